@@ -1,0 +1,42 @@
+#!/usr/bin/env bash
+# Installs every Debian package tetrig needs to build, test and benchmark, skipping what is present.
+# Used by both README commands and by .ci/run. Runs apt-get as root, or through sudo.
+set -euo pipefail
+
+packages=(
+  # toolchain
+  g++ cmake ninja-build pkg-config git
+  # runtime and drivers
+  libeigen3-dev libusb-1.0-0-dev libhidapi-dev
+  # tests and benchmarks
+  libgtest-dev libgmock-dev libbenchmark-dev umockdev libumockdev-dev
+  # offline tools (tools/: rig builder)
+  libtet1.5-dev libassimp-dev libmeshoptimizer-dev libnanoflann-dev libcli11-dev nlohmann-json3-dev
+  # fuzzing and sanitizers (clang, libFuzzer, LeakSanitizer runtime)
+  clang libclang-rt-14-dev
+)
+
+missing=()
+for p in "${packages[@]}"; do
+  if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
+    missing+=("$p")
+  fi
+done
+
+if [ ${#missing[@]} -eq 0 ]; then
+  echo "setup: all ${#packages[@]} packages present"
+  exit 0
+fi
+
+echo "setup: installing ${#missing[@]} missing packages: ${missing[*]}"
+sudo_cmd=()
+if [ "$(id -u)" -ne 0 ]; then
+  if command -v sudo >/dev/null 2>&1; then sudo_cmd=(sudo); else
+    echo "setup: not root and no sudo; install these packages by hand: ${missing[*]}" >&2
+    exit 1
+  fi
+fi
+export DEBIAN_FRONTEND=noninteractive
+"${sudo_cmd[@]}" apt-get update -qq
+"${sudo_cmd[@]}" apt-get install -y -qq --no-install-recommends "${missing[@]}"
+echo "setup: done"

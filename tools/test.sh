@@ -1,0 +1,9 @@
+#!/usr/bin/env bash
+# The README's test command: install what is missing, build the release preset, run every test
+# that is not labelled soak or fuzz. Extra arguments go to ctest (e.g. -R Polar).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash tools/setup.sh
+cmake --preset release
+cmake --build --preset release
+ctest --preset release "$@"
