@@ -1,1 +1,492 @@
-// placeholder: being written
+// The deformation core's load step and frame step: Stoll et al. 2007, sections 2.3.1-2.3.2.
+#include "tetrig/deformer.hpp"
+
+#include "tetrig/laplacian.hpp"
+#include "tetrig/rigid_groups.hpp"
+#include "tetrig/rotation_interpolation.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <stdexcept>
+#include <string>
+
+namespace tetrig {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+std::int64_t nanosecondsBetween(Clock::time_point a, Clock::time_point b) {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(b - a).count();
+}
+
+[[noreturn]] void fail(const std::string& what) { throw std::invalid_argument("deformer setup: " + what); }
+
+void checkTetIndex(std::int32_t t, std::int32_t tet_count, const std::string& where) {
+  if (t < 0 || t >= tet_count) {
+    fail(where + " names tet " + std::to_string(t) + " but the mesh has " + std::to_string(tet_count) + " tets");
+  }
+}
+
+}  // namespace
+
+Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(setup.options) {
+  vertex_count_ = mesh.vertexCount();
+  tet_count_ = mesh.tetCount();
+  if (tet_count_ == 0) fail("the mesh has no tets");
+  if (options_.rotation_steps < 0 || options_.rotation_steps > 64) fail("rotation_steps must be in [0, 64]");
+  const TetMeshReport report = checkTetMesh(mesh);
+  if (report.out_of_range_indices > 0 || report.repeated_corner_tets > 0 || report.degenerate_tets > 0 ||
+      report.non_finite_vertices > 0) {
+    fail("the tet mesh is not usable: " + report.summary());
+  }
+
+  // --- Handles: slots for vertex handles, then region vertices. ---
+  std::vector<std::int32_t> handle_of_vertex(static_cast<size_t>(vertex_count_), -1);
+  auto add_handle = [&](std::int32_t v, std::int32_t region, const std::string& where) {
+    if (v < 0 || v >= vertex_count_) {
+      fail(where + " names vertex " + std::to_string(v) + " but the mesh has " + std::to_string(vertex_count_) +
+           " vertices");
+    }
+    const std::int32_t existing = handle_of_vertex[static_cast<size_t>(v)];
+    if (existing >= 0) {
+      if (region >= 0 && handle_region_[static_cast<size_t>(existing)] == region) return;  // shared by two tets
+      fail(where + " constrains vertex " + std::to_string(v) + ", which another handle already constrains");
+    }
+    handle_of_vertex[static_cast<size_t>(v)] = static_cast<std::int32_t>(handle_vertex_.size());
+    handle_vertex_.push_back(v);
+    handle_region_.push_back(region);
+  };
+  for (size_t i = 0; i < setup.vertex_handles.size(); ++i) {
+    add_handle(setup.vertex_handles[i], -1, "vertex handle " + std::to_string(i));
+  }
+  vertex_handle_count_ = static_cast<std::int32_t>(handle_vertex_.size());
+  for (size_t r = 0; r < setup.region_handles.size(); ++r) {
+    const auto& region = setup.region_handles[r];
+    if (region.tets.empty()) fail("region handle " + std::to_string(r) + " has no tets");
+    for (auto t : region.tets) {
+      checkTetIndex(t, tet_count_, "region handle " + std::to_string(r));
+      for (int c = 0; c < 4; ++c)
+        add_handle(mesh.tets(t, c), static_cast<std::int32_t>(r), "region handle " + std::to_string(r));
+    }
+  }
+  handle_count_ = static_cast<std::int32_t>(handle_vertex_.size());
+  free_count_ = vertex_count_ - handle_count_;
+  if (handle_count_ == 0 && setup.point_handles.empty()) {
+    fail("no handles: give at least one vertex, region or point handle (a mesh with nothing fixed can float anywhere)");
+  }
+
+  // --- Laplacian, reduced system, factorization. ---
+  const TetRestFrames frames = computeRestFrames(mesh);
+  const std::vector<double> weights = tetWeights(frames, setup.stiffness);
+  const Eigen::SparseMatrix<double> laplacian = assembleLaplacian(mesh, frames, weights);
+
+  std::vector<std::int32_t> free_index(static_cast<size_t>(vertex_count_), -1);
+  std::vector<std::int32_t> free_vertices;
+  free_vertices.reserve(static_cast<size_t>(free_count_));
+  for (std::int32_t v = 0; v < vertex_count_; ++v) {
+    if (handle_of_vertex[static_cast<size_t>(v)] < 0) {
+      free_index[static_cast<size_t>(v)] = static_cast<std::int32_t>(free_vertices.size());
+      free_vertices.push_back(v);
+    }
+  }
+
+  double mean_diagonal = laplacian.diagonal().mean();
+  point_lambda_ = options_.point_handle_weight * mean_diagonal;
+  std::vector<Eigen::Triplet<double>> reduced;
+  reduced.reserve(static_cast<size_t>(laplacian.nonZeros()));
+  for (Eigen::Index col = 0; col < laplacian.outerSize(); ++col) {
+    const std::int32_t fc = free_index[static_cast<size_t>(col)];
+    if (fc < 0) continue;
+    for (Eigen::SparseMatrix<double>::InnerIterator it(laplacian, col); it; ++it) {
+      const std::int32_t fr = free_index[static_cast<size_t>(it.row())];
+      if (fr >= 0) reduced.emplace_back(fr, fc, it.value());
+    }
+  }
+  for (size_t p = 0; p < setup.point_handles.size(); ++p) {
+    const auto& point = setup.point_handles[p];
+    checkTetIndex(point.tet, tet_count_, "point handle " + std::to_string(p));
+    if (!point.barycentric.allFinite() || std::abs(point.barycentric.sum() - 1.0) > 1e-6) {
+      fail("point handle " + std::to_string(p) + " has barycentric weights that do not sum to 1");
+    }
+    for (int a = 0; a < 4; ++a) {
+      const std::int32_t fa = free_index[static_cast<size_t>(mesh.tets(point.tet, a))];
+      if (fa < 0) continue;
+      for (int b = 0; b < 4; ++b) {
+        const std::int32_t fb = free_index[static_cast<size_t>(mesh.tets(point.tet, b))];
+        if (fb >= 0) reduced.emplace_back(fa, fb, point_lambda_ * point.barycentric[a] * point.barycentric[b]);
+      }
+    }
+  }
+  const auto factor_start = Clock::now();
+  if (free_count_ > 0) {
+    Eigen::SparseMatrix<double> a(free_count_, free_count_);
+    a.setFromTriplets(reduced.begin(), reduced.end());
+    factor_.factorize(a);
+  }
+  factorize_seconds_ = std::chrono::duration<double>(Clock::now() - factor_start).count();
+
+  // --- Solver order: free vertices at their factor positions, then handle slots. ---
+  solver_index_.resize(static_cast<size_t>(vertex_count_));
+  for (std::int32_t v = 0; v < vertex_count_; ++v) {
+    const std::int32_t h = handle_of_vertex[static_cast<size_t>(v)];
+    solver_index_[static_cast<size_t>(v)] =
+        h >= 0 ? free_count_ + h : factor_.position(free_index[static_cast<size_t>(v)]);
+  }
+  const auto n3 = static_cast<size_t>(vertex_count_) * 3;
+  rest_solver_.resize(n3);
+  for (std::int32_t v = 0; v < vertex_count_; ++v)
+    for (int c = 0; c < 3; ++c)
+      rest_solver_[3 * static_cast<size_t>(solver_index_[static_cast<size_t>(v)]) + static_cast<size_t>(c)] =
+          mesh.vertices(v, c);
+  x_ = rest_solver_;
+  delta_.assign(n3, 0.0);
+  rhs_constant_.assign(static_cast<size_t>(free_count_) * 3, 0.0);
+  positions_.assign(n3, 0.0);
+
+  // --- Coupling -L_fh as CSR over free rows in solver order. ---
+  {
+    std::vector<std::vector<std::pair<std::int32_t, double>>> rows(static_cast<size_t>(free_count_));
+    for (Eigen::Index col = 0; col < laplacian.outerSize(); ++col) {
+      const std::int32_t h = handle_of_vertex[static_cast<size_t>(col)];
+      if (h < 0) continue;
+      for (Eigen::SparseMatrix<double>::InnerIterator it(laplacian, col); it; ++it) {
+        const std::int32_t fr = free_index[static_cast<size_t>(it.row())];
+        if (fr >= 0) rows[static_cast<size_t>(factor_.position(fr))].emplace_back(h, -it.value());
+      }
+    }
+    coupling_start_.assign(static_cast<size_t>(free_count_) + 1, 0);
+    for (std::int32_t i = 0; i < free_count_; ++i) {
+      for (auto [h, value] : rows[static_cast<size_t>(i)]) {
+        coupling_handle_.push_back(h);
+        coupling_value_.push_back(value);
+      }
+      coupling_start_[static_cast<size_t>(i) + 1] = static_cast<std::int32_t>(coupling_handle_.size());
+    }
+  }
+
+  // --- Point handles. ---
+  for (const auto& point : setup.point_handles) {
+    for (int c = 0; c < 4; ++c) {
+      point_corner_.push_back(solver_index_[static_cast<size_t>(mesh.tets(point.tet, c))]);
+      point_weight_.push_back(point.barycentric[c]);
+    }
+  }
+
+  // --- Tet blocks, ordered by their lowest solver index for locality of gathers and scatters. ---
+  std::vector<std::int32_t> order(static_cast<size_t>(tet_count_));
+  std::iota(order.begin(), order.end(), 0);
+  auto key = [&](std::int32_t t) {
+    std::int32_t k = solver_index_[static_cast<size_t>(mesh.tets(t, 0))];
+    for (int c = 1; c < 4; ++c) k = std::min(k, solver_index_[static_cast<size_t>(mesh.tets(t, c))]);
+    return k;
+  };
+  std::stable_sort(order.begin(), order.end(), [&](std::int32_t a, std::int32_t b) { return key(a) < key(b); });
+  const std::int32_t block_count = (tet_count_ + kTetBlockWidth - 1) / kTetBlockWidth;
+  blocks_.assign(static_cast<size_t>(block_count), TetBlock{});
+  tet_slot_.assign(static_cast<size_t>(tet_count_), -1);
+  for (std::int32_t b = 0; b < block_count; ++b) {
+    TetBlock& block = blocks_[static_cast<size_t>(b)];
+    for (int l = 0; l < kTetBlockWidth; ++l) {
+      const std::int32_t s = b * kTetBlockWidth + l;
+      block.rotation[0][l] = 1.0;
+      block.rotation[1][l] = block.rotation[2][l] = block.rotation[3][l] = 0.0;
+      if (s >= tet_count_) {  // padding lane: weight 0, identity frame, corners at vertex 0
+        for (int c = 0; c < 4; ++c) block.corner[c][l] = 0;
+        for (int i = 0; i < 9; ++i) block.edge_inverse[i][l] = (i % 4 == 0) ? 1.0 : 0.0;
+        block.weight[l] = 0.0;
+        continue;
+      }
+      const std::int32_t t = order[static_cast<size_t>(s)];
+      tet_slot_[static_cast<size_t>(t)] = s;
+      for (int c = 0; c < 4; ++c) block.corner[c][l] = solver_index_[static_cast<size_t>(mesh.tets(t, c))];
+      const Eigen::Matrix3d& e = frames.edge_inverse[static_cast<size_t>(t)];
+      for (int i = 0; i < 9; ++i) block.edge_inverse[i][l] = e(i / 3, i % 3);
+      block.weight[l] = weights[static_cast<size_t>(t)];
+    }
+  }
+
+  // --- Rotation interpolation: harmonic weights per oriented region handle. ---
+  std::vector<std::vector<std::int32_t>> oriented_tets;
+  for (size_t r = 0; r < setup.region_handles.size(); ++r) {
+    if (setup.region_handles[r].oriented) {
+      oriented_regions_.push_back(static_cast<std::int32_t>(r));
+      oriented_tets.push_back(setup.region_handles[r].tets);
+    }
+  }
+  if (options_.interpolate_rotations && options_.update_rotations && !oriented_regions_.empty()) {
+    std::vector<std::int32_t> zero_tets;
+    for (std::int32_t t = 0; t < tet_count_; ++t) {
+      for (int c = 0; c < 4; ++c) {
+        const std::int32_t h = handle_of_vertex[static_cast<size_t>(mesh.tets(t, c))];
+        if (h < 0) continue;
+        const std::int32_t region = handle_region_[static_cast<size_t>(h)];
+        if (region < 0 || !setup.region_handles[static_cast<size_t>(region)].oriented) {
+          zero_tets.push_back(t);
+          break;
+        }
+      }
+    }
+    const std::vector<double> mesh_order = harmonicTetWeights(mesh, oriented_tets, zero_tets);
+    const auto slots = static_cast<size_t>(block_count) * kTetBlockWidth;
+    harmonic_weights_.assign(oriented_regions_.size() * slots, 0.0);
+    for (size_t h = 0; h < oriented_regions_.size(); ++h)
+      for (std::int32_t t = 0; t < tet_count_; ++t)
+        harmonic_weights_[h * slots + static_cast<size_t>(tet_slot_[static_cast<size_t>(t)])] =
+            mesh_order[h * static_cast<size_t>(tet_count_) + static_cast<size_t>(t)];
+    interpolated_rotation_.assign(oriented_regions_.size(), Eigen::Quaterniond::Identity());
+    rotation_increment_.assign(oriented_regions_.size(), Eigen::Quaterniond::Identity());
+  }
+
+  // --- Rigid groups. ---
+  std::vector<char> grouped(static_cast<size_t>(tet_count_), 0);
+  group_start_.push_back(0);
+  for (size_t g = 0; g < setup.rigid_groups.size(); ++g) {
+    for (auto t : setup.rigid_groups[g].tets) {
+      checkTetIndex(t, tet_count_, "rigid group " + std::to_string(g));
+      if (grouped[static_cast<size_t>(t)]) fail("tet " + std::to_string(t) + " is in two rigid groups");
+      grouped[static_cast<size_t>(t)] = 1;
+      group_slot_.push_back(slotOfTet(t));
+    }
+    group_start_.push_back(static_cast<std::int32_t>(group_slot_.size()));
+  }
+
+  vertex_targets_.resize(static_cast<size_t>(vertex_handle_count_));
+  region_targets_.resize(setup.region_handles.size());
+  point_targets_.resize(setup.point_handles.size());
+  reset();
+}
+
+void Deformer::reset() {
+  for (auto& block : blocks_) {
+    for (int l = 0; l < kTetBlockWidth; ++l) {
+      block.rotation[0][l] = 1.0;
+      block.rotation[1][l] = block.rotation[2][l] = block.rotation[3][l] = 0.0;
+    }
+  }
+  x_ = rest_solver_;
+  for (std::int32_t h = 0; h < vertex_handle_count_; ++h) {
+    const double* p = &rest_solver_[3 * static_cast<size_t>(free_count_ + h)];
+    vertex_targets_[static_cast<size_t>(h)] = Eigen::Vector3d(p[0], p[1], p[2]);
+  }
+  for (auto& region : region_targets_) region = RigidTransform{};
+  for (size_t p = 0; p < point_targets_.size(); ++p) {
+    Eigen::Vector3d rest = Eigen::Vector3d::Zero();
+    for (int c = 0; c < 4; ++c) {
+      const double* q = &rest_solver_[3 * static_cast<size_t>(point_corner_[4 * p + static_cast<size_t>(c)])];
+      rest += point_weight_[4 * p + static_cast<size_t>(c)] * Eigen::Vector3d(q[0], q[1], q[2]);
+    }
+    point_targets_[p] = rest;
+  }
+  for (auto& q : interpolated_rotation_) q = Eigen::Quaterniond::Identity();
+  rebuildDelta();
+  updateConstantRhs();
+  writePositions();
+}
+
+bool Deformer::acceptTargets(const HandleTargets& targets, std::uint32_t& flags) {
+  if (targets.vertex_positions.size() != static_cast<size_t>(vertex_handle_count_) ||
+      targets.region_transforms.size() != region_targets_.size() ||
+      targets.point_positions.size() != point_targets_.size()) {
+    flags |= kStepTargetsWrongSize;
+    return false;
+  }
+  const double limit = options_.max_abs_coordinate;
+  auto sane = [limit](const Eigen::Vector3d& v) {
+    return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]) && std::abs(v[0]) <= limit &&
+           std::abs(v[1]) <= limit && std::abs(v[2]) <= limit;
+  };
+  for (const auto& v : targets.vertex_positions)
+    if (!sane(v)) {
+      flags |= kStepTargetsRejected;
+      return false;
+    }
+  for (const auto& v : targets.point_positions)
+    if (!sane(v)) {
+      flags |= kStepTargetsRejected;
+      return false;
+    }
+  for (const auto& t : targets.region_transforms) {
+    const double norm = t.rotation.norm();
+    if (!sane(t.translation) || !std::isfinite(norm) || norm < 1e-6) {
+      flags |= kStepTargetsRejected;
+      return false;
+    }
+  }
+  std::copy(targets.vertex_positions.begin(), targets.vertex_positions.end(), vertex_targets_.begin());
+  std::copy(targets.point_positions.begin(), targets.point_positions.end(), point_targets_.begin());
+  for (size_t r = 0; r < region_targets_.size(); ++r) {
+    region_targets_[r] = targets.region_transforms[r];
+    region_targets_[r].rotation.normalize();
+  }
+  return true;
+}
+
+void Deformer::updateConstantRhs() {
+  // Handle positions into the handle slots of x.
+  for (std::int32_t h = 0; h < handle_count_; ++h) {
+    double* out = &x_[3 * static_cast<size_t>(free_count_ + h)];
+    const std::int32_t region = handle_region_[static_cast<size_t>(h)];
+    Eigen::Vector3d p;
+    if (region < 0) {
+      p = vertex_targets_[static_cast<size_t>(h)];
+    } else {
+      const double* rest = &rest_solver_[3 * static_cast<size_t>(free_count_ + h)];
+      const RigidTransform& t = region_targets_[static_cast<size_t>(region)];
+      p = t.rotation * Eigen::Vector3d(rest[0], rest[1], rest[2]) + t.translation;
+    }
+    out[0] = p[0];
+    out[1] = p[1];
+    out[2] = p[2];
+  }
+  // -L_fh x_h.
+  const double* handles = x_.data() + 3 * static_cast<size_t>(free_count_);
+  for (std::int32_t i = 0; i < free_count_; ++i) {
+    double s0 = 0.0, s1 = 0.0, s2 = 0.0;
+    for (auto p = coupling_start_[static_cast<size_t>(i)]; p < coupling_start_[static_cast<size_t>(i) + 1]; ++p) {
+      const double* xh = handles + 3 * coupling_handle_[static_cast<size_t>(p)];
+      const double value = coupling_value_[static_cast<size_t>(p)];
+      s0 += value * xh[0];
+      s1 += value * xh[1];
+      s2 += value * xh[2];
+    }
+    rhs_constant_[3 * static_cast<size_t>(i)] = s0;
+    rhs_constant_[3 * static_cast<size_t>(i) + 1] = s1;
+    rhs_constant_[3 * static_cast<size_t>(i) + 2] = s2;
+  }
+  // Point handles: lambda b_a (p - sum_{handle corners h} b_h x_h) for each free corner a.
+  for (size_t p = 0; p < point_targets_.size(); ++p) {
+    Eigen::Vector3d target = point_targets_[p];
+    for (int c = 0; c < 4; ++c) {
+      const std::int32_t s = point_corner_[4 * p + static_cast<size_t>(c)];
+      if (s >= free_count_) {
+        const double* xh = &x_[3 * static_cast<size_t>(s)];
+        target -= point_weight_[4 * p + static_cast<size_t>(c)] * Eigen::Vector3d(xh[0], xh[1], xh[2]);
+      }
+    }
+    for (int c = 0; c < 4; ++c) {
+      const std::int32_t s = point_corner_[4 * p + static_cast<size_t>(c)];
+      if (s >= free_count_) continue;
+      const double w = point_lambda_ * point_weight_[4 * p + static_cast<size_t>(c)];
+      for (int k = 0; k < 3; ++k) rhs_constant_[3 * static_cast<size_t>(s) + static_cast<size_t>(k)] += w * target[k];
+    }
+  }
+}
+
+void Deformer::interpolateRotations() {
+  if (harmonic_weights_.empty()) return;
+  bool any = false;
+  for (size_t k = 0; k < oriented_regions_.size(); ++k) {
+    const Eigen::Quaterniond& target = region_targets_[static_cast<size_t>(oriented_regions_[k])].rotation;
+    Eigen::Quaterniond increment = target * interpolated_rotation_[k].conjugate();
+    if (increment.w() < 0.0) increment.coeffs() = -increment.coeffs();
+    increment.normalize();
+    rotation_increment_[k] = increment;
+    any = any || (1.0 - increment.w()) > 1e-15;
+    interpolated_rotation_[k] = target;
+  }
+  if (!any) return;
+  applyRotationIncrements(harmonic_weights_, rotation_increment_, blocks_.data(),
+                          static_cast<std::int32_t>(blocks_.size()) * kTetBlockWidth);
+  rebuildDelta();
+}
+
+void Deformer::applyRigidGroups() {
+  if (group_slot_.empty()) return;
+  tetrig::applyRigidGroups(group_start_, group_slot_, blocks_.data());
+}
+
+void Deformer::rebuildDelta() {
+  std::fill(delta_.begin(), delta_.end(), 0.0);
+  differentialPass(blocks_.data(), static_cast<std::int32_t>(blocks_.size()), delta_.data());
+}
+
+void Deformer::writePositions() {
+  for (std::int32_t v = 0; v < vertex_count_; ++v) {
+    const double* p = &x_[3 * static_cast<size_t>(solver_index_[static_cast<size_t>(v)])];
+    double* out = &positions_[3 * static_cast<size_t>(v)];
+    out[0] = p[0];
+    out[1] = p[1];
+    out[2] = p[2];
+  }
+}
+
+StepStats Deformer::step(const HandleTargets& targets, const StepBudget& budget) {
+  StepStats stats;
+  const auto start = Clock::now();
+  acceptTargets(targets, stats.flags);
+  updateConstantRhs();
+  if (options_.update_rotations) {
+    const auto t0 = Clock::now();
+    interpolateRotations();
+    stats.interpolation_ns += nanosecondsBetween(t0, Clock::now());
+  }
+  const auto block_count = static_cast<std::int32_t>(blocks_.size());
+  const bool has_groups = !group_slot_.empty();
+  const size_t free3 = static_cast<size_t>(free_count_) * 3;
+  for (int iteration = 0; iteration < budget.max_iterations; ++iteration) {
+    // 1. Linear solve: L_ff x_f = delta_f - L_fh x_h (+ point terms).
+    const auto t0 = Clock::now();
+    for (size_t i = 0; i < free3; ++i) x_[i] = delta_[i] + rhs_constant_[i];
+    if (free_count_ > 0) factor_.solveInPlace(x_.data());
+    const auto t1 = Clock::now();
+    stats.solve_ns += nanosecondsBetween(t0, t1);
+    ++stats.iterations;
+    if (options_.update_rotations) {
+      // 2.-4. Rotations, rigid groups, differential coordinates.
+      std::fill(delta_.begin(), delta_.end(), 0.0);
+      const RotationPassStats pass =
+          rotationPass(blocks_.data(), block_count, x_.data(), has_groups ? nullptr : delta_.data(),
+                       options_.rotation_steps);
+      stats.energy = pass.energy;
+      stats.exact_rotations += pass.exact_fallbacks;
+      auto t2 = Clock::now();
+      if (has_groups) {
+        applyRigidGroups();
+        const auto t3 = Clock::now();
+        stats.rigid_ns += nanosecondsBetween(t2, t3);
+        differentialPass(blocks_.data(), block_count, delta_.data());
+        t2 = t3;
+      }
+      stats.rotation_ns += nanosecondsBetween(t1, Clock::now());
+    }
+    if (iteration + 1 < budget.max_iterations && Clock::now() >= budget.deadline) {
+      stats.flags |= kStepDeadlineHit;
+      break;
+    }
+  }
+  if (stats.exact_rotations > 0) stats.flags |= kStepExactRotations;
+  writePositions();
+  stats.total_ns = nanosecondsBetween(start, Clock::now());
+  return stats;
+}
+
+Eigen::Vector3d Deformer::position(std::int32_t v) const {
+  const double* p = &positions_[3 * static_cast<size_t>(v)];
+  return {p[0], p[1], p[2]};
+}
+
+Eigen::Quaterniond Deformer::rotation(std::int32_t t) const {
+  const std::int32_t s = slotOfTet(t);
+  const TetBlock& block = blocks_[static_cast<size_t>(s / kTetBlockWidth)];
+  const int l = s % kTetBlockWidth;
+  return {block.rotation[0][l], block.rotation[1][l], block.rotation[2][l], block.rotation[3][l]};
+}
+
+void Deformer::setRotations(std::span<const Eigen::Quaterniond> rotations) {
+  if (rotations.size() != static_cast<size_t>(tet_count_)) return;
+  for (std::int32_t t = 0; t < tet_count_; ++t) {
+    const std::int32_t s = slotOfTet(t);
+    TetBlock& block = blocks_[static_cast<size_t>(s / kTetBlockWidth)];
+    const int l = s % kTetBlockWidth;
+    const Eigen::Quaterniond q = rotations[static_cast<size_t>(t)].normalized();
+    block.rotation[0][l] = q.w();
+    block.rotation[1][l] = q.x();
+    block.rotation[2][l] = q.y();
+    block.rotation[3][l] = q.z();
+  }
+  rebuildDelta();
+}
+
+}  // namespace tetrig

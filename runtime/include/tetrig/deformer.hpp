@@ -1,0 +1,197 @@
+// The deformation core: a precompute/solve pair (Stoll et al. 2007, section 2.3).
+//
+//   Deformer deformer(mesh, setup);            // load: all allocation and the factorization
+//   StepStats s = deformer.step(targets, budget);  // per frame: no allocation, lock, throw or I/O
+//   deformer.positions();                      // #V*3 doubles, mesh order, valid after step()
+//
+// Handles (section 2.3.1):
+// - vertex handles: a vertex whose position is prescribed; eliminated from L.
+// - region handles: a set of tets whose corners are all prescribed by a rigid transform of their
+//   rest positions, x = R p_rest + t. An oriented region's rotation R also drives the harmonic
+//   interpolation of rotations (section 2.3.2) so twists propagate at once, beyond 180 degrees.
+// - point handles: a point inside (or near) tet j, p = sum_k b_k x_ck with fixed barycentric
+//   weights b. They enter as a soft constraint lambda ||sum_k b_k x_ck - p||^2 added to the
+//   energy, so the matrix L + lambda B^T B is factored once and a frame only changes the
+//   right-hand side (lambda = point_handle_weight * mean diagonal of L). Markers bound by
+//   invisible tets (paper 3.2) are vertex handles instead, made by the rig builder.
+// Per frame only the right-hand side changes; the factor is computed once at load.
+//
+// Iteration, repeated k times per step() (k bounded by count and deadline, warm-started):
+//   1. linear solve L_ff x_f = delta_f - L_fh x_h (+ point-handle terms), split LDL^T, no alloc;
+//   2. rotation extraction per tet (warm-started, exact fallback for inverted tets);
+//   3. rigid groups: every tet of a group takes the group's average rotation;
+//   4. differential coordinates delta = G^T D g(R).
+// Rotation interpolation runs once per change of an oriented handle's rotation, before that
+// frame's first solve: the handle's rotation increment since the last interpolation is spread
+// over the mesh with precomputed harmonic weights and composed onto every tet's rotation (the
+// increments are small even when the total twist exceeds 180 degrees).
+//
+// Threads: a Deformer is used by one thread at a time (the solver thread). Construction throws
+// std::invalid_argument / std::runtime_error with a message naming what was wrong.
+#pragma once
+
+#include "tetrig/ldlt_factor.hpp"
+#include "tetrig/rotation_kernel.hpp"
+#include "tetrig/tet_mesh.hpp"
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <Eigen/SparseCore>
+
+#include <chrono>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+namespace tetrig {
+
+struct RegionHandle {
+  std::vector<std::int32_t> tets;  // every corner of these tets is prescribed
+  bool oriented = true;            // its rotation drives rotation interpolation
+};
+
+struct PointHandle {
+  std::int32_t tet = -1;                                   // tet whose corners carry the point
+  Eigen::Vector4d barycentric = Eigen::Vector4d::Zero();   // weights of corners 0..3, sum 1
+};
+
+struct RigidGroup {
+  std::vector<std::int32_t> tets;  // may be disconnected ("pseudo-skeleton"); groups are disjoint
+};
+
+struct DeformerOptions {
+  bool update_rotations = true;       // false: linear Laplacian editing (R_j = I), for comparison
+  bool interpolate_rotations = true;  // needs oriented region handles; ignored otherwise
+  int rotation_steps = 2;             // warm-started refinement steps per tet per iteration
+  double point_handle_weight = 1e3;   // lambda / mean diagonal of L for point handles
+  double max_abs_coordinate = 1e6;    // a target coordinate beyond this is rejected as absurd
+};
+
+struct DeformerSetup {
+  std::vector<std::int32_t> vertex_handles;
+  std::vector<RegionHandle> region_handles;
+  std::vector<PointHandle> point_handles;
+  std::vector<RigidGroup> rigid_groups;
+  std::vector<double> stiffness;  // empty, or one positive weight per tet (1 = default)
+  DeformerOptions options;
+};
+
+struct RigidTransform {
+  Eigen::Quaterniond rotation = Eigen::Quaterniond::Identity();
+  Eigen::Vector3d translation = Eigen::Vector3d::Zero();
+};
+
+// Targets for one frame. Sizes must match the setup; spans are read during step() only.
+struct HandleTargets {
+  std::span<const Eigen::Vector3d> vertex_positions;  // one per vertex handle
+  std::span<const RigidTransform> region_transforms;  // one per region handle
+  std::span<const Eigen::Vector3d> point_positions;   // one per point handle
+};
+
+struct StepBudget {
+  int max_iterations = 3;
+  std::chrono::steady_clock::time_point deadline = std::chrono::steady_clock::time_point::max();
+};
+
+enum StepFlags : std::uint32_t {
+  kStepDeadlineHit = 1u << 0,         // stopped before max_iterations: the deadline passed
+  kStepTargetsRejected = 1u << 1,     // a target was non-finite or absurd: the previous targets were kept
+  kStepTargetsWrongSize = 1u << 2,    // a target span had the wrong size: the previous targets were kept
+  kStepExactRotations = 1u << 3,      // some tets were inverted/degenerate and took the exact rotation
+};
+
+struct StepStats {
+  std::int32_t iterations = 0;
+  std::uint32_t flags = 0;                // StepFlags
+  double energy = 0.0;                    // sum_j a_j ||F_j - R_j||^2 after the last rotation update
+  std::int32_t exact_rotations = 0;       // tets that took the exact rotation, summed over iterations
+  std::int64_t solve_ns = 0;              // linear solves
+  std::int64_t rotation_ns = 0;           // rotation extraction + differential update
+  std::int64_t interpolation_ns = 0;      // rotation interpolation
+  std::int64_t rigid_ns = 0;              // rigid groups
+  std::int64_t total_ns = 0;              // the whole step
+};
+
+class Deformer {
+ public:
+  Deformer(const TetMesh& mesh, const DeformerSetup& setup);
+
+  // One frame: new targets, up to budget.max_iterations iterations (at least one when
+  // max_iterations >= 1; the deadline is checked after each). Never allocates, locks or throws.
+  StepStats step(const HandleTargets& targets, const StepBudget& budget);
+
+  // Deformed positions, #V*3 doubles in mesh vertex order (x0 y0 z0 x1 ...).
+  std::span<const double> positions() const { return positions_; }
+  Eigen::Vector3d position(std::int32_t v) const;
+
+  // Current rotation of tet t.
+  Eigen::Quaterniond rotation(std::int32_t t) const;
+
+  // Replaces every tet rotation (e.g. randomised differential coordinates) and rebuilds delta.
+  // Not for the frame path: allocation-free but O(#T).
+  void setRotations(std::span<const Eigen::Quaterniond> rotations);
+
+  // Back to the rest state: rotations I, positions at rest, handle targets at rest.
+  void reset();
+
+  std::int32_t vertexCount() const { return vertex_count_; }
+  std::int32_t tetCount() const { return tet_count_; }
+  std::int32_t freeVertexCount() const { return free_count_; }
+  std::int64_t factorNonZeros() const { return factor_.factorNonZeros(); }
+  double factorizeSeconds() const { return factorize_seconds_; }
+
+ private:
+  bool acceptTargets(const HandleTargets& targets, std::uint32_t& flags);
+  void updateConstantRhs();
+  void interpolateRotations();
+  void applyRigidGroups();
+  void rebuildDelta();
+  void writePositions();
+  std::int32_t slotOfTet(std::int32_t t) const { return tet_slot_[static_cast<size_t>(t)]; }
+
+  std::int32_t vertex_count_ = 0, tet_count_ = 0, free_count_ = 0, handle_count_ = 0;
+  DeformerOptions options_;
+  SplitLdlt factor_;
+  double factorize_seconds_ = 0.0;
+
+  // Vertex ordering: free vertex v lives at solver index factor position; handle slot h at free_count_ + h.
+  std::vector<std::int32_t> solver_index_;    // mesh vertex -> solver index
+  std::vector<double> rest_solver_;           // rest positions, solver order, 3 per vertex
+  std::vector<double> x_;                     // current positions, solver order (free then handles)
+  std::vector<double> delta_;                 // differential coordinates, solver order
+  std::vector<double> rhs_constant_;          // -L_fh x_h + point terms, free part
+  std::vector<double> positions_;             // mesh order output
+
+  // -L_fh as CSR over free rows (solver order), columns = handle slots.
+  std::vector<std::int32_t> coupling_start_, coupling_handle_;
+  std::vector<double> coupling_value_;
+
+  // Handles. Handle slot h: mesh vertex handle_vertex_[h], driven by vertex target or region.
+  std::int32_t vertex_handle_count_ = 0;
+  std::vector<std::int32_t> handle_vertex_;
+  std::vector<std::int32_t> handle_region_;       // region index, or -1 for a vertex handle
+  std::vector<Eigen::Vector3d> vertex_targets_;   // accepted targets
+  std::vector<RigidTransform> region_targets_;
+  std::vector<Eigen::Vector3d> point_targets_;
+
+  // Point handles (soft): corners in solver order, barycentric weights, lambda.
+  std::vector<std::int32_t> point_corner_;  // 4 per point handle
+  std::vector<double> point_weight_;        // 4 per point handle
+  double point_lambda_ = 0.0;
+
+  // Tets in blocks.
+  std::vector<TetBlock> blocks_;
+  std::vector<std::int32_t> tet_slot_;  // mesh tet -> block * kTetBlockWidth + lane
+
+  // Rotation interpolation: per oriented region, harmonic weights over tets and the rotation the
+  // mesh was last interpolated for.
+  std::vector<std::int32_t> oriented_regions_;          // region index of each oriented handle
+  std::vector<double> harmonic_weights_;                // oriented-handle-major, #T each, slot order
+  std::vector<Eigen::Quaterniond> interpolated_rotation_;
+  std::vector<Eigen::Quaterniond> rotation_increment_;  // scratch
+
+  // Rigid groups: CSR over tet slots.
+  std::vector<std::int32_t> group_start_, group_slot_;
+};
+
+}  // namespace tetrig

@@ -1,0 +1,32 @@
+// Rotation extraction: the rotational part R of a deformation gradient F (paper eq. 2.7-2.8).
+//
+// Both functions return the proper rotation (det R = +1) that maximises tr(R^T F), i.e. the R
+// minimising ||F - R||_F over SO(3). For det F > 0 that is the polar factor (F = R S, S
+// symmetric positive definite); for inverted F (det F < 0) it is U diag(1, 1, -1) V^T from the SVD
+// F = U Sigma V^T; for singular F it is one of the minimisers. Never NaN for finite F.
+//
+// - closestRotation: exact, by Horn's method: tr(R(q)^T F) = q^T N(F) q for unit quaternions q,
+//   so the maximiser is the eigenvector of the largest eigenvalue of the symmetric 4x4 N(F).
+//   About a microsecond; used at load, for rigid-group averages and as the fallback of the
+//   frame kernel for inverted tets.
+// - refineRotation: the warm-started iteration of Mueller, Bender, Chentanez and Macklin,
+//   "A Robust Method to Extract the Rotational Part of Deformations" (MIG 2016): rotate q by
+//   omega = sum_i r_i x f_i / (|sum_i r_i . f_i| + eps) (r_i, f_i: columns of R(q) and F), the
+//   ascent direction of tr(R^T F). A step is kept only if it does not lower tr(R^T F), so the
+//   ARAP energy never rises. Returns the angle of the last step taken (0 when converged).
+// Neither allocates; both are safe on any thread.
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+namespace tetrig {
+
+Eigen::Quaterniond closestRotation(const Eigen::Matrix3d& f);
+
+double refineRotation(const Eigen::Matrix3d& f, Eigen::Quaterniond& q, int max_steps, double tolerance = 1e-12);
+
+// Horn's N(F): q^T N q = tr(R(q)^T F) for unit q = (w, x, y, z).
+Eigen::Matrix4d hornMatrix(const Eigen::Matrix3d& f);
+
+}  // namespace tetrig

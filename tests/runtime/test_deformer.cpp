@@ -1,0 +1,375 @@
+// Behaviour of the deformation core on bars: the paper's claims (section 3.3) on our code.
+#include "deformer_test_util.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <random>
+
+#include <Eigen/Geometry>
+#include <algorithm>
+
+namespace tetrig {
+namespace {
+
+using test::Rigidity;
+
+HandleTargets vertexTargets(const std::vector<Eigen::Vector3d>& positions) {
+  HandleTargets targets;
+  targets.vertex_positions = positions;
+  return targets;
+}
+
+double maxDistanceToRest(const TetMesh& mesh, const Deformer& deformer) {
+  return (test::deformedVertices(deformer) - mesh.vertices).rowwise().norm().maxCoeff();
+}
+
+TEST(Deformer, RestPoseIsAFixedPoint) {
+  const auto bar = scenes::makeBarScene(3, 3, 10);
+  Deformer deformer(bar.mesh, test::endVertexHandles(bar));
+  const auto rest = test::endTargets(bar, Eigen::Isometry3d::Identity());
+  const double volume = test::totalSignedVolume(bar.mesh, bar.mesh.vertices);
+  for (int frame = 0; frame < 5; ++frame) {
+    const StepStats stats = deformer.step(vertexTargets(rest), StepBudget{10});
+    EXPECT_EQ(stats.iterations, 10);
+    EXPECT_LT(stats.energy, 1e-12 * volume);  // rounding of sum a (|F|^2 - 2 tr + 3) only
+  }
+  EXPECT_LT(maxDistanceToRest(bar.mesh, deformer), 1e-11);
+}
+
+// Bends the 4x4x33 bar by 90 degrees over `frames` frames, then iterates until converged.
+Vertices bendBar(const scenes::BarScene& bar, DeformerOptions options, int frames, int iterations_per_frame,
+                 int final_iterations) {
+  DeformerSetup setup = test::endVertexHandles(bar);
+  setup.options = options;
+  Deformer deformer(bar.mesh, setup);
+  for (int f = 1; f <= frames; ++f) {
+    const auto targets = test::endTargets(bar, scenes::barBendTransform(bar, 0.5 * M_PI * f / frames));
+    deformer.step(vertexTargets(targets), StepBudget{f == frames ? final_iterations : iterations_per_frame});
+  }
+  return test::deformedVertices(deformer);
+}
+
+TEST(Deformer, BarBendStaysRigidAndKeepsVolumeWhereLinearLaplacianFails) {
+  const auto bar = scenes::makeBarScene(4, 4, 33);
+  const double rest_volume = test::totalSignedVolume(bar.mesh, bar.mesh.vertices);
+
+  const Vertices bent = bendBar(bar, DeformerOptions{}, 10, 5, 400);
+  const Rigidity arap = test::rigidity(bar.mesh, bent);
+  const double arap_volume_change = std::abs(test::totalSignedVolume(bar.mesh, bent) / rest_volume - 1.0);
+
+  DeformerOptions linear_options;
+  linear_options.update_rotations = false;
+  const Vertices linear = bendBar(bar, linear_options, 1, 1, 1);
+  const Rigidity lin = test::rigidity(bar.mesh, linear);
+  const double linear_volume_change = std::abs(test::totalSignedVolume(bar.mesh, linear) / rest_volume - 1.0);
+
+  std::printf("bend 90 deg, 4x4x33: ARAP  max ||F-R|| %.4f mean %.4f volume change %.3f %%\n", arap.max, arap.mean,
+              100 * arap_volume_change);
+  std::printf("                     linear max ||F-R|| %.4f mean %.4f volume change %.3f %%\n", lin.max, lin.mean,
+              100 * linear_volume_change);
+  // Bending a bar of thickness 4 into a quarter circle of radius ~20 stretches its outer fibres by
+  // about 2/20 = 10 %: every tet stays within 0.25 of a rotation (Frobenius), on average within 0.06.
+  EXPECT_LT(arap.max, 0.25);
+  EXPECT_LT(arap.mean, 0.06);
+  EXPECT_LT(arap_volume_change, 0.01);
+  // The linear Laplacian cannot rotate its tets: at least 4x the mean distortion of the volumetric
+  // method, and a larger volume change.
+  EXPECT_GT(lin.mean, 4.0 * arap.mean);
+  EXPECT_GT(linear_volume_change, arap_volume_change);
+}
+
+TEST(Deformer, EnergyNeverIncreasesWithoutInterpolationOrRigidGroups) {
+  const auto bar = scenes::makeBarScene(4, 4, 33);
+  Deformer deformer(bar.mesh, test::endVertexHandles(bar));
+  // One large jump (twist 150 degrees, shift sideways and squash the bar to 40 % of its length)
+  // inverts tets in the first iterations.
+  const auto targets =
+      test::endTargets(bar, scenes::barAxisTransform(bar, 150.0 / 180.0 * M_PI, Eigen::Vector3d(3, -2, -20)));
+  double previous = std::numeric_limits<double>::infinity();
+  bool saw_exact = false;
+  for (int iteration = 0; iteration < 300; ++iteration) {
+    const StepStats stats = deformer.step(vertexTargets(targets), StepBudget{1});
+    saw_exact = saw_exact || (stats.flags & kStepExactRotations);
+    // Relative slack for rounding only.
+    EXPECT_LE(stats.energy, previous * (1.0 + 1e-12) + 1e-12) << "iteration " << iteration;
+    previous = stats.energy;
+  }
+  EXPECT_TRUE(saw_exact) << "the jump was meant to invert some tets and exercise the exact fallback";
+}
+
+// Twist angle (radians, unwrapped against `previous`) of vertex v about the bar axis.
+double twistAngle(const scenes::BarScene& bar, const Deformer& deformer, std::int32_t v, double previous) {
+  const Eigen::Vector3d p = deformer.position(v) - bar.axis_point;
+  const Eigen::Vector3d r = Eigen::Vector3d(bar.mesh.vertices.row(v).transpose()) - bar.axis_point;
+  double angle = std::atan2(p.y(), p.x()) - std::atan2(r.y(), r.x());
+  while (angle - previous > M_PI) angle -= 2 * M_PI;
+  while (angle - previous < -M_PI) angle += 2 * M_PI;
+  return angle;
+}
+
+struct TwistRun {
+  double max_lag_deg = 0.0;  // worst |expected - actual| mid-bar twist over the frames
+  int extra_iterations = -1;  // after the last frame, iterations until within tolerance
+};
+
+TwistRun twistBar(bool interpolate, int frames, int iterations_per_frame, double tolerance_deg, int max_extra) {
+  const auto bar = scenes::makeBarScene(4, 4, 33);
+  DeformerSetup setup;
+  setup.region_handles = {RegionHandle{bar.near_tets, true}, RegionHandle{bar.far_tets, true}};
+  setup.options.interpolate_rotations = interpolate;
+  Deformer deformer(bar.mesh, setup);
+  // Mid-bar corner vertex (0, 0, 16), off the axis; the free part spans z in [1, 32].
+  const std::int32_t mid = 16 * 25;
+  const double fraction = (16.0 - 1.0) / (32.0 - 1.0);
+  std::vector<RigidTransform> transforms(2);
+  HandleTargets targets;
+  targets.region_transforms = transforms;
+  TwistRun run;
+  double angle = 0.0, total = 0.0;
+  for (int f = 1; f <= frames; ++f) {
+    total = 2 * M_PI * f / frames;
+    const Eigen::Isometry3d far = scenes::barAxisTransform(bar, total, Eigen::Vector3d::Zero());
+    transforms[1].rotation = Eigen::Quaterniond(far.rotation());
+    transforms[1].translation = far.translation();
+    deformer.step(targets, StepBudget{iterations_per_frame});
+    angle = twistAngle(bar, deformer, mid, angle);
+    run.max_lag_deg = std::max(run.max_lag_deg, std::abs(fraction * total - angle) * 180 / M_PI);
+  }
+  for (int extra = 0; extra <= max_extra; ++extra) {
+    if (std::abs(fraction * total - angle) * 180 / M_PI <= tolerance_deg) {
+      run.extra_iterations = extra;
+      break;
+    }
+    deformer.step(targets, StepBudget{1});
+    angle = twistAngle(bar, deformer, mid, angle);
+  }
+  return run;
+}
+
+TEST(Deformer, TwistOf360DegreesPropagatesWithRotationInterpolation) {
+  // 360 degrees in 8 frames of 45 degrees, 3 iterations each: the mid-bar must follow at once.
+  const TwistRun with = twistBar(true, 8, 3, 10.0, 0);
+  std::printf("twist 360 deg, 8 frames x 3 iterations: with interpolation worst mid-bar lag %.2f deg\n",
+              with.max_lag_deg);
+  EXPECT_LT(with.max_lag_deg, 10.0);
+  EXPECT_EQ(with.extra_iterations, 0);
+  // Without interpolation the twist diffuses slowly from the handle; report what it takes.
+  const TwistRun without3 = twistBar(false, 8, 3, 10.0, 2000);
+  std::printf("without interpolation, 3 iterations/frame: worst lag %.1f deg; %s\n", without3.max_lag_deg,
+              without3.extra_iterations >= 0
+                  ? ("caught up " + std::to_string(without3.extra_iterations) + " iterations after the last frame").c_str()
+                  : "never caught up within 2000 more iterations (it settled in a less twisted state)");
+  EXPECT_GT(without3.max_lag_deg, 30.0);
+  int needed = -1;
+  for (int per_frame : {10, 30, 100, 300}) {
+    if (twistBar(false, 8, per_frame, 10.0, 0).max_lag_deg < 10.0) {
+      needed = per_frame;
+      break;
+    }
+  }
+  std::printf("without interpolation, iterations per 45-degree frame to keep the lag under 10 deg: %s\n",
+              needed > 0 ? std::to_string(needed).c_str() : "more than 300");
+}
+
+TEST(Deformer, RecoversTheRestShapeFromRandomRotations) {
+  const auto bar = scenes::makeBarScene(3, 3, 12);
+  Deformer deformer(bar.mesh, test::endVertexHandles(bar));
+  std::mt19937 rng(11);
+  std::normal_distribution<double> normal;
+  std::vector<Eigen::Quaterniond> random(static_cast<size_t>(bar.mesh.tetCount()));
+  for (auto& q : random) q = Eigen::Quaterniond(normal(rng), normal(rng), normal(rng), normal(rng)).normalized();
+  deformer.setRotations(random);
+  const auto rest = test::endTargets(bar, Eigen::Isometry3d::Identity());
+  deformer.step(vertexTargets(rest), StepBudget{1});
+  const double diagonal = boundingBoxDiagonal(bar.mesh.vertices);
+  const double scrambled = maxDistanceToRest(bar.mesh, deformer) / diagonal;
+  int iterations = 1;
+  while (iterations < 5000 && maxDistanceToRest(bar.mesh, deformer) / diagonal > 1e-6) {
+    deformer.step(vertexTargets(rest), StepBudget{10});
+    iterations += 10;
+  }
+  std::printf("rest recovery: scrambled to %.3f of the diagonal, back within 1e-6 after %d iterations\n", scrambled,
+              iterations);
+  EXPECT_GT(scrambled, 0.05);
+  EXPECT_LE(maxDistanceToRest(bar.mesh, deformer) / diagonal, 1e-6);
+}
+
+// RMS distance of `vertices` from the best rigid map of their rest positions (Kabsch), over
+// the RMS distance of the rest positions from their centroid.
+double rigidFitResidual(const TetMesh& mesh, const Vertices& x, const std::vector<std::int32_t>& vertices) {
+  Eigen::MatrixXd rest(3, vertices.size()), bent(3, vertices.size());
+  for (size_t i = 0; i < vertices.size(); ++i) {
+    rest.col(static_cast<Eigen::Index>(i)) = mesh.vertices.row(vertices[i]).transpose();
+    bent.col(static_cast<Eigen::Index>(i)) = x.row(vertices[i]).transpose();
+  }
+  const Eigen::Matrix4d fit = Eigen::umeyama(rest, bent, false);
+  const Eigen::MatrixXd mapped = (fit.topLeftCorner<3, 3>() * rest).colwise() + fit.topRightCorner<3, 1>();
+  const Eigen::Vector3d centroid = rest.rowwise().mean();
+  return std::sqrt((mapped - bent).squaredNorm() / (rest.colwise() - centroid).squaredNorm());
+}
+
+struct GroupShape {
+  double residual = 0.0;         // worst part's rigid-fit residual
+  double rotation_spread = 0.0;  // radians
+};
+
+TEST(Deformer, RigidGroupsShareOneRotationAndKeepTheirShape) {
+  const auto bar = scenes::makeBarScene(4, 4, 33);
+  // An S-bend: the far end moves sideways by 8 and keeps its orientation. The bar's tangent angle
+  // is then symmetric about the middle (z = 16.5), so two parts placed symmetrically, z in [8, 12]
+  // and [21, 25], can share one rotation: one group of two disconnected parts ("pseudo-skeleton").
+  RigidGroup group;
+  std::vector<std::vector<std::int32_t>> part_vertices(2);
+  for (std::int32_t t = 0; t < bar.mesh.tetCount(); ++t) {
+    double z = 0.0;
+    for (int c = 0; c < 4; ++c) z += 0.25 * bar.mesh.vertices(bar.mesh.tets(t, c), 2);
+    const int part = (z > 8 && z < 12) ? 0 : (z > 21 && z < 25) ? 1 : -1;
+    if (part < 0) continue;
+    group.tets.push_back(t);
+    for (int c = 0; c < 4; ++c) part_vertices[static_cast<size_t>(part)].push_back(bar.mesh.tets(t, c));
+  }
+  for (auto& p : part_vertices) {
+    std::sort(p.begin(), p.end());
+    p.erase(std::unique(p.begin(), p.end()), p.end());
+  }
+  auto run = [&](bool with_group, double group_stiffness) {
+    DeformerSetup setup = test::endVertexHandles(bar);
+    if (with_group) setup.rigid_groups = {group};
+    setup.stiffness.assign(static_cast<size_t>(bar.mesh.tetCount()), 1.0);
+    for (auto t : group.tets) setup.stiffness[static_cast<size_t>(t)] = group_stiffness;
+    Deformer deformer(bar.mesh, setup);
+    for (int f = 1; f <= 10; ++f) {
+      const auto targets = test::endTargets(bar, scenes::barAxisTransform(bar, 0.0, Eigen::Vector3d(0, 0.8 * f, 0)));
+      deformer.step(vertexTargets(targets), StepBudget{f == 10 ? 400 : 5});
+    }
+    if (with_group) {
+      const Eigen::Quaterniond first = deformer.rotation(group.tets.front());
+      for (auto t : group.tets) EXPECT_LT(first.angularDistance(deformer.rotation(t)), 1e-12) << "tet " << t;
+    }
+    const Vertices x = test::deformedVertices(deformer);
+    // Bending inside the group: the largest angle between a group tet's own polar rotation and
+    // the average of them all.
+    const TetRestFrames frames = computeRestFrames(bar.mesh);
+    Eigen::Matrix3d sum = Eigen::Matrix3d::Zero();
+    std::vector<Eigen::Quaterniond> own;
+    for (auto t : group.tets) {
+      own.push_back(closestRotation(deformationGradient(bar.mesh, frames, x, t)));
+      sum += own.back().toRotationMatrix();
+    }
+    const Eigen::Quaterniond mean = closestRotation(sum);
+    GroupShape shape;
+    for (const auto& q : own) shape.rotation_spread = std::max(shape.rotation_spread, mean.angularDistance(q));
+    shape.residual = std::max(rigidFitResidual(bar.mesh, x, part_vertices[0]), rigidFitResidual(bar.mesh, x, part_vertices[1]));
+    return shape;
+  };
+  // A group removes bending inside it (one rotation for all its tets); strain from the load it
+  // carries is removed by stiffness (paper 2.3.2, end). A rigid part is a group with stiffness.
+  const GroupShape group1 = run(true, 1.0), free1 = run(false, 1.0);
+  const GroupShape group10 = run(true, 10.0), free10 = run(false, 10.0);
+  std::printf("rigid group, S-bend: rotation spread %.2f deg (no group %.2f); with stiffness 10: %.2f deg (%.2f), "
+              "rigid-fit residual %.4f (no group, stiffness 1: %.4f)\n",
+              group1.rotation_spread * 180 / M_PI, free1.rotation_spread * 180 / M_PI,
+              group10.rotation_spread * 180 / M_PI, free10.rotation_spread * 180 / M_PI, group10.residual,
+              free1.residual);
+  EXPECT_LT(group1.rotation_spread, 0.6 * free1.rotation_spread);
+  EXPECT_LT(group10.rotation_spread, 0.6 * free10.rotation_spread);
+  EXPECT_LT(group10.residual, 0.005);
+  EXPECT_LT(group10.residual, 0.2 * free1.residual);
+}
+
+TEST(Deformer, NonFiniteAndAbsurdTargetsAreRejected) {
+  const auto bar = scenes::makeBarScene(2, 2, 8);
+  Deformer deformer(bar.mesh, test::endVertexHandles(bar));
+  Deformer twin(bar.mesh, test::endVertexHandles(bar));  // sees only the good targets
+  auto targets = test::endTargets(bar, scenes::barAxisTransform(bar, 0.3, Eigen::Vector3d(0, 0, 1)));
+  deformer.step(vertexTargets(targets), StepBudget{5});
+  twin.step(vertexTargets(targets), StepBudget{5});
+  const double bad_values[] = {std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity(),
+                               -std::numeric_limits<double>::infinity(), 1e300};
+  for (double bad : bad_values) {
+    auto poisoned = targets;
+    poisoned[3].y() = bad;
+    const StepStats stats = deformer.step(vertexTargets(poisoned), StepBudget{5});
+    EXPECT_TRUE(stats.flags & kStepTargetsRejected) << bad;
+    for (double p : deformer.positions()) ASSERT_TRUE(std::isfinite(p)) << bad;
+    // The previous targets were kept: the result is that of a deformer given the good ones.
+    twin.step(vertexTargets(targets), StepBudget{5});
+    for (size_t i = 0; i < twin.positions().size(); ++i) ASSERT_EQ(deformer.positions()[i], twin.positions()[i]);
+  }
+  std::vector<Eigen::Vector3d> too_few(targets.begin(), targets.end() - 1);
+  EXPECT_TRUE(deformer.step(vertexTargets(too_few), StepBudget{1}).flags & kStepTargetsWrongSize);
+  // A good frame afterwards is accepted again.
+  EXPECT_EQ(deformer.step(vertexTargets(targets), StepBudget{1}).flags & (kStepTargetsRejected | kStepTargetsWrongSize),
+            0u);
+}
+
+TEST(Deformer, DeadlineStopsTheIterations) {
+  const auto bar = scenes::makeBarScene(3, 3, 20);
+  Deformer deformer(bar.mesh, test::endVertexHandles(bar));
+  const auto targets = test::endTargets(bar, scenes::barBendTransform(bar, 1.0));
+  StepBudget budget{1000, std::chrono::steady_clock::now()};  // already past
+  const StepStats stats = deformer.step(vertexTargets(targets), budget);
+  EXPECT_EQ(stats.iterations, 1);  // one iteration always runs, then the deadline stops it
+  EXPECT_TRUE(stats.flags & kStepDeadlineHit);
+  const StepStats unbounded = deformer.step(vertexTargets(targets), StepBudget{7});
+  EXPECT_EQ(unbounded.iterations, 7);
+  EXPECT_FALSE(unbounded.flags & kStepDeadlineHit);
+  EXPECT_GT(unbounded.solve_ns, 0);
+  EXPECT_GT(unbounded.rotation_ns, 0);
+  EXPECT_GE(unbounded.total_ns, unbounded.solve_ns + unbounded.rotation_ns);
+}
+
+TEST(Deformer, PointHandlesPullTheirPointSoftly) {
+  const auto bar = scenes::makeBarScene(2, 2, 10);
+  DeformerSetup setup;
+  setup.vertex_handles = bar.near_vertices;
+  PointHandle point;
+  point.tet = bar.mesh.tetCount() - 1;  // in the last cube, free of handles
+  point.barycentric = Eigen::Vector4d(0.1, 0.2, 0.3, 0.4);
+  setup.point_handles = {point};
+  Deformer deformer(bar.mesh, setup);
+  const auto near = scenes::transformedPositions(bar.mesh, bar.near_vertices, Eigen::Isometry3d::Identity());
+  Eigen::Vector3d rest_point = Eigen::Vector3d::Zero();
+  for (int c = 0; c < 4; ++c)
+    rest_point += point.barycentric[c] * bar.mesh.vertices.row(bar.mesh.tets(point.tet, c)).transpose();
+  const std::vector<Eigen::Vector3d> goal = {rest_point + Eigen::Vector3d(2.0, 0.0, 0.0)};
+  HandleTargets targets;
+  targets.vertex_positions = near;
+  targets.point_positions = goal;
+  for (int f = 0; f < 20; ++f) deformer.step(targets, StepBudget{20});
+  Eigen::Vector3d reached = Eigen::Vector3d::Zero();
+  for (int c = 0; c < 4; ++c) reached += point.barycentric[c] * deformer.position(bar.mesh.tets(point.tet, c));
+  std::printf("point handle: moved 2.0, residual %.4f\n", (reached - goal[0]).norm());
+  EXPECT_LT((reached - goal[0]).norm(), 0.05);  // soft, but close (lambda = 1e3 x mean diag L)
+  EXPECT_GT((reached - rest_point).norm(), 1.9);
+}
+
+TEST(Deformer, SetupErrorsNameTheProblem) {
+  const auto bar = scenes::makeBarScene(1, 1, 20);
+  auto message = [&](DeformerSetup setup) -> std::string {
+    try {
+      Deformer d(bar.mesh, setup);
+    } catch (const std::exception& e) {
+      return e.what();
+    }
+    return "";
+  };
+  DeformerSetup out_of_range;
+  out_of_range.vertex_handles = {0, 999};
+  EXPECT_NE(message(out_of_range).find("vertex 999"), std::string::npos);
+  DeformerSetup twice;
+  twice.vertex_handles = {bar.near_vertices[0]};
+  twice.region_handles = {RegionHandle{bar.near_tets, true}};
+  EXPECT_NE(message(twice).find("already"), std::string::npos);
+  DeformerSetup no_handles;
+  EXPECT_NE(message(no_handles).find("handle"), std::string::npos);
+  DeformerSetup bad_group = test::endVertexHandles(bar);
+  bad_group.rigid_groups = {RigidGroup{{0, 1}}, RigidGroup{{1, 2}}};
+  EXPECT_NE(message(bad_group).find("two rigid groups"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace tetrig
