@@ -1,15 +1,21 @@
 // Fused rotation extraction + differential-coordinate update (Stoll et al. 2007, 2.3.2), with
 // the warm-started rotation iteration of Mueller et al. 2016. See rotation_kernel.hpp.
+//
+// Lanes: one `Lanes` value holds one quantity of the kTetBlockWidth (8) tets of a block, written
+// with GCC/Clang vector extensions so every build (AVX-512, AVX2, SSE2, NEON) vectorises the same
+// source. Scalar code remains only for the gathers/scatters and the rare exact fallback.
 #include "tetrig/rotation_kernel.hpp"
 
 #include "tetrig/polar.hpp"
 
 #include <cmath>
+#include <cstring>
 
-// x86-64: compile the lane loops for AVX-512, AVX2 and baseline, chosen at load time by the
-// dynamic loader (ifunc). Other targets (aarch64) get the portable build only.
+// x86-64 with GCC: the kernels are compiled for x86-64-v4 (AVX-512), x86-64-v3 (AVX2 + FMA) and
+// the baseline, and the dynamic loader picks one (ifunc). Elsewhere (clang, aarch64) the portable build only.
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && !defined(TETRIG_NO_MULTIVERSION)
-#define TETRIG_KERNEL_CLONES __attribute__((target_clones("avx512f", "avx2", "default")))
+#define TETRIG_KERNEL_CLONES __attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default")))
+#define TETRIG_KERNEL_MULTIVERSION 1
 #else
 #define TETRIG_KERNEL_CLONES
 #endif
@@ -19,35 +25,48 @@ namespace tetrig {
 namespace {
 
 constexpr int W = kTetBlockWidth;
+using Lanes = double __attribute__((vector_size(W * sizeof(double))));
+using Mask = long long __attribute__((vector_size(W * sizeof(double))));
+static_assert(sizeof(Lanes) == sizeof(double) * W);
 
-// Rotation matrix of a unit quaternion, row-major r[3 * row + col].
-inline void quaternionToMatrix(double w, double x, double y, double z, double* r) {
-  const double xx = x * x, yy = y * y, zz = z * z;
-  const double xy = x * y, xz = x * z, yz = y * z, wx = w * x, wy = w * y, wz = w * z;
-  r[0] = 1.0 - 2.0 * (yy + zz);
-  r[1] = 2.0 * (xy - wz);
-  r[2] = 2.0 * (xz + wy);
-  r[3] = 2.0 * (xy + wz);
-  r[4] = 1.0 - 2.0 * (xx + zz);
-  r[5] = 2.0 * (yz - wx);
-  r[6] = 2.0 * (xz - wy);
-  r[7] = 2.0 * (yz + wx);
-  r[8] = 1.0 - 2.0 * (xx + yy);
+inline Lanes load(const double* p) {
+  Lanes v;
+  std::memcpy(&v, p, sizeof v);
+  return v;
+}
+inline void store(double* p, Lanes v) { std::memcpy(p, &v, sizeof v); }
+inline Lanes splat(double x) { return Lanes{} + x; }
+inline Lanes select(Mask m, Lanes a, Lanes b) { return m ? a : b; }
+inline Lanes absolute(Lanes x) { return select(x < 0.0, -x, x); }
+inline Lanes squareRoot(Lanes x) {
+  double lanes[W];
+  store(lanes, x);
+  for (double& v : lanes) v = __builtin_sqrt(v);  // -fno-math-errno: one vector sqrt
+  return load(lanes);
 }
 
-// Scatter of a R E^-T into delta for one block, from per-lane rotation matrices r[9][W].
-inline void scatterBlock(const TetBlock& block, const double (&r)[9][W], double* delta) {
+// Rotation matrix (row-major r[3 * row + col]) of unit quaternions (w, x, y, z).
+struct Matrix {
+  Lanes m[9];
+};
+inline Matrix quaternionToMatrix(Lanes w, Lanes x, Lanes y, Lanes z) {
+  const Lanes xx = x * x, yy = y * y, zz = z * z;
+  const Lanes xy = x * y, xz = x * z, yz = y * z, wx = w * x, wy = w * y, wz = w * z;
+  return {{1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy),  //
+           2.0 * (xy + wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz - wx),  //
+           2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy)}};
+}
+
+// delta_ck += a R grad phi_k (k = 0..2), delta_c3 -= their sum, with grad phi_k = row k of E^-1.
+inline void scatterBlock(const TetBlock& block, const Matrix& r, double* delta) {
+  const Lanes a = load(block.weight);
+  Lanes e[9];
+  for (int i = 0; i < 9; ++i) e[i] = load(block.edge_inverse[i]);
   double m[9][W];  // m[3 * row + k]: component `row` of a R grad phi_k
-#pragma omp simd
-  for (int l = 0; l < W; ++l) {
-    for (int row = 0; row < 3; ++row) {
-      for (int k = 0; k < 3; ++k) {
-        m[3 * row + k][l] = block.weight[l] * (r[3 * row][l] * block.edge_inverse[3 * k][l] +
-                                               r[3 * row + 1][l] * block.edge_inverse[3 * k + 1][l] +
-                                               r[3 * row + 2][l] * block.edge_inverse[3 * k + 2][l]);
-      }
-    }
-  }
+  for (int row = 0; row < 3; ++row)
+    for (int k = 0; k < 3; ++k)
+      store(m[3 * row + k], a * (r.m[3 * row] * e[3 * k] + r.m[3 * row + 1] * e[3 * k + 1] +
+                                 r.m[3 * row + 2] * e[3 * k + 2]));
   for (int l = 0; l < W; ++l) {
     for (int k = 0; k < 3; ++k) {
       double* d = delta + 3 * block.corner[k][l];
@@ -68,136 +87,150 @@ TETRIG_KERNEL_CLONES
 RotationPassStats rotationPass(TetBlock* blocks, std::int32_t block_count, const double* xyz, double* delta,
                                int steps) {
   RotationPassStats stats;
-  double energy = 0.0;
+  Lanes energy = splat(0.0);
   for (std::int32_t b = 0; b < block_count; ++b) {
     TetBlock& block = blocks[b];
-    // Gather the edges x_ck - x_c3.
-    double e[9][W];  // e[3 * k + c]: component c of edge k
-    for (int l = 0; l < W; ++l) {
-      const double* p3 = xyz + 3 * block.corner[3][l];
-      for (int k = 0; k < 3; ++k) {
-        const double* pk = xyz + 3 * block.corner[k][l];
-        e[3 * k][l] = pk[0] - p3[0];
-        e[3 * k + 1][l] = pk[1] - p3[1];
-        e[3 * k + 2][l] = pk[2] - p3[2];
+    // Edges x_ck - x_c3 of the deformed tets, gathered straight into lanes (building vectors from
+    // scalars avoids a store-then-vector-load round trip through memory).
+    const double* p[4][W];
+    for (int k = 0; k < 4; ++k)
+      for (int l = 0; l < W; ++l) p[k][l] = xyz + 3 * block.corner[k][l];
+    auto gather = [&p](int k, int c) {
+      return Lanes{p[k][0][c], p[k][1][c], p[k][2][c], p[k][3][c], p[k][4][c], p[k][5][c], p[k][6][c], p[k][7][c]};
+    };
+    static_assert(W == 8, "gather() lists 8 lanes");
+    // F = E' E^-1: F(row, col) = sum_k edge_k[row] Einv(k, col)   (eq. 2.6)
+    Matrix f;
+    {
+      Lanes e[9], inv[9];
+      for (int c = 0; c < 3; ++c) {
+        const Lanes p3 = gather(3, c);
+        for (int k = 0; k < 3; ++k) e[3 * k + c] = gather(k, c) - p3;
       }
+      for (int i = 0; i < 9; ++i) inv[i] = load(block.edge_inverse[i]);
+      for (int row = 0; row < 3; ++row)
+        for (int col = 0; col < 3; ++col)
+          f.m[3 * row + col] = e[row] * inv[col] + e[3 + row] * inv[3 + col] + e[6 + row] * inv[6 + col];
     }
-    // F = E' E^-1: F(row, col) = sum_k e_k[row] * Einv(k, col).
-    double f[9][W];
-    double det[W];
-#pragma omp simd
-    for (int l = 0; l < W; ++l) {
-      for (int row = 0; row < 3; ++row) {
-        for (int col = 0; col < 3; ++col) {
-          f[3 * row + col][l] = e[row][l] * block.edge_inverse[col][l] +
-                                e[3 + row][l] * block.edge_inverse[3 + col][l] +
-                                e[6 + row][l] * block.edge_inverse[6 + col][l];
-        }
-      }
-      det[l] = f[0][l] * (f[4][l] * f[8][l] - f[5][l] * f[7][l]) -
-               f[1][l] * (f[3][l] * f[8][l] - f[5][l] * f[6][l]) +
-               f[2][l] * (f[3][l] * f[7][l] - f[4][l] * f[6][l]);
+    const Lanes det = f.m[0] * (f.m[4] * f.m[8] - f.m[5] * f.m[7]) - f.m[1] * (f.m[3] * f.m[8] - f.m[5] * f.m[6]) +
+                      f.m[2] * (f.m[3] * f.m[7] - f.m[4] * f.m[6]);
+    Lanes ff = f.m[0] * f.m[0];
+    for (int i = 1; i < 9; ++i) ff += f.m[i] * f.m[i];
+    // Horn's symmetric N(F): q^T N q = |q|^2 tr(R(q)^T F) for any quaternion q (polar.hpp).
+    const Lanes n00 = f.m[0] + f.m[4] + f.m[8], n11 = f.m[0] - f.m[4] - f.m[8];
+    const Lanes n22 = f.m[4] - f.m[0] - f.m[8], n33 = f.m[8] - f.m[0] - f.m[4];
+    const Lanes n01 = f.m[7] - f.m[5], n02 = f.m[2] - f.m[6], n03 = f.m[3] - f.m[1];
+    const Lanes n12 = f.m[1] + f.m[3], n13 = f.m[2] + f.m[6], n23 = f.m[5] + f.m[7];
+
+    // Warm-started refinement of q towards argmax tr(R^T F) (Mueller et al. 2016). With g = N q,
+    // the gradient of tr(R^T F) over rotation vectors is omega = (q_w g_v - g_w q_v + q_v x g_v) / |q|^2
+    // (for unit q, sum_c r_c x f_c). The step rotates q by the half-angle vector
+    // damping * omega / (|tr| + eps), i.e. q <- (|tr| + eps, damping * omega) q, unnormalised:
+    // q only needs normalising once, at the end. A step is kept only if tr(R^T F) does not drop;
+    // a rejected step halves that lane's damping.
+    Lanes qw = load(block.rotation[0]), qx = load(block.rotation[1]), qy = load(block.rotation[2]),
+          qz = load(block.rotation[3]);
+    Lanes norm2 = qw * qw + qx * qx + qy * qy + qz * qz;  // 1 up to rounding
+    Lanes gw = n00 * qw + n01 * qx + n02 * qy + n03 * qz;
+    Lanes gx = n01 * qw + n11 * qx + n12 * qy + n13 * qz;
+    Lanes gy = n02 * qw + n12 * qx + n22 * qy + n23 * qz;
+    Lanes gz = n03 * qw + n13 * qx + n23 * qy + n33 * qz;
+    Lanes quad = qw * gw + qx * gx + qy * gy + qz * gz;  // |q|^2 tr(R^T F)
+    Lanes damping = splat(0.5);  // 0.5: (1, omega / 2) is the half-angle form of a rotation by |omega|
+    for (int s = 0; s < steps; ++s) {
+      const Lanes inv_norm2 = 1.0 / norm2;
+      const Lanes trace = quad * inv_norm2;
+      const Lanes k = damping * inv_norm2;
+      const Lanes ox = k * (qw * gx - gw * qx + qy * gz - qz * gy);
+      const Lanes oy = k * (qw * gy - gw * qy + qz * gx - qx * gz);
+      const Lanes oz = k * (qw * gz - gw * qz + qx * gy - qy * gx);
+      const Lanes dw = absolute(trace) + 1e-9;
+      const Lanes w1 = dw * qw - ox * qx - oy * qy - oz * qz;  // (dw, o) * q
+      const Lanes x1 = dw * qx + ox * qw + oy * qz - oz * qy;
+      const Lanes y1 = dw * qy + oy * qw + oz * qx - ox * qz;
+      const Lanes z1 = dw * qz + oz * qw + ox * qy - oy * qx;
+      const Lanes gw1 = n00 * w1 + n01 * x1 + n02 * y1 + n03 * z1;
+      const Lanes gx1 = n01 * w1 + n11 * x1 + n12 * y1 + n13 * z1;
+      const Lanes gy1 = n02 * w1 + n12 * x1 + n22 * y1 + n23 * z1;
+      const Lanes gz1 = n03 * w1 + n13 * x1 + n23 * y1 + n33 * z1;
+      const Lanes quad1 = w1 * gw1 + x1 * gx1 + y1 * gy1 + z1 * gz1;
+      const Lanes norm21 = w1 * w1 + x1 * x1 + y1 * y1 + z1 * z1;
+      const Mask accept = quad1 * norm2 >= quad * norm21;  // tr1 >= tr without dividing; false on NaN
+      qw = select(accept, w1, qw);
+      qx = select(accept, x1, qx);
+      qy = select(accept, y1, qy);
+      qz = select(accept, z1, qz);
+      gw = select(accept, gw1, gw);
+      gx = select(accept, gx1, gx);
+      gy = select(accept, gy1, gy);
+      gz = select(accept, gz1, gz);
+      quad = select(accept, quad1, quad);
+      norm2 = select(accept, norm21, norm2);
+      damping = select(accept, damping, 0.5 * damping);
     }
-    // Current rotation and its trace against F.
-    double r[9][W], trace[W], damping[W];
-#pragma omp simd
-    for (int l = 0; l < W; ++l) {
-      damping[l] = 0.5;  // (1, omega / 2): the half-angle vector; halved again after a rejected step
-      double rl[9];
-      quaternionToMatrix(block.rotation[0][l], block.rotation[1][l], block.rotation[2][l], block.rotation[3][l], rl);
+    const Lanes inv_norm = 1.0 / squareRoot(norm2);
+    qw *= inv_norm;
+    qx *= inv_norm;
+    qy *= inv_norm;
+    qz *= inv_norm;
+    Lanes trace = quad * inv_norm * inv_norm;
+    store(block.rotation[0], qw);
+    store(block.rotation[1], qx);
+    store(block.rotation[2], qy);
+    store(block.rotation[3], qz);
+    Matrix r = quaternionToMatrix(qw, qx, qy, qz);
+
+    // Inverted and degenerate tets take the exact rotation: the local iteration can stall there.
+    const Mask needs_exact = (load(block.weight) > 0.0) & ~(det > 1e-12);
+    long long any_exact = 0;
+    for (int l = 0; l < W; ++l) any_exact |= needs_exact[l];
+    for (int l = 0; any_exact != 0 && l < W; ++l) {
+      if (!needs_exact[l]) continue;
+      Eigen::Matrix3d fl;
+      for (int i = 0; i < 9; ++i) fl(i / 3, i % 3) = f.m[i][l];
+      const Eigen::Quaterniond q = closestRotation(fl);
+      block.rotation[0][l] = q.w();
+      block.rotation[1][l] = q.x();
+      block.rotation[2][l] = q.y();
+      block.rotation[3][l] = q.z();
+      const Eigen::Matrix3d rl = q.toRotationMatrix();
       double t = 0.0;
       for (int i = 0; i < 9; ++i) {
-        r[i][l] = rl[i];
-        t += rl[i] * f[i][l];
+        r.m[i][l] = rl(i / 3, i % 3);
+        t += rl(i / 3, i % 3) * fl(i / 3, i % 3);
       }
       trace[l] = t;
+      ++stats.exact_fallbacks;
     }
-    // Warm-started refinement: q <- normalize((1, omega / 2) q), kept only if tr(R^T F) does not
-    // drop; a rejected step halves that lane's step for the rest of the pass.
-    for (int s = 0; s < steps; ++s) {
-#pragma omp simd
-      for (int l = 0; l < W; ++l) {
-        // omega = sum_c r_c x f_c over columns c, scaled by 1 / (|tr| + eps).
-        double ox = 0.0, oy = 0.0, oz = 0.0;
-        for (int c = 0; c < 3; ++c) {
-          ox += r[3 + c][l] * f[6 + c][l] - r[6 + c][l] * f[3 + c][l];
-          oy += r[6 + c][l] * f[c][l] - r[c][l] * f[6 + c][l];
-          oz += r[c][l] * f[3 + c][l] - r[3 + c][l] * f[c][l];
-        }
-        const double scale = damping[l] / (std::abs(trace[l]) + 1e-9);
-        const double hx = ox * scale, hy = oy * scale, hz = oz * scale;  // (1, h): half-angle vector
-        const double w0 = block.rotation[0][l], x0 = block.rotation[1][l], y0 = block.rotation[2][l],
-                     z0 = block.rotation[3][l];
-        double w1 = w0 - hx * x0 - hy * y0 - hz * z0;
-        double x1 = x0 + hx * w0 + hy * z0 - hz * y0;
-        double y1 = y0 + hy * w0 + hz * x0 - hx * z0;
-        double z1 = z0 + hz * w0 + hx * y0 - hy * x0;
-        const double inv_norm = 1.0 / std::sqrt(w1 * w1 + x1 * x1 + y1 * y1 + z1 * z1);
-        w1 *= inv_norm;
-        x1 *= inv_norm;
-        y1 *= inv_norm;
-        z1 *= inv_norm;
-        double rl[9];
-        quaternionToMatrix(w1, x1, y1, z1, rl);
-        double t = 0.0;
-        for (int i = 0; i < 9; ++i) t += rl[i] * f[i][l];
-        const bool accept = t >= trace[l];  // false on NaN as well
-        block.rotation[0][l] = accept ? w1 : w0;
-        block.rotation[1][l] = accept ? x1 : x0;
-        block.rotation[2][l] = accept ? y1 : y0;
-        block.rotation[3][l] = accept ? z1 : z0;
-        for (int i = 0; i < 9; ++i) r[i][l] = accept ? rl[i] : r[i][l];
-        trace[l] = accept ? t : trace[l];
-        damping[l] = accept ? damping[l] : 0.5 * damping[l];
-      }
-    }
-    // Exact rotation for inverted and degenerate tets, where the local iteration can stall.
-    for (int l = 0; l < W; ++l) {
-      if (block.weight[l] > 0.0 && !(det[l] > 1e-12)) {
-        Eigen::Matrix3d fl;
-        for (int i = 0; i < 9; ++i) fl(i / 3, i % 3) = f[i][l];
-        const Eigen::Quaterniond q = closestRotation(fl);
-        block.rotation[0][l] = q.w();
-        block.rotation[1][l] = q.x();
-        block.rotation[2][l] = q.y();
-        block.rotation[3][l] = q.z();
-        double rl[9];
-        quaternionToMatrix(q.w(), q.x(), q.y(), q.z(), rl);
-        double t = 0.0;
-        for (int i = 0; i < 9; ++i) {
-          r[i][l] = rl[i];
-          t += rl[i] * f[i][l];
-        }
-        trace[l] = t;
-        ++stats.exact_fallbacks;
-      }
-    }
-    // Energy a (||F||^2 - 2 tr + 3).
-    double block_energy = 0.0;
-#pragma omp simd reduction(+ : block_energy)
-    for (int l = 0; l < W; ++l) {
-      double ff = 0.0;
-      for (int i = 0; i < 9; ++i) ff += f[i][l] * f[i][l];
-      block_energy += block.weight[l] * (ff - 2.0 * trace[l] + 3.0);
-    }
-    energy += block_energy;
+    // Energy a (||F||^2 - 2 tr(R^T F) + 3).
+    energy += load(block.weight) * (ff - 2.0 * trace + 3.0);
     if (delta != nullptr) scatterBlock(block, r, delta);
   }
-  stats.energy = energy;
+  double total = 0.0;
+  for (int l = 0; l < W; ++l) total += energy[l];
+  stats.energy = total;
   return stats;
+}
+
+const char* rotationKernelInstructionSet() {
+#if defined(TETRIG_KERNEL_MULTIVERSION)
+  // Same order as the target_clones resolver: the widest supported clone wins.
+  if (__builtin_cpu_supports("x86-64-v4")) return "x86-64-v4 (AVX-512)";
+  if (__builtin_cpu_supports("x86-64-v3")) return "x86-64-v3 (AVX2, FMA)";
+  return "x86-64 baseline (SSE2)";
+#elif defined(__aarch64__)
+  return "aarch64 (NEON, portable build)";
+#else
+  return "portable build";
+#endif
 }
 
 TETRIG_KERNEL_CLONES
 void differentialPass(const TetBlock* blocks, std::int32_t block_count, double* delta) {
   for (std::int32_t b = 0; b < block_count; ++b) {
     const TetBlock& block = blocks[b];
-    double r[9][W];
-#pragma omp simd
-    for (int l = 0; l < W; ++l) {
-      double rl[9];
-      quaternionToMatrix(block.rotation[0][l], block.rotation[1][l], block.rotation[2][l], block.rotation[3][l], rl);
-      for (int i = 0; i < 9; ++i) r[i][l] = rl[i];
-    }
+    const Matrix r = quaternionToMatrix(load(block.rotation[0]), load(block.rotation[1]), load(block.rotation[2]),
+                                        load(block.rotation[3]));
     scatterBlock(block, r, delta);
   }
 }

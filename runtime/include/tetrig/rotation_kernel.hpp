@@ -35,6 +35,9 @@ struct RotationPassStats {
 RotationPassStats rotationPass(TetBlock* blocks, std::int32_t block_count, const double* xyz, double* delta,
                                int steps);
 
+// The instruction set the kernels run with on this machine ("avx512f", "avx2", "baseline").
+const char* rotationKernelInstructionSet();
+
 // Adds a_j R_j G_j of every tet into `delta` from the stored rotations (no extraction).
 void differentialPass(const TetBlock* blocks, std::int32_t block_count, double* delta);
 

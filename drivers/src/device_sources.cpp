@@ -1,0 +1,205 @@
+// Device sources: transport + decoder + latest-frame mailbox (see device_sources.hpp).
+#include <tetrig/drivers/device_sources.hpp>
+
+#include <algorithm>
+#include <utility>
+
+namespace tetrig::devices {
+
+namespace {
+
+constexpr auto kRelaxed = std::memory_order_relaxed;
+
+std::vector<std::uint8_t> commandReport(drivers::MarkerStreamCommand command, std::uint16_t param) {
+  std::vector<std::uint8_t> report(drivers::kMarkerStreamHidReportSize, 0);
+  (void)drivers::encodeMarkerStreamCommandReport(command, param, report);
+  return report;
+}
+
+UsbControlRequest controlRequest(drivers::MarkerStreamCommand command, std::uint16_t param, int interface_number) {
+  const drivers::UsbControlSetup setup =
+      drivers::markerStreamControlSetup(command, param, static_cast<std::uint16_t>(std::max(interface_number, 0)));
+  UsbControlRequest r;
+  r.request_type = setup.request_type;
+  r.request = setup.request;
+  r.value = setup.value;
+  r.index = setup.index;
+  r.data.assign(setup.length, 0);
+  return r;
+}
+
+HidTransportConfig prepareHidMarkerStream(const HidMarkerStreamSourceConfig& c) {
+  HidTransportConfig hid = c.hid;
+  hid.report_size = drivers::kMarkerStreamHidReportSize;
+  hid.open_output_reports.push_back(
+      commandReport(drivers::MarkerStreamCommand::kStart, static_cast<std::uint16_t>(c.record_format)));
+  if (c.rate_hz > 0) hid.open_output_reports.push_back(commandReport(drivers::MarkerStreamCommand::kSetRate, c.rate_hz));
+  return hid;
+}
+
+HidTransportConfig prepareHydra(const HydraSourceConfig& c) {
+  HidTransportConfig hid = c.hid;
+  if (hid.vendor_id == 0) hid.vendor_id = drivers::kHydraVendorId;
+  if (hid.product_id == 0) hid.product_id = drivers::kHydraProductId;
+  if (hid.interface_number < 0) hid.interface_number = drivers::kHydraMotionInterface;
+  if (hid.feature_interface_number < 0) hid.feature_interface_number = drivers::kHydraControlInterface;
+  hid.report_size = drivers::kHydraReportSize;
+  if (hid.open_feature_reports.empty()) {
+    const auto mode = drivers::hydraMotionModeFeatureReport();
+    hid.open_feature_reports.emplace_back(mode.begin(), mode.end());
+  }
+  return hid;
+}
+
+UsbTransportConfig prepareUsbMarkerStream(const UsbMarkerStreamSourceConfig& c) {
+  UsbTransportConfig usb = c.usb;
+  usb.transfer_size = std::max(usb.transfer_size, drivers::kMarkerStreamMaxFrameSize);
+  usb.open_control_requests.push_back(controlRequest(
+      drivers::MarkerStreamCommand::kStart, static_cast<std::uint16_t>(c.record_format), usb.interface_number));
+  if (c.rate_hz > 0) {
+    usb.open_control_requests.push_back(
+        controlRequest(drivers::MarkerStreamCommand::kSetRate, c.rate_hz, usb.interface_number));
+  }
+  return usb;
+}
+
+// Wraps the caller's status sink: after every open the decoder forgets its partial state.
+template <class Decoder>
+StatusSink resettingStatus(Decoder& decoder, StatusSink& user) {
+  return [&decoder, &user](const TransportStatus& s) {
+    if (s.event == TransportEvent::kOpened) decoder.reset();  // driver thread, like the sink
+    if (user) user(s);
+  };
+}
+
+void countMarkerStreamError(detail::AtomicSourceStats& stats, drivers::MarkerStreamStatus status) noexcept {
+  stats.decode_errors.fetch_add(1, kRelaxed);
+  stats.last_error.store(static_cast<int>(status), kRelaxed);
+}
+
+void mirrorDecoderStats(detail::AtomicSourceStats& stats, std::uint64_t lost, std::uint64_t duplicates,
+                        std::uint64_t rejected) noexcept {
+  stats.frames_lost.store(lost, kRelaxed);
+  stats.duplicates.store(duplicates, kRelaxed);
+  stats.rejected_markers.store(rejected, kRelaxed);
+}
+
+}  // namespace
+
+namespace detail {
+DeviceSourceStats AtomicSourceStats::snapshot() const noexcept {
+  DeviceSourceStats s;
+  s.frames_published = frames_published.load(kRelaxed);
+  s.decode_errors = decode_errors.load(kRelaxed);
+  s.frames_lost = frames_lost.load(kRelaxed);
+  s.duplicates = duplicates.load(kRelaxed);
+  s.rejected_markers = rejected_markers.load(kRelaxed);
+  s.last_error = last_error.load(kRelaxed);
+  return s;
+}
+}  // namespace detail
+
+// ---------------------------------------------------------------- HID marker stream
+
+HidMarkerStreamSource::HidMarkerStreamSource(HidMarkerStreamSourceConfig config, FrameMailbox& mailbox)
+    : mailbox_(mailbox), transport_(prepareHidMarkerStream(config)), decoder_(config.decoder) {}
+
+HidMarkerStreamSource::~HidMarkerStreamSource() { stop(); }
+
+bool HidMarkerStreamSource::start(StatusSink status) {
+  if (transport_.running()) return false;
+  user_status_ = std::move(status);
+  return transport_.start([this](const ReceivedReport& r) { onReport(r); }, resettingStatus(decoder_, user_status_));
+}
+
+void HidMarkerStreamSource::stop() { transport_.stop(); }
+
+void HidMarkerStreamSource::onReport(const ReceivedReport& report) noexcept {
+  const auto status = decoder_.decodeHidReport(report.bytes, report.receive_ns, mailbox_.producerSlot());
+  if (status == drivers::MarkerStreamStatus::kFrame) {
+    mailbox_.commit();
+    stats_.frames_published.fetch_add(1, kRelaxed);
+  } else if (status != drivers::MarkerStreamStatus::kNeedMore) {
+    countMarkerStreamError(stats_, status);
+  }
+  const auto& d = decoder_.stats();
+  mirrorDecoderStats(stats_, d.frames_lost, d.duplicates, d.rejected_markers);
+}
+
+DeviceSourceStats HidMarkerStreamSource::stats() const noexcept {
+  DeviceSourceStats s = stats_.snapshot();
+  s.transport = transport_.stats();
+  s.mailbox = mailbox_.stats();
+  return s;
+}
+
+// ---------------------------------------------------------------- Hydra
+
+HydraSource::HydraSource(HydraSourceConfig config, FrameMailbox& mailbox)
+    : mailbox_(mailbox), transport_(prepareHydra(config)) {}
+
+HydraSource::~HydraSource() { stop(); }
+
+bool HydraSource::start(StatusSink status) {
+  if (transport_.running()) return false;
+  user_status_ = std::move(status);
+  return transport_.start([this](const ReceivedReport& r) { onReport(r); }, resettingStatus(decoder_, user_status_));
+}
+
+void HydraSource::stop() { transport_.stop(); }
+
+void HydraSource::onReport(const ReceivedReport& report) noexcept {
+  const auto status = decoder_.decode(report.bytes, report.receive_ns, mailbox_.producerSlot());
+  if (status == drivers::HydraStatus::kFrame) {
+    mailbox_.commit();
+    stats_.frames_published.fetch_add(1, kRelaxed);
+  } else {
+    stats_.decode_errors.fetch_add(1, kRelaxed);
+    stats_.last_error.store(static_cast<int>(status), kRelaxed);
+  }
+  const auto& d = decoder_.stats();
+  mirrorDecoderStats(stats_, d.frames_lost, d.duplicates, d.rejected_markers);
+}
+
+DeviceSourceStats HydraSource::stats() const noexcept {
+  DeviceSourceStats s = stats_.snapshot();
+  s.transport = transport_.stats();
+  s.mailbox = mailbox_.stats();
+  return s;
+}
+
+// ---------------------------------------------------------------- USB marker stream
+
+UsbMarkerStreamSource::UsbMarkerStreamSource(UsbMarkerStreamSourceConfig config, FrameMailbox& mailbox)
+    : mailbox_(mailbox), transport_(prepareUsbMarkerStream(config)), decoder_(config.decoder) {}
+
+UsbMarkerStreamSource::~UsbMarkerStreamSource() { stop(); }
+
+bool UsbMarkerStreamSource::start(StatusSink status) {
+  if (transport_.running()) return false;
+  user_status_ = std::move(status);
+  return transport_.start([this](const ReceivedReport& r) { onTransfer(r); }, resettingStatus(decoder_, user_status_));
+}
+
+void UsbMarkerStreamSource::stop() { transport_.stop(); }
+
+void UsbMarkerStreamSource::onTransfer(const ReceivedReport& report) noexcept {
+  const auto status = decoder_.decodeFrame(report.bytes, report.receive_ns, mailbox_.producerSlot());
+  if (status == drivers::MarkerStreamStatus::kFrame) {
+    mailbox_.commit();
+    stats_.frames_published.fetch_add(1, kRelaxed);
+  } else {
+    countMarkerStreamError(stats_, status);
+  }
+  const auto& d = decoder_.stats();
+  mirrorDecoderStats(stats_, d.frames_lost, d.duplicates, d.rejected_markers);
+}
+
+DeviceSourceStats UsbMarkerStreamSource::stats() const noexcept {
+  DeviceSourceStats s = stats_.snapshot();
+  s.transport = transport_.stats();
+  s.mailbox = mailbox_.stats();
+  return s;
+}
+
+}  // namespace tetrig::devices

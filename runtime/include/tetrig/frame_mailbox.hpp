@@ -1,0 +1,94 @@
+// Latest-frame mailbox: a lock-free single-producer / single-consumer triple buffer of MarkerFrames.
+//
+// Algorithm: the classic triple buffer. Three slots; the producer owns one ("back"), the consumer
+// owns one ("front"), and the third ("middle") is held by one atomic word that also carries a
+// "fresh" bit. publish() fills the back slot and swaps it into the middle with one atomic
+// exchange; tryTakeLatest() swaps the middle with its front slot when the fresh bit is set. Each
+// side only ever reads or writes the slot it owns, so no frame is ever torn and there is no data
+// race (unlike a seqlock with plain copies). Neither side waits for the other.
+//
+// Guarantees:
+//  - the consumer always gets the newest complete frame published before its call;
+//  - a frame published but overwritten before the consumer took it is counted in dropped();
+//  - at any quiescent point published() == taken() + dropped() + (hasPending() ? 1 : 0);
+//  - nothing is allocated: the three slots live inside the object (about 3 x 9.3 KB, so create the
+//    mailbox with new/make_unique or as a member, not on a small thread stack).
+//
+// Threads: exactly one producer thread (the driver's read loop) calls publish()/producerSlot()/
+// commit(); exactly one consumer thread (the solver) calls tryTakeLatest()/tryAcquireLatest().
+// The counters may be read from any thread. All member functions are wait-free, never allocate,
+// never throw and never block.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+
+#include "tetrig/marker_frame.hpp"
+
+namespace tetrig {
+
+// Snapshot of the mailbox counters (each read atomically; not one consistent snapshot while
+// both sides are running).
+struct FrameMailboxStats {
+  std::uint64_t published = 0;  // frames committed by the producer
+  std::uint64_t taken = 0;      // frames handed to the consumer
+  std::uint64_t dropped = 0;    // frames overwritten by a newer one before the consumer took them
+};
+
+class FrameMailbox {
+ public:
+  FrameMailbox() noexcept;
+  FrameMailbox(const FrameMailbox&) = delete;
+  FrameMailbox& operator=(const FrameMailbox&) = delete;
+
+  // ---- producer thread only ----
+
+  // Copies `frame` into the producer's slot and publishes it (the newest frame replaces an
+  // unread older one, which is then counted as dropped). Wait-free; copies sizeof(MarkerFrame).
+  void publish(const MarkerFrame& frame) noexcept;
+
+  // Zero-copy variant: the slot the producer owns. Decode directly into it, then commit().
+  // The reference stays valid and private to the producer until commit(); its previous contents
+  // are an older frame (not cleared), so overwrite every field you rely on.
+  [[nodiscard]] MarkerFrame& producerSlot() noexcept { return slots_[back_]; }
+  // Publishes the producer slot (see publish()).
+  void commit() noexcept;
+
+  // ---- consumer thread only ----
+
+  // If a frame was published since the last take, copies the newest one into `out` and returns
+  // true; otherwise returns false and leaves `out` unchanged. Wait-free.
+  [[nodiscard]] bool tryTakeLatest(MarkerFrame& out) noexcept;
+
+  // Zero-copy variant: returns the newest unread frame, or nullptr when there is none. The frame
+  // is owned by the mailbox and stays valid and unchanged until the consumer's next call of
+  // tryAcquireLatest() or tryTakeLatest().
+  [[nodiscard]] const MarkerFrame* tryAcquireLatest() noexcept;
+
+  // ---- any thread ----
+
+  // True when a published frame waits to be taken (a hint while the producer is running).
+  [[nodiscard]] bool hasPending() const noexcept;
+  [[nodiscard]] std::uint64_t published() const noexcept { return published_.load(std::memory_order_relaxed); }
+  [[nodiscard]] std::uint64_t taken() const noexcept { return taken_.load(std::memory_order_relaxed); }
+  [[nodiscard]] std::uint64_t dropped() const noexcept { return dropped_.load(std::memory_order_relaxed); }
+  [[nodiscard]] FrameMailboxStats stats() const noexcept;
+
+ private:
+  static constexpr std::uint32_t kIndexMask = 0x3u;
+  static constexpr std::uint32_t kFreshBit = 0x4u;
+  static constexpr std::size_t kCacheLine = 64;
+
+  MarkerFrame slots_[3];
+  // Middle slot index | kFreshBit when it holds a frame the consumer has not taken.
+  alignas(kCacheLine) std::atomic<std::uint32_t> middle_;
+  // Producer-owned.
+  alignas(kCacheLine) std::uint32_t back_;
+  std::atomic<std::uint64_t> published_{0};
+  std::atomic<std::uint64_t> dropped_{0};
+  // Consumer-owned.
+  alignas(kCacheLine) std::uint32_t front_;
+  std::atomic<std::uint64_t> taken_{0};
+};
+
+}  // namespace tetrig

@@ -1,0 +1,117 @@
+// The rig file: one binary, versioned, checksummed file holding everything the runtime needs to
+// deform a character (byte layout: docs/rig-format.md, "Binary layout").
+//
+//   tetrig::Rig rig = tetrig::loadRigFile("man.rig");      // load time: allocates, may throw
+//   tetrig::Deformer deformer(rig.tet_mesh, rig.setup);     // ready to step()
+//   // per frame: device marker (mm, device axes) -> rig units with rig.alignment, write the
+//   // target of marker k at targets.vertex_positions[rig.markers[k].vertex_handle];
+//   // x_fine = B x_tet with rig.pose_transfer (tetrig/pose_transfer.hpp).
+//
+// File = 32-byte header (magic "TETRIGRF", format version, section count, file size, CRC-32C of
+// every byte after the header) + a section table (tag, offset, size per section) + sections.
+// The loader checks magic, version, file size, checksum, every section's bounds and exact size,
+// every count against the bytes present (before allocating), every index range and every float
+// for finiteness, then that the tet mesh has no inverted or degenerate tet. Any mismatch throws
+// RigFileError with one line naming the file, the section and what was wrong; a truncated or
+// corrupted file never crashes the loader (tested at every truncation length and fuzzed).
+//
+// Threads: all functions are load-time code (allocate, may throw), callable from any thread;
+// a Rig is a plain value with no hidden state.
+#pragma once
+
+#include "tetrig/deformer.hpp"
+#include "tetrig/pose_transfer.hpp"
+#include "tetrig/tet_mesh.hpp"
+
+#include <Eigen/Core>
+
+#include <cstdint>
+#include <filesystem>
+#include <span>
+#include <stdexcept>
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace tetrig {
+
+class RigFileError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+inline constexpr std::uint32_t kRigFormatVersion = 1;
+inline constexpr char kRigMagic[8] = {'T', 'E', 'T', 'R', 'I', 'G', 'R', 'F'};
+
+// A marker bound to the rig (paper section 3.2): an extra tet vertex joined to the nearest boundary
+// faces by invisible tets, driven as a vertex handle.
+struct RigMarker {
+  std::string label;                                  // e.g. "LFHD" (subject prefix removed)
+  std::int32_t tet_vertex = -1;                       // index into tet_mesh.vertices
+  std::int32_t vertex_handle = -1;                    // index into setup.vertex_handles (== tet_vertex there)
+  Eigen::Vector3d rest_position = Eigen::Vector3d::Zero();  // rig units, after alignment
+  std::int32_t bound_faces = 0;                       // invisible tets joining it to the body
+  double surface_distance = 0.0;                      // rest distance to the fine surface, rig units
+};
+
+// Device -> rig mapping: x_rig = linear * x_device_mm + translation, where x_device_mm is a marker
+// position in millimetres in the device's (or C3D file's) own axes (tetrig::MarkerFrame). linear =
+// scale * R * (unit conversion and axis change); it is a similarity (linear = s Q, Q a rotation).
+struct RigAlignment {
+  Eigen::Matrix3d linear = Eigen::Matrix3d::Identity();
+  Eigen::Vector3d translation = Eigen::Vector3d::Zero();
+  double fit_scale = 1.0;       // the similarity fit's own scale factor (1 = units alone matched)
+  double rig_units_per_mm = 1.0;  // unit conversion alone (0.001 for a rig in metres)
+  std::string device_up = "z";  // device up axis as given ("x", "y", "z", "-z", ...)
+  std::string rig_up = "y";     // rig up axis
+  Eigen::Vector3d apply(const Eigen::Vector3d& device_mm) const { return linear * device_mm + translation; }
+};
+
+struct Rig {
+  std::string name;              // free text: source mesh, clip
+  std::string unit = "m";        // rig unit name ("m", "mm", "cm", "mesh")
+  std::string builder;           // the program and version that built it
+
+  TetMesh tet_mesh;              // body vertices first, then marker vertices; body tets first, then invisible tets
+  std::int32_t body_vertex_count = 0;
+  std::int32_t body_tet_count = 0;
+
+  Vertices fine_vertices;        // #fine by 3, rest pose, rig units
+  Triangles fine_triangles;      // #F by 3, outward (counter-clockwise seen from outside)
+  PoseTransferCsr<double> pose_transfer;  // B: #fine rows by #tetV columns, rows sum to 1
+
+  DeformerSetup setup;           // handles (markers are vertex handles), rigid groups, per-tet stiffness, options
+  std::vector<std::string> vertex_handle_names;  // one per setup.vertex_handles ("" allowed)
+  std::vector<std::string> region_handle_names;  // one per setup.region_handles
+  std::vector<std::string> point_handle_names;   // one per setup.point_handles
+  std::vector<std::string> rigid_group_names;    // one per setup.rigid_groups
+  std::vector<RigMarker> markers;
+  RigAlignment alignment;
+};
+
+// Serialises a rig into the file format (header, section table, sections, checksum). Validates the
+// rig first (validateRig) and throws RigFileError on a fault. Allocates.
+std::vector<std::uint8_t> serializeRig(const Rig& rig);
+
+struct RigParseOptions {
+  bool verify_checksum = true;  // false only for fuzzing the section parsers behind the checksum
+};
+
+// Parses bytes produced by serializeRig. `source_name` appears in messages. Throws RigFileError.
+Rig parseRig(std::span<const std::uint8_t> bytes, std::string_view source_name, const RigParseOptions& options = {});
+
+// Reads and parses a rig file. Throws RigFileError (also for a missing or unreadable file).
+Rig loadRigFile(const std::filesystem::path& path);
+
+// Checks a rig's internal consistency (sizes, index ranges, finite values, orientation, marker
+// handles). Returns "" when valid, else a one-line description of the first fault.
+std::string validateRig(const Rig& rig);
+
+// Bytes the rig's arrays occupy in memory (positions, tets, B, handles; excluding the Deformer).
+std::int64_t rigMemoryBytes(const Rig& rig);
+
+// CRC-32C (Castagnoli, reflected polynomial 0x82F63B78, init and xor-out 0xFFFFFFFF) as used in
+// the rig file; rigCrc32c("123456789") == 0xE3069283. No allocation, any thread.
+std::uint32_t rigCrc32c(std::span<const std::uint8_t> data, std::uint32_t previous = 0) noexcept;
+
+}  // namespace tetrig

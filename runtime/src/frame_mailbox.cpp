@@ -1,0 +1,62 @@
+// Latest-frame mailbox: lock-free SPSC triple buffer (see frame_mailbox.hpp for the algorithm).
+//
+// Memory ordering: the producer writes its slot with plain stores, then exchanges the slot index
+// into middle_ with release semantics; the consumer's exchange acquires it before reading the
+// slot. The reverse direction (the consumer hands its old slot back through middle_ with release;
+// the producer acquires it before overwriting) keeps the consumer's reads before the producer's
+// later writes. Counters are incremented so that an observer that reads taken/dropped first and
+// published last (stats()) always sees taken + dropped <= published.
+#include "tetrig/frame_mailbox.hpp"
+
+namespace tetrig {
+
+FrameMailbox::FrameMailbox() noexcept : middle_(1u), back_(0u), front_(2u) {}
+
+void FrameMailbox::commit() noexcept {
+  // Count before the hand-off so that no observer can see a take or a drop of this frame first.
+  published_.fetch_add(1, std::memory_order_acq_rel);
+  const std::uint32_t previous = middle_.exchange(back_ | kFreshBit, std::memory_order_acq_rel);
+  back_ = previous & kIndexMask;
+  if ((previous & kFreshBit) != 0u) {
+    dropped_.fetch_add(1, std::memory_order_acq_rel);
+  }
+}
+
+void FrameMailbox::publish(const MarkerFrame& frame) noexcept {
+  slots_[back_] = frame;
+  commit();
+}
+
+const MarkerFrame* FrameMailbox::tryAcquireLatest() noexcept {
+  if ((middle_.load(std::memory_order_relaxed) & kFreshBit) == 0u) {
+    return nullptr;
+  }
+  // Only the consumer clears the fresh bit, so it is still set here: the exchange takes a frame.
+  const std::uint32_t previous = middle_.exchange(front_, std::memory_order_acq_rel);
+  front_ = previous & kIndexMask;
+  taken_.fetch_add(1, std::memory_order_acq_rel);
+  return &slots_[front_];
+}
+
+bool FrameMailbox::tryTakeLatest(MarkerFrame& out) noexcept {
+  const MarkerFrame* frame = tryAcquireLatest();
+  if (frame == nullptr) {
+    return false;
+  }
+  out = *frame;
+  return true;
+}
+
+bool FrameMailbox::hasPending() const noexcept {
+  return (middle_.load(std::memory_order_acquire) & kFreshBit) != 0u;
+}
+
+FrameMailboxStats FrameMailbox::stats() const noexcept {
+  FrameMailboxStats s;
+  s.taken = taken_.load(std::memory_order_acquire);
+  s.dropped = dropped_.load(std::memory_order_acquire);
+  s.published = published_.load(std::memory_order_acquire);
+  return s;
+}
+
+}  // namespace tetrig

@@ -1,0 +1,695 @@
+// The tetrig rig file format (docs/rig-format.md, "Binary layout"): little-endian, magic
+// "TETRIGRF", format version, section table, CRC-32C over everything after the header.
+// The CRC-32C here is the Castagnoli CRC (reflected polynomial 0x82F63B78), table driven; the
+// runtime may not link tetrig::drivers (which has its own copy for the marker-stream protocol).
+#include "tetrig/rig_file.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <limits>
+#include <sstream>
+
+namespace tetrig {
+namespace {
+
+constexpr std::size_t kHeaderBytes = 32;
+constexpr std::size_t kTableEntryBytes = 24;
+constexpr std::uint32_t kMaxSections = 64;
+constexpr std::uint32_t kMaxStringBytes = 1u << 16;
+
+constexpr std::uint32_t tag(const char (&s)[5]) {
+  return static_cast<std::uint32_t>(static_cast<unsigned char>(s[0])) |
+         (static_cast<std::uint32_t>(static_cast<unsigned char>(s[1])) << 8) |
+         (static_cast<std::uint32_t>(static_cast<unsigned char>(s[2])) << 16) |
+         (static_cast<std::uint32_t>(static_cast<unsigned char>(s[3])) << 24);
+}
+
+constexpr std::uint32_t kTagMeta = tag("META");
+constexpr std::uint32_t kTagTetVertices = tag("TETV");
+constexpr std::uint32_t kTagTets = tag("TETS");
+constexpr std::uint32_t kTagFine = tag("FINE");
+constexpr std::uint32_t kTagPoseTransfer = tag("BCSR");
+constexpr std::uint32_t kTagVertexHandles = tag("VHND");
+constexpr std::uint32_t kTagRegionHandles = tag("RHND");
+constexpr std::uint32_t kTagPointHandles = tag("PHND");
+constexpr std::uint32_t kTagRigidGroups = tag("RGID");
+constexpr std::uint32_t kTagStiffness = tag("STIF");
+constexpr std::uint32_t kTagMarkers = tag("MARK");
+constexpr std::uint32_t kTagAlignment = tag("ALGN");
+constexpr std::uint32_t kTagOptions = tag("OPTS");
+
+constexpr std::array<std::uint32_t, 13> kRequiredTags = {
+    kTagMeta,       kTagTetVertices, kTagTets,      kTagFine,    kTagPoseTransfer, kTagVertexHandles, kTagRegionHandles,
+    kTagPointHandles, kTagRigidGroups, kTagStiffness, kTagMarkers, kTagAlignment,    kTagOptions};
+
+std::string tagName(std::uint32_t t) {
+  std::string s;
+  for (int i = 0; i < 4; ++i) {
+    const char c = static_cast<char>((t >> (8 * i)) & 0xFFu);
+    s += (c >= 32 && c < 127) ? c : '?';
+  }
+  return s;
+}
+
+constexpr std::array<std::uint32_t, 256> makeCrcTable() {
+  std::array<std::uint32_t, 256> table{};
+  for (std::uint32_t i = 0; i < 256; ++i) {
+    std::uint32_t c = i;
+    for (int k = 0; k < 8; ++k) c = (c & 1u) ? (0x82F63B78u ^ (c >> 1)) : (c >> 1);
+    table[i] = c;
+  }
+  return table;
+}
+constexpr std::array<std::uint32_t, 256> kCrcTable = makeCrcTable();
+
+// ---- writing ----
+class Writer {
+ public:
+  void u8(std::uint8_t v) { bytes_.push_back(v); }
+  void u32(std::uint32_t v) {
+    for (int i = 0; i < 4; ++i) bytes_.push_back(static_cast<std::uint8_t>(v >> (8 * i)));
+  }
+  void i32(std::int32_t v) { u32(static_cast<std::uint32_t>(v)); }
+  void u64(std::uint64_t v) {
+    for (int i = 0; i < 8; ++i) bytes_.push_back(static_cast<std::uint8_t>(v >> (8 * i)));
+  }
+  void f64(double v) {
+    std::uint64_t b = 0;
+    std::memcpy(&b, &v, sizeof b);
+    u64(b);
+  }
+  void count(std::size_t n, const char* what) {
+    if (n > static_cast<std::size_t>(std::numeric_limits<std::int32_t>::max())) {
+      throw RigFileError(std::string("rig file: too many ") + what + " to store");
+    }
+    u32(static_cast<std::uint32_t>(n));
+  }
+  void str(const std::string& s) {
+    if (s.size() > kMaxStringBytes) throw RigFileError("rig file: a name is longer than 65536 bytes: " + s.substr(0, 40));
+    u32(static_cast<std::uint32_t>(s.size()));
+    bytes_.insert(bytes_.end(), s.begin(), s.end());
+  }
+  void pad8() {
+    while (bytes_.size() % 8 != 0) bytes_.push_back(0);
+  }
+  std::vector<std::uint8_t>& bytes() { return bytes_; }
+
+ private:
+  std::vector<std::uint8_t> bytes_;
+};
+
+// ---- reading: bounds-checked little-endian cursor over one section ----
+class Cursor {
+ public:
+  Cursor(const std::uint8_t* data, std::size_t size, std::string where) : data_(data), size_(size), where_(std::move(where)) {}
+
+  [[noreturn]] void fail(const std::string& what) const {
+    throw RigFileError(where_ + " at byte " + std::to_string(pos_) + ": " + what);
+  }
+  std::size_t remaining() const { return size_ - pos_; }
+  void need(std::size_t n, const char* what) const {
+    if (n > remaining()) {
+      fail(std::string("truncated: ") + what + " needs " + std::to_string(n) + " bytes, " + std::to_string(remaining()) +
+           " left in the section");
+    }
+  }
+  std::uint8_t u8(const char* what) {
+    need(1, what);
+    return data_[pos_++];
+  }
+  std::uint32_t u32(const char* what) {
+    need(4, what);
+    std::uint32_t v = 0;
+    for (int i = 0; i < 4; ++i) v |= static_cast<std::uint32_t>(data_[pos_ + static_cast<std::size_t>(i)]) << (8 * i);
+    pos_ += 4;
+    return v;
+  }
+  std::int32_t i32(const char* what) { return static_cast<std::int32_t>(u32(what)); }
+  std::uint64_t u64(const char* what) {
+    need(8, what);
+    std::uint64_t v = 0;
+    for (int i = 0; i < 8; ++i) v |= static_cast<std::uint64_t>(data_[pos_ + static_cast<std::size_t>(i)]) << (8 * i);
+    pos_ += 8;
+    return v;
+  }
+  double f64(const char* what) {
+    const std::uint64_t b = u64(what);
+    double v = 0.0;
+    std::memcpy(&v, &b, sizeof v);
+    if (!std::isfinite(v)) fail(std::string("non-finite value in ") + what);
+    return v;
+  }
+  // A count of records of at least `min_record_bytes` each: checked against the bytes left before
+  // anything is allocated.
+  std::size_t count(const char* what, std::size_t min_record_bytes) {
+    const std::uint32_t n = u32(what);
+    if (n > static_cast<std::uint32_t>(std::numeric_limits<std::int32_t>::max())) fail(std::string("absurd count of ") + what);
+    if (min_record_bytes > 0 && static_cast<std::uint64_t>(n) * min_record_bytes > remaining()) {
+      fail(std::string("truncated: ") + std::to_string(n) + " " + what + " need at least " +
+           std::to_string(static_cast<std::uint64_t>(n) * min_record_bytes) + " bytes, " + std::to_string(remaining()) +
+           " left in the section");
+    }
+    return n;
+  }
+  std::string str(const char* what) {
+    const std::uint32_t n = u32(what);
+    if (n > kMaxStringBytes) fail(std::string(what) + " is longer than 65536 bytes");
+    need(n, what);
+    std::string s(reinterpret_cast<const char*>(data_ + pos_), n);
+    pos_ += n;
+    return s;
+  }
+  void end() const {
+    if (pos_ != size_) fail(std::to_string(size_ - pos_) + " unexpected bytes at the end of the section");
+  }
+
+ private:
+  const std::uint8_t* data_;
+  std::size_t size_;
+  std::size_t pos_ = 0;
+  std::string where_;
+};
+
+void writeSection(Writer& w, std::vector<std::array<std::uint64_t, 3>>& table, std::uint32_t t,
+                  const std::vector<std::uint8_t>& body) {
+  w.pad8();
+  table.push_back({t, w.bytes().size(), body.size()});
+  w.bytes().insert(w.bytes().end(), body.begin(), body.end());
+}
+
+bool finite3(const Eigen::Vector3d& v) { return v.allFinite(); }
+
+}  // namespace
+
+std::uint32_t rigCrc32c(std::span<const std::uint8_t> data, std::uint32_t previous) noexcept {
+  std::uint32_t c = previous ^ 0xFFFFFFFFu;
+  for (const std::uint8_t b : data) c = kCrcTable[(c ^ b) & 0xFFu] ^ (c >> 8);
+  return c ^ 0xFFFFFFFFu;
+}
+
+std::string validateRig(const Rig& rig) {
+  const std::int32_t nv = rig.tet_mesh.vertexCount();
+  const std::int32_t nt = rig.tet_mesh.tetCount();
+  const std::int32_t nf = static_cast<std::int32_t>(rig.fine_vertices.rows());
+  auto num = [](auto v) { return std::to_string(v); };
+  if (nv <= 0 || nt <= 0) return "the tet mesh is empty";
+  if (rig.body_vertex_count < 4 || rig.body_vertex_count > nv) return "body vertex count " + num(rig.body_vertex_count) + " is not in [4, " + num(nv) + "]";
+  if (rig.body_tet_count < 1 || rig.body_tet_count > nt) return "body tet count " + num(rig.body_tet_count) + " is not in [1, " + num(nt) + "]";
+  const TetMeshReport report = checkTetMesh(rig.tet_mesh);
+  if (!report.ok()) return "tet mesh: " + report.summary();
+  if (nf <= 0) return "the fine mesh has no vertices";
+  if (!rig.fine_vertices.allFinite()) return "the fine mesh has non-finite vertices";
+  for (Eigen::Index f = 0; f < rig.fine_triangles.rows(); ++f) {
+    for (int k = 0; k < 3; ++k) {
+      const std::int32_t v = rig.fine_triangles(f, k);
+      if (v < 0 || v >= nf) return "fine triangle " + num(f) + " names vertex " + num(v) + " of " + num(nf);
+    }
+  }
+  const PoseTransferCsr<double>& b = rig.pose_transfer;
+  if (b.rows != nf || b.cols != nv) {
+    return "pose transfer B is " + num(b.rows) + " x " + num(b.cols) + ", expected " + num(nf) + " x " + num(nv);
+  }
+  if (b.row_offsets.size() != static_cast<std::size_t>(b.rows) + 1 || b.columns.size() != b.weights.size() ||
+      b.row_offsets.front() != 0 || b.row_offsets.back() < 0 ||
+      static_cast<std::size_t>(b.row_offsets.back()) != b.columns.size()) {
+    return "pose transfer B: array sizes do not match its row offsets";
+  }
+  if (std::string e = validatePoseTransfer(b.view()); !e.empty()) return "pose transfer B: " + e;
+  const DeformerSetup& s = rig.setup;
+  std::vector<std::uint8_t> used(static_cast<std::size_t>(nv), 0);
+  for (std::size_t h = 0; h < s.vertex_handles.size(); ++h) {
+    const std::int32_t v = s.vertex_handles[h];
+    if (v < 0 || v >= nv) return "vertex handle " + num(h) + " names vertex " + num(v) + " of " + num(nv);
+    if (used[static_cast<std::size_t>(v)]) return "vertex " + num(v) + " is a vertex handle twice";
+    used[static_cast<std::size_t>(v)] = 1;
+  }
+  for (std::size_t r = 0; r < s.region_handles.size(); ++r) {
+    if (s.region_handles[r].tets.empty()) return "region handle " + num(r) + " has no tets";
+    for (const std::int32_t t : s.region_handles[r].tets) {
+      if (t < 0 || t >= nt) return "region handle " + num(r) + " names tet " + num(t) + " of " + num(nt);
+    }
+  }
+  for (std::size_t p = 0; p < s.point_handles.size(); ++p) {
+    const PointHandle& ph = s.point_handles[p];
+    if (ph.tet < 0 || ph.tet >= nt) return "point handle " + num(p) + " names tet " + num(ph.tet) + " of " + num(nt);
+    if (!ph.barycentric.allFinite() || std::abs(ph.barycentric.sum() - 1.0) > 1e-6) {
+      return "point handle " + num(p) + " has barycentric weights that are not finite or do not sum to 1";
+    }
+  }
+  std::vector<std::uint8_t> grouped(static_cast<std::size_t>(nt), 0);
+  for (std::size_t g = 0; g < s.rigid_groups.size(); ++g) {
+    for (const std::int32_t t : s.rigid_groups[g].tets) {
+      if (t < 0 || t >= nt) return "rigid group " + num(g) + " names tet " + num(t) + " of " + num(nt);
+      if (grouped[static_cast<std::size_t>(t)]) return "tet " + num(t) + " is in two rigid groups";
+      grouped[static_cast<std::size_t>(t)] = 1;
+    }
+  }
+  if (!s.stiffness.empty()) {
+    if (s.stiffness.size() != static_cast<std::size_t>(nt)) return "stiffness has " + num(s.stiffness.size()) + " values for " + num(nt) + " tets";
+    for (std::size_t t = 0; t < s.stiffness.size(); ++t) {
+      if (!(s.stiffness[t] > 0.0) || !std::isfinite(s.stiffness[t])) return "stiffness of tet " + num(t) + " is not a positive number";
+    }
+  }
+  if (rig.vertex_handle_names.size() != s.vertex_handles.size() || rig.region_handle_names.size() != s.region_handles.size() ||
+      rig.point_handle_names.size() != s.point_handles.size() || rig.rigid_group_names.size() != s.rigid_groups.size()) {
+    return "the handle name lists do not match the handle counts";
+  }
+  for (std::size_t m = 0; m < rig.markers.size(); ++m) {
+    const RigMarker& mk = rig.markers[m];
+    if (mk.tet_vertex < 0 || mk.tet_vertex >= nv) return "marker " + mk.label + " names tet vertex " + num(mk.tet_vertex);
+    if (mk.vertex_handle < 0 || static_cast<std::size_t>(mk.vertex_handle) >= s.vertex_handles.size() ||
+        s.vertex_handles[static_cast<std::size_t>(mk.vertex_handle)] != mk.tet_vertex) {
+      return "marker " + mk.label + " is not the vertex handle it names (" + num(mk.vertex_handle) + ")";
+    }
+    if (!finite3(mk.rest_position) || !std::isfinite(mk.surface_distance)) return "marker " + mk.label + " has a non-finite rest position";
+  }
+  const RigAlignment& a = rig.alignment;
+  if (!a.linear.allFinite() || !a.translation.allFinite() || !std::isfinite(a.fit_scale) || !std::isfinite(a.rig_units_per_mm) ||
+      std::abs(a.linear.determinant()) <= 0.0) {
+    return "the alignment transform is not finite and invertible";
+  }
+  const DeformerOptions& o = s.options;
+  if (o.rotation_steps < 0 || o.rotation_steps > 64) return "rotation_steps " + num(o.rotation_steps) + " is not in [0, 64]";
+  if (!(o.point_handle_weight > 0.0) || !std::isfinite(o.point_handle_weight) || !(o.max_abs_coordinate > 0.0) ||
+      !std::isfinite(o.max_abs_coordinate)) {
+    return "deformer options hold a non-positive or non-finite weight";
+  }
+  return {};
+}
+
+std::vector<std::uint8_t> serializeRig(const Rig& rig) {
+  if (std::string e = validateRig(rig); !e.empty()) throw RigFileError("rig file: cannot write an invalid rig: " + e);
+  std::vector<std::array<std::uint64_t, 3>> table;
+  Writer out;
+  // Header and table placeholders; filled at the end.
+  const std::size_t section_count = kRequiredTags.size();
+  out.bytes().resize(kHeaderBytes + section_count * kTableEntryBytes, 0);
+  {
+    Writer w;
+    w.str(rig.name);
+    w.str(rig.unit);
+    w.str(rig.builder);
+    writeSection(out, table, kTagMeta, w.bytes());
+  }
+  {
+    Writer w;
+    w.count(static_cast<std::size_t>(rig.tet_mesh.vertexCount()), "tet vertices");
+    w.u32(static_cast<std::uint32_t>(rig.body_vertex_count));
+    for (Eigen::Index i = 0; i < rig.tet_mesh.vertices.rows(); ++i) {
+      for (int k = 0; k < 3; ++k) w.f64(rig.tet_mesh.vertices(i, k));
+    }
+    writeSection(out, table, kTagTetVertices, w.bytes());
+  }
+  {
+    Writer w;
+    w.count(static_cast<std::size_t>(rig.tet_mesh.tetCount()), "tets");
+    w.u32(static_cast<std::uint32_t>(rig.body_tet_count));
+    for (Eigen::Index i = 0; i < rig.tet_mesh.tets.rows(); ++i) {
+      for (int k = 0; k < 4; ++k) w.i32(rig.tet_mesh.tets(i, k));
+    }
+    writeSection(out, table, kTagTets, w.bytes());
+  }
+  {
+    Writer w;
+    w.count(static_cast<std::size_t>(rig.fine_vertices.rows()), "fine vertices");
+    w.count(static_cast<std::size_t>(rig.fine_triangles.rows()), "fine triangles");
+    for (Eigen::Index i = 0; i < rig.fine_vertices.rows(); ++i) {
+      for (int k = 0; k < 3; ++k) w.f64(rig.fine_vertices(i, k));
+    }
+    for (Eigen::Index i = 0; i < rig.fine_triangles.rows(); ++i) {
+      for (int k = 0; k < 3; ++k) w.i32(rig.fine_triangles(i, k));
+    }
+    writeSection(out, table, kTagFine, w.bytes());
+  }
+  {
+    Writer w;
+    const PoseTransferCsr<double>& b = rig.pose_transfer;
+    w.u32(static_cast<std::uint32_t>(b.rows));
+    w.u32(static_cast<std::uint32_t>(b.cols));
+    w.count(b.columns.size(), "pose-transfer weights");
+    for (const std::int32_t o : b.row_offsets) w.i32(o);
+    for (const std::int32_t c : b.columns) w.i32(c);
+    for (const double x : b.weights) w.f64(x);
+    writeSection(out, table, kTagPoseTransfer, w.bytes());
+  }
+  {
+    Writer w;
+    w.count(rig.setup.vertex_handles.size(), "vertex handles");
+    for (std::size_t h = 0; h < rig.setup.vertex_handles.size(); ++h) {
+      w.i32(rig.setup.vertex_handles[h]);
+      w.str(rig.vertex_handle_names[h]);
+    }
+    writeSection(out, table, kTagVertexHandles, w.bytes());
+  }
+  {
+    Writer w;
+    w.count(rig.setup.region_handles.size(), "region handles");
+    for (std::size_t r = 0; r < rig.setup.region_handles.size(); ++r) {
+      const RegionHandle& region = rig.setup.region_handles[r];
+      w.u8(region.oriented ? 1 : 0);
+      w.str(rig.region_handle_names[r]);
+      w.count(region.tets.size(), "region tets");
+      for (const std::int32_t t : region.tets) w.i32(t);
+    }
+    writeSection(out, table, kTagRegionHandles, w.bytes());
+  }
+  {
+    Writer w;
+    w.count(rig.setup.point_handles.size(), "point handles");
+    for (std::size_t p = 0; p < rig.setup.point_handles.size(); ++p) {
+      const PointHandle& ph = rig.setup.point_handles[p];
+      w.i32(ph.tet);
+      for (int k = 0; k < 4; ++k) w.f64(ph.barycentric[k]);
+      w.str(rig.point_handle_names[p]);
+    }
+    writeSection(out, table, kTagPointHandles, w.bytes());
+  }
+  {
+    Writer w;
+    w.count(rig.setup.rigid_groups.size(), "rigid groups");
+    for (std::size_t g = 0; g < rig.setup.rigid_groups.size(); ++g) {
+      w.str(rig.rigid_group_names[g]);
+      w.count(rig.setup.rigid_groups[g].tets.size(), "rigid group tets");
+      for (const std::int32_t t : rig.setup.rigid_groups[g].tets) w.i32(t);
+    }
+    writeSection(out, table, kTagRigidGroups, w.bytes());
+  }
+  {
+    Writer w;
+    w.count(rig.setup.stiffness.size(), "stiffness values");
+    for (const double x : rig.setup.stiffness) w.f64(x);
+    writeSection(out, table, kTagStiffness, w.bytes());
+  }
+  {
+    Writer w;
+    w.count(rig.markers.size(), "markers");
+    for (const RigMarker& m : rig.markers) {
+      w.str(m.label);
+      w.i32(m.tet_vertex);
+      w.i32(m.vertex_handle);
+      for (int k = 0; k < 3; ++k) w.f64(m.rest_position[k]);
+      w.i32(m.bound_faces);
+      w.f64(m.surface_distance);
+    }
+    writeSection(out, table, kTagMarkers, w.bytes());
+  }
+  {
+    Writer w;
+    const RigAlignment& a = rig.alignment;
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 3; ++c) w.f64(a.linear(r, c));
+    }
+    for (int k = 0; k < 3; ++k) w.f64(a.translation[k]);
+    w.f64(a.fit_scale);
+    w.f64(a.rig_units_per_mm);
+    w.str(a.device_up);
+    w.str(a.rig_up);
+    writeSection(out, table, kTagAlignment, w.bytes());
+  }
+  {
+    Writer w;
+    const DeformerOptions& o = rig.setup.options;
+    w.u8(o.update_rotations ? 1 : 0);
+    w.u8(o.interpolate_rotations ? 1 : 0);
+    w.i32(o.rotation_steps);
+    w.f64(o.point_handle_weight);
+    w.f64(o.max_abs_coordinate);
+    writeSection(out, table, kTagOptions, w.bytes());
+  }
+  out.pad8();
+  std::vector<std::uint8_t>& bytes = out.bytes();
+  // Section table.
+  for (std::size_t i = 0; i < table.size(); ++i) {
+    Writer e;
+    e.u32(static_cast<std::uint32_t>(table[i][0]));
+    e.u32(0);
+    e.u64(table[i][1]);
+    e.u64(table[i][2]);
+    std::copy(e.bytes().begin(), e.bytes().end(), bytes.begin() + static_cast<std::ptrdiff_t>(kHeaderBytes + i * kTableEntryBytes));
+  }
+  // Header.
+  Writer h;
+  for (const char c : kRigMagic) h.u8(static_cast<std::uint8_t>(c));
+  h.u32(kRigFormatVersion);
+  h.u32(static_cast<std::uint32_t>(table.size()));
+  h.u64(bytes.size());
+  h.u32(rigCrc32c(std::span<const std::uint8_t>(bytes).subspan(kHeaderBytes)));
+  h.u32(0);
+  std::copy(h.bytes().begin(), h.bytes().end(), bytes.begin());
+  return bytes;
+}
+
+Rig parseRig(std::span<const std::uint8_t> bytes, std::string_view source_name, const RigParseOptions& options) {
+  const std::string name(source_name);
+  auto fail = [&name](const std::string& what) -> void { throw RigFileError(name + ": " + what); };
+  if (bytes.size() < kHeaderBytes) {
+    fail("not a rig file: " + std::to_string(bytes.size()) + " bytes, shorter than the 32-byte header");
+  }
+  if (std::memcmp(bytes.data(), kRigMagic, sizeof kRigMagic) != 0) fail("not a rig file (magic is not TETRIGRF)");
+  Cursor header(bytes.data() + 8, kHeaderBytes - 8, name + ": header");
+  const std::uint32_t version = header.u32("version");
+  const std::uint32_t section_count = header.u32("section count");
+  const std::uint64_t file_size = header.u64("file size");
+  const std::uint32_t crc = header.u32("checksum");
+  const std::uint32_t reserved = header.u32("reserved");
+  if (version != kRigFormatVersion) {
+    fail("rig format version " + std::to_string(version) + ", this program reads version " + std::to_string(kRigFormatVersion) +
+         ": rebuild the rig with this version's `tetrig build-rig`");
+  }
+  if (file_size != bytes.size()) {
+    fail("the header says " + std::to_string(file_size) + " bytes but the file has " + std::to_string(bytes.size()) +
+         " (truncated or appended to): rebuild or re-copy it");
+  }
+  if (reserved != 0) fail("reserved header word is not 0");
+  if (options.verify_checksum) {
+    const std::uint32_t actual = rigCrc32c(bytes.subspan(kHeaderBytes));
+    if (actual != crc) {
+      std::ostringstream s;
+      s << std::hex << "checksum mismatch (stored 0x" << crc << ", computed 0x" << actual
+        << "): the file is corrupted; rebuild or re-copy it";
+      fail(s.str());
+    }
+  }
+  if (section_count == 0 || section_count > kMaxSections) fail("absurd section count " + std::to_string(section_count));
+  const std::size_t table_end = kHeaderBytes + section_count * kTableEntryBytes;
+  if (table_end > bytes.size()) fail("truncated section table");
+
+  struct Entry {
+    std::uint32_t tag;
+    std::size_t offset, size;
+  };
+  std::vector<Entry> entries;
+  Cursor table(bytes.data() + kHeaderBytes, section_count * kTableEntryBytes, name + ": section table");
+  for (std::uint32_t i = 0; i < section_count; ++i) {
+    const std::uint32_t t = table.u32("tag");
+    (void)table.u32("reserved");
+    const std::uint64_t offset = table.u64("offset");
+    const std::uint64_t size = table.u64("size");
+    if (offset < table_end || offset > bytes.size() || size > bytes.size() - offset) {
+      fail("section " + tagName(t) + " lies outside the file (offset " + std::to_string(offset) + ", size " + std::to_string(size) + ")");
+    }
+    for (const Entry& e : entries) {
+      if (e.tag == t) fail("section " + tagName(t) + " appears twice");
+    }
+    entries.push_back({t, static_cast<std::size_t>(offset), static_cast<std::size_t>(size)});
+  }
+  auto section = [&](std::uint32_t t) -> Cursor {
+    for (const Entry& e : entries) {
+      if (e.tag == t) return Cursor(bytes.data() + e.offset, e.size, name + ": section " + tagName(t));
+    }
+    throw RigFileError(name + ": section " + tagName(t) + " is missing");
+  };
+
+  Rig rig;
+  {
+    Cursor c = section(kTagMeta);
+    rig.name = c.str("rig name");
+    rig.unit = c.str("unit");
+    rig.builder = c.str("builder");
+    c.end();
+  }
+  {
+    Cursor c = section(kTagTetVertices);
+    const std::size_t n = c.count("tet vertices", 0);
+    rig.body_vertex_count = static_cast<std::int32_t>(c.u32("body vertex count"));
+    c.need(n * 24, "tet vertex positions");
+    rig.tet_mesh.vertices.resize(static_cast<Eigen::Index>(n), 3);
+    for (std::size_t i = 0; i < n; ++i) {
+      for (int k = 0; k < 3; ++k) rig.tet_mesh.vertices(static_cast<Eigen::Index>(i), k) = c.f64("tet vertex position");
+    }
+    c.end();
+  }
+  {
+    Cursor c = section(kTagTets);
+    const std::size_t n = c.count("tets", 0);
+    rig.body_tet_count = static_cast<std::int32_t>(c.u32("body tet count"));
+    c.need(n * 16, "tets");
+    rig.tet_mesh.tets.resize(static_cast<Eigen::Index>(n), 4);
+    for (std::size_t i = 0; i < n; ++i) {
+      for (int k = 0; k < 4; ++k) rig.tet_mesh.tets(static_cast<Eigen::Index>(i), k) = c.i32("tet corner");
+    }
+    c.end();
+  }
+  {
+    Cursor c = section(kTagFine);
+    const std::size_t nv = c.count("fine vertices", 0);
+    const std::size_t nf = c.count("fine triangles", 0);
+    c.need(nv * 24 + nf * 12, "fine mesh");
+    rig.fine_vertices.resize(static_cast<Eigen::Index>(nv), 3);
+    for (std::size_t i = 0; i < nv; ++i) {
+      for (int k = 0; k < 3; ++k) rig.fine_vertices(static_cast<Eigen::Index>(i), k) = c.f64("fine vertex position");
+    }
+    rig.fine_triangles.resize(static_cast<Eigen::Index>(nf), 3);
+    for (std::size_t i = 0; i < nf; ++i) {
+      for (int k = 0; k < 3; ++k) rig.fine_triangles(static_cast<Eigen::Index>(i), k) = c.i32("fine triangle corner");
+    }
+    c.end();
+  }
+  {
+    Cursor c = section(kTagPoseTransfer);
+    PoseTransferCsr<double>& b = rig.pose_transfer;
+    const std::uint32_t rows = c.u32("B rows");
+    const std::uint32_t cols = c.u32("B columns");
+    if (rows > static_cast<std::uint32_t>(std::numeric_limits<std::int32_t>::max() - 1) ||
+        cols > static_cast<std::uint32_t>(std::numeric_limits<std::int32_t>::max())) {
+      c.fail("absurd B size");
+    }
+    const std::size_t nnz = c.count("pose-transfer weights", 0);
+    c.need((static_cast<std::size_t>(rows) + 1) * 4 + nnz * 12, "pose-transfer matrix");
+    b.rows = static_cast<std::int32_t>(rows);
+    b.cols = static_cast<std::int32_t>(cols);
+    b.row_offsets.resize(static_cast<std::size_t>(rows) + 1);
+    for (std::int32_t& o : b.row_offsets) o = c.i32("B row offset");
+    b.columns.resize(nnz);
+    for (std::int32_t& col : b.columns) col = c.i32("B column");
+    b.weights.resize(nnz);
+    for (double& x : b.weights) x = c.f64("B weight");
+    c.end();
+  }
+  {
+    Cursor c = section(kTagVertexHandles);
+    const std::size_t n = c.count("vertex handles", 8);
+    rig.setup.vertex_handles.resize(n);
+    rig.vertex_handle_names.resize(n);
+    for (std::size_t h = 0; h < n; ++h) {
+      rig.setup.vertex_handles[h] = c.i32("vertex handle");
+      rig.vertex_handle_names[h] = c.str("vertex handle name");
+    }
+    c.end();
+  }
+  {
+    Cursor c = section(kTagRegionHandles);
+    const std::size_t n = c.count("region handles", 9);
+    rig.setup.region_handles.resize(n);
+    rig.region_handle_names.resize(n);
+    for (std::size_t r = 0; r < n; ++r) {
+      const std::uint8_t oriented = c.u8("region orientation flag");
+      if (oriented > 1) c.fail("region orientation flag is not 0 or 1");
+      rig.setup.region_handles[r].oriented = oriented == 1;
+      rig.region_handle_names[r] = c.str("region handle name");
+      const std::size_t nt = c.count("region tets", 4);
+      rig.setup.region_handles[r].tets.resize(nt);
+      for (std::int32_t& t : rig.setup.region_handles[r].tets) t = c.i32("region tet");
+    }
+    c.end();
+  }
+  {
+    Cursor c = section(kTagPointHandles);
+    const std::size_t n = c.count("point handles", 40);
+    rig.setup.point_handles.resize(n);
+    rig.point_handle_names.resize(n);
+    for (std::size_t p = 0; p < n; ++p) {
+      rig.setup.point_handles[p].tet = c.i32("point handle tet");
+      for (int k = 0; k < 4; ++k) rig.setup.point_handles[p].barycentric[k] = c.f64("point handle weight");
+      rig.point_handle_names[p] = c.str("point handle name");
+    }
+    c.end();
+  }
+  {
+    Cursor c = section(kTagRigidGroups);
+    const std::size_t n = c.count("rigid groups", 8);
+    rig.setup.rigid_groups.resize(n);
+    rig.rigid_group_names.resize(n);
+    for (std::size_t g = 0; g < n; ++g) {
+      rig.rigid_group_names[g] = c.str("rigid group name");
+      const std::size_t nt = c.count("rigid group tets", 4);
+      rig.setup.rigid_groups[g].tets.resize(nt);
+      for (std::int32_t& t : rig.setup.rigid_groups[g].tets) t = c.i32("rigid group tet");
+    }
+    c.end();
+  }
+  {
+    Cursor c = section(kTagStiffness);
+    const std::size_t n = c.count("stiffness values", 8);
+    rig.setup.stiffness.resize(n);
+    for (double& x : rig.setup.stiffness) x = c.f64("stiffness");
+    c.end();
+  }
+  {
+    Cursor c = section(kTagMarkers);
+    const std::size_t n = c.count("markers", 48);
+    rig.markers.resize(n);
+    for (RigMarker& m : rig.markers) {
+      m.label = c.str("marker label");
+      m.tet_vertex = c.i32("marker tet vertex");
+      m.vertex_handle = c.i32("marker vertex handle");
+      for (int k = 0; k < 3; ++k) m.rest_position[k] = c.f64("marker rest position");
+      m.bound_faces = c.i32("marker bound faces");
+      m.surface_distance = c.f64("marker surface distance");
+    }
+    c.end();
+  }
+  {
+    Cursor c = section(kTagAlignment);
+    RigAlignment& a = rig.alignment;
+    for (int r = 0; r < 3; ++r) {
+      for (int k = 0; k < 3; ++k) a.linear(r, k) = c.f64("alignment matrix");
+    }
+    for (int k = 0; k < 3; ++k) a.translation[k] = c.f64("alignment translation");
+    a.fit_scale = c.f64("alignment scale");
+    a.rig_units_per_mm = c.f64("alignment unit");
+    a.device_up = c.str("device up axis");
+    a.rig_up = c.str("rig up axis");
+    c.end();
+  }
+  {
+    Cursor c = section(kTagOptions);
+    DeformerOptions& o = rig.setup.options;
+    const std::uint8_t update = c.u8("update_rotations");
+    const std::uint8_t interpolate = c.u8("interpolate_rotations");
+    if (update > 1 || interpolate > 1) c.fail("option flags are not 0 or 1");
+    o.update_rotations = update == 1;
+    o.interpolate_rotations = interpolate == 1;
+    o.rotation_steps = c.i32("rotation_steps");
+    o.point_handle_weight = c.f64("point_handle_weight");
+    o.max_abs_coordinate = c.f64("max_abs_coordinate");
+    c.end();
+  }
+  if (std::string e = validateRig(rig); !e.empty()) fail(e);
+  return rig;
+}
+
+Rig loadRigFile(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw RigFileError(path.string() + ": cannot open the rig file (missing or unreadable)");
+  std::vector<std::uint8_t> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (in.bad()) throw RigFileError(path.string() + ": read error");
+  return parseRig(bytes, path.string());
+}
+
+std::int64_t rigMemoryBytes(const Rig& rig) {
+  std::int64_t bytes = 0;
+  bytes += rig.tet_mesh.vertices.size() * 8 + rig.tet_mesh.tets.size() * 4;
+  bytes += rig.fine_vertices.size() * 8 + rig.fine_triangles.size() * 4;
+  bytes += rig.pose_transfer.bytes();
+  bytes += static_cast<std::int64_t>(rig.setup.vertex_handles.size() * 4 + rig.setup.point_handles.size() * 40 +
+                                     rig.setup.stiffness.size() * 8 + rig.markers.size() * sizeof(RigMarker));
+  for (const RegionHandle& r : rig.setup.region_handles) bytes += static_cast<std::int64_t>(r.tets.size() * 4);
+  for (const RigidGroup& g : rig.setup.rigid_groups) bytes += static_cast<std::int64_t>(g.tets.size() * 4);
+  return bytes;
+}
+
+}  // namespace tetrig

@@ -1,0 +1,283 @@
+// Tests for the latest-frame mailbox (runtime/src/frame_mailbox.cpp): hand-off semantics, drop
+// accounting, slot ownership, no allocation, and a multi-thread stress run that checks that no
+// consumer ever sees a torn frame. Also built with -fsanitize=thread (test_frame_mailbox_tsan).
+#include "tetrig/frame_mailbox.hpp"
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <cstdlib>
+#include <memory>
+#include <new>
+#include <thread>
+#include <vector>
+
+// Global allocation counter: proves that publish/take never allocate. (GCC's
+// -Wmismatched-new-delete misreads the malloc/free pair of a replaced operator new/delete.)
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
+#endif
+namespace {
+std::atomic<std::uint64_t> g_allocations{0};
+}  // namespace
+
+void* operator new(std::size_t size) {
+  g_allocations.fetch_add(1, std::memory_order_relaxed);
+  if (void* p = std::malloc(size == 0 ? 1 : size)) {
+    return p;
+  }
+  throw std::bad_alloc();
+}
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+
+namespace {
+
+using tetrig::FrameMailbox;
+using tetrig::MarkerFrame;
+
+#ifndef TETRIG_MAILBOX_STRESS_FRAMES
+#define TETRIG_MAILBOX_STRESS_FRAMES 40000
+#endif
+
+// Fills every field a torn copy could mix up with values derived from `counter`.
+void stamp(MarkerFrame& f, std::uint64_t counter) {
+  f.frame_counter = counter;
+  f.device_timestamp_ns = static_cast<std::int64_t>(counter * 3u);
+  f.receive_timestamp_ns = static_cast<std::int64_t>(counter * 5u);
+  f.flags = static_cast<std::uint32_t>(counter);
+  f.marker_count = static_cast<std::uint16_t>(tetrig::kMaxMarkers);
+  f.rejected_count = static_cast<std::uint16_t>(counter & 0xFFFFu);
+  const float c = static_cast<float>(counter & 0xFFFFFu);  // exact in float
+  for (auto& m : f.markers) {
+    m.position_mm[0] = c;
+    m.position_mm[1] = -c;
+    m.position_mm[2] = c + 0.5f;
+    m.id = static_cast<std::uint16_t>(counter & 0xFFFFu);
+    m.valid = 1;
+    m.orientation[0] = c;
+  }
+}
+
+// True when every field of `f` agrees with its frame_counter.
+bool consistent(const MarkerFrame& f) {
+  const std::uint64_t counter = f.frame_counter;
+  if (f.device_timestamp_ns != static_cast<std::int64_t>(counter * 3u) ||
+      f.receive_timestamp_ns != static_cast<std::int64_t>(counter * 5u) ||
+      f.flags != static_cast<std::uint32_t>(counter) ||
+      f.rejected_count != static_cast<std::uint16_t>(counter & 0xFFFFu) ||
+      f.marker_count != tetrig::kMaxMarkers) {
+    return false;
+  }
+  const float c = static_cast<float>(counter & 0xFFFFFu);
+  for (const auto& m : f.markers) {
+    if (m.position_mm[0] != c || m.position_mm[1] != -c || m.position_mm[2] != c + 0.5f ||
+        m.id != static_cast<std::uint16_t>(counter & 0xFFFFu) || m.orientation[0] != c) {
+      return false;
+    }
+  }
+  return true;
+}
+
+TEST(FrameMailbox, EmptyMailboxYieldsNothingAndLeavesOutputAlone) {
+  auto box = std::make_unique<FrameMailbox>();
+  auto out = std::make_unique<MarkerFrame>();
+  stamp(*out, 77);
+  EXPECT_FALSE(box->tryTakeLatest(*out));
+  EXPECT_EQ(out->frame_counter, 77u);
+  EXPECT_TRUE(consistent(*out));
+  EXPECT_EQ(box->tryAcquireLatest(), nullptr);
+  EXPECT_FALSE(box->hasPending());
+  const auto s = box->stats();
+  EXPECT_EQ(s.published, 0u);
+  EXPECT_EQ(s.taken, 0u);
+  EXPECT_EQ(s.dropped, 0u);
+}
+
+TEST(FrameMailbox, OneFrameIsTakenOnce) {
+  auto box = std::make_unique<FrameMailbox>();
+  auto in = std::make_unique<MarkerFrame>();
+  auto out = std::make_unique<MarkerFrame>();
+  stamp(*in, 5);
+  box->publish(*in);
+  EXPECT_TRUE(box->hasPending());
+  ASSERT_TRUE(box->tryTakeLatest(*out));
+  EXPECT_EQ(out->frame_counter, 5u);
+  EXPECT_TRUE(consistent(*out));
+  EXPECT_FALSE(box->hasPending());
+  EXPECT_FALSE(box->tryTakeLatest(*out));
+  EXPECT_EQ(box->published(), 1u);
+  EXPECT_EQ(box->taken(), 1u);
+  EXPECT_EQ(box->dropped(), 0u);
+}
+
+TEST(FrameMailbox, NewestFrameWinsAndOverwrittenFramesAreCountedAsDropped) {
+  auto box = std::make_unique<FrameMailbox>();
+  auto in = std::make_unique<MarkerFrame>();
+  auto out = std::make_unique<MarkerFrame>();
+  for (std::uint64_t c = 1; c <= 3; ++c) {
+    stamp(*in, c);
+    box->publish(*in);
+  }
+  ASSERT_TRUE(box->tryTakeLatest(*out));
+  EXPECT_EQ(out->frame_counter, 3u);
+  EXPECT_EQ(box->dropped(), 2u);
+  // Interleave: publish 4, take 4, publish 5 and 6, take 6.
+  stamp(*in, 4);
+  box->publish(*in);
+  ASSERT_TRUE(box->tryTakeLatest(*out));
+  EXPECT_EQ(out->frame_counter, 4u);
+  stamp(*in, 5);
+  box->publish(*in);
+  stamp(*in, 6);
+  box->publish(*in);
+  EXPECT_TRUE(box->hasPending());
+  const auto s = box->stats();
+  EXPECT_EQ(s.published, 6u);
+  EXPECT_EQ(s.taken, 2u);
+  EXPECT_EQ(s.dropped, 3u);
+  EXPECT_EQ(s.published, s.taken + s.dropped + 1u);  // one pending
+  ASSERT_TRUE(box->tryTakeLatest(*out));
+  EXPECT_EQ(out->frame_counter, 6u);
+  EXPECT_EQ(box->published(), box->taken() + box->dropped());
+}
+
+TEST(FrameMailbox, AcquiredFrameIsNotTouchedByLaterPublishes) {
+  auto box = std::make_unique<FrameMailbox>();
+  auto in = std::make_unique<MarkerFrame>();
+  stamp(*in, 10);
+  box->publish(*in);
+  const MarkerFrame* held = box->tryAcquireLatest();
+  ASSERT_NE(held, nullptr);
+  // The producer cycles through every slot it may own many times; the consumer's slot is not one.
+  for (std::uint64_t c = 11; c < 40; ++c) {
+    MarkerFrame& slot = box->producerSlot();
+    EXPECT_NE(&slot, held);
+    stamp(slot, c);
+    box->commit();
+  }
+  EXPECT_EQ(held->frame_counter, 10u);
+  EXPECT_TRUE(consistent(*held));
+  const MarkerFrame* next = box->tryAcquireLatest();
+  ASSERT_NE(next, nullptr);
+  EXPECT_EQ(next->frame_counter, 39u);
+  EXPECT_TRUE(consistent(*next));
+}
+
+TEST(FrameMailbox, PublishAndTakeDoNotAllocate) {
+  auto box = std::make_unique<FrameMailbox>();
+  auto in = std::make_unique<MarkerFrame>();
+  auto out = std::make_unique<MarkerFrame>();
+  const std::uint64_t before = g_allocations.load();
+  for (std::uint64_t c = 1; c < 1000; ++c) {
+    stamp(*in, c);
+    box->publish(*in);
+    if (c % 3 == 0) {
+      EXPECT_TRUE(box->tryTakeLatest(*out));
+    }
+    (void)box->tryAcquireLatest();
+  }
+  EXPECT_EQ(g_allocations.load(), before);
+}
+
+// Several independent producer/consumer pairs (the mailbox is SPSC) plus observer threads that
+// read the counters, all at once on a 2-core machine: every taken frame is whole, counters only
+// grow, counter relations hold while running, and the books balance at the end.
+TEST(FrameMailbox, StressNoTornFramesAndDropAccountingBalances) {
+  constexpr int kPairs = 3;
+  constexpr int kObservers = 2;
+  constexpr std::uint64_t kFrames = TETRIG_MAILBOX_STRESS_FRAMES;
+
+  std::vector<std::unique_ptr<FrameMailbox>> boxes;
+  for (int i = 0; i < kPairs; ++i) {
+    boxes.push_back(std::make_unique<FrameMailbox>());
+  }
+  std::atomic<int> torn{0};
+  std::atomic<int> non_monotonic_frames{0};
+  std::atomic<int> counter_violations{0};
+  std::atomic<bool> consumers_done{false};
+  std::vector<std::uint64_t> taken_seen(kPairs, 0);
+
+  std::vector<std::thread> threads;
+  for (int i = 0; i < kPairs; ++i) {
+    FrameMailbox* box = boxes[static_cast<std::size_t>(i)].get();
+    threads.emplace_back([box, i] {
+      auto scratch = std::make_unique<MarkerFrame>();
+      for (std::uint64_t c = 1; c <= kFrames; ++c) {
+        // Alternate the copying and the zero-copy producer paths.
+        if ((c + static_cast<std::uint64_t>(i)) % 2 == 0) {
+          stamp(box->producerSlot(), c);
+          box->commit();
+        } else {
+          stamp(*scratch, c);
+          box->publish(*scratch);
+        }
+      }
+    });
+    threads.emplace_back([box, i, &torn, &non_monotonic_frames, &taken_seen] {
+      auto out = std::make_unique<MarkerFrame>();
+      std::uint64_t last = 0;
+      std::uint64_t count = 0;
+      while (last < kFrames) {
+        bool got = false;
+        if (count % 2 == 0) {
+          got = box->tryTakeLatest(*out);
+          if (got && !consistent(*out)) torn.fetch_add(1);
+          if (got) {
+            if (out->frame_counter <= last) non_monotonic_frames.fetch_add(1);
+            last = out->frame_counter;
+          }
+        } else if (const MarkerFrame* f = box->tryAcquireLatest()) {
+          got = true;
+          if (!consistent(*f)) torn.fetch_add(1);
+          if (f->frame_counter <= last) non_monotonic_frames.fetch_add(1);
+          last = f->frame_counter;
+        }
+        if (got) {
+          ++count;
+        } else {
+          std::this_thread::yield();
+        }
+      }
+      taken_seen[static_cast<std::size_t>(i)] = count;
+    });
+  }
+  for (int o = 0; o < kObservers; ++o) {
+    threads.emplace_back([&boxes, &consumers_done, &counter_violations] {
+      std::vector<tetrig::FrameMailboxStats> prev(boxes.size());
+      while (!consumers_done.load()) {
+        for (std::size_t b = 0; b < boxes.size(); ++b) {
+          const auto s = boxes[b]->stats();
+          if (s.published < prev[b].published || s.taken < prev[b].taken || s.dropped < prev[b].dropped ||
+              s.taken + s.dropped > s.published) {
+            counter_violations.fetch_add(1);
+          }
+          prev[b] = s;
+        }
+        std::this_thread::yield();
+      }
+    });
+  }
+  // Join producers and consumers (all but the observers), then stop the observers.
+  for (std::size_t t = 0; t < static_cast<std::size_t>(2 * kPairs); ++t) {
+    threads[t].join();
+  }
+  consumers_done.store(true);
+  for (std::size_t t = static_cast<std::size_t>(2 * kPairs); t < threads.size(); ++t) {
+    threads[t].join();
+  }
+
+  EXPECT_EQ(torn.load(), 0);
+  EXPECT_EQ(non_monotonic_frames.load(), 0);
+  EXPECT_EQ(counter_violations.load(), 0);
+  for (int i = 0; i < kPairs; ++i) {
+    const auto s = boxes[static_cast<std::size_t>(i)]->stats();
+    EXPECT_EQ(s.published, kFrames);
+    EXPECT_EQ(s.taken, taken_seen[static_cast<std::size_t>(i)]);
+    EXPECT_FALSE(boxes[static_cast<std::size_t>(i)]->hasPending());  // the last frame was taken
+    EXPECT_EQ(s.published, s.taken + s.dropped);
+    EXPECT_GE(s.taken, 1u);
+  }
+}
+
+}  // namespace

@@ -1,0 +1,123 @@
+// Run-time pose transfer x_fine = B x_tet over a CSR matrix.
+#include "tetrig/pose_transfer.hpp"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Dense>
+
+#include <atomic>
+#include <cstdlib>
+#include <new>
+#include <random>
+#include <vector>
+
+// Global allocation counter: proves that applyPoseTransfer never allocates. (GCC's
+// -Wmismatched-new-delete misreads the malloc/free pair of a replaced operator new/delete.)
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
+#endif
+namespace {
+std::atomic<std::uint64_t> g_allocations{0};
+}  // namespace
+void* operator new(std::size_t size) {
+  g_allocations.fetch_add(1, std::memory_order_relaxed);
+  if (void* p = std::malloc(size == 0 ? 1 : size)) return p;
+  throw std::bad_alloc();
+}
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+
+namespace tetrig {
+namespace {
+
+// A random sparse matrix (some rows empty).
+Eigen::SparseMatrix<double, Eigen::RowMajor> randomB(int rows, int cols, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_int_distribution<int> count(0, 12);
+  std::uniform_int_distribution<int> col(0, cols - 1);
+  std::uniform_real_distribution<double> value(-0.5, 1.5);
+  std::vector<Eigen::Triplet<double>> t;
+  for (int i = 0; i < rows; ++i) {
+    const int n = i % 7 == 0 ? 0 : count(rng);
+    for (int k = 0; k < n; ++k) t.emplace_back(i, col(rng), value(rng));
+  }
+  Eigen::SparseMatrix<double, Eigen::RowMajor> b(rows, cols);
+  b.setFromTriplets(t.begin(), t.end());
+  return b;
+}
+
+TEST(PoseTransfer, MatchesEigenProductInDoubleAndFloat) {
+  const int rows = 500;
+  const int cols = 80;
+  const auto b = randomB(rows, cols, 7);
+  Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> x = Eigen::MatrixXd::Random(cols, 3);
+  const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> expected = b * x;
+
+  const PoseTransferCsr<double> bd = makePoseTransferCsr<double>(b);
+  EXPECT_EQ(validatePoseTransfer(bd.view()), "");
+  EXPECT_EQ(bd.nonzeros(), b.nonZeros());
+  Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> out(rows, 3);
+  applyPoseTransfer(bd.view(), x.data(), out.data());
+  EXPECT_LT((out - expected).cwiseAbs().maxCoeff(), 1e-12);
+
+  const PoseTransferCsr<float> bf = makePoseTransferCsr<float>(b);
+  const Eigen::Matrix<float, Eigen::Dynamic, 3, Eigen::RowMajor> xf = x.cast<float>();
+  Eigen::Matrix<float, Eigen::Dynamic, 3, Eigen::RowMajor> outf(rows, 3);
+  applyPoseTransfer(bf.view(), xf.data(), outf.data());
+  EXPECT_LT((outf.cast<double>() - expected).cwiseAbs().maxCoeff(), 1e-4);
+  // Double positions in, float vertices out (the shared-memory case).
+  applyPoseTransfer(bf.view(), x.data(), outf.data());
+  EXPECT_LT((outf.cast<double>() - expected).cwiseAbs().maxCoeff(), 1e-4);
+  EXPECT_EQ(bf.bytes(), static_cast<std::int64_t>((rows + 1) * 4 + b.nonZeros() * 8));
+}
+
+TEST(PoseTransfer, RowRangeWritesOnlyThoseRows) {
+  const auto b = randomB(40, 10, 3);
+  const PoseTransferCsr<double> bd = makePoseTransferCsr<double>(b);
+  Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> x = Eigen::MatrixXd::Random(10, 3);
+  Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> out = Eigen::MatrixXd::Constant(40, 3, 42.0);
+  applyPoseTransferRows(bd.view(), x.data(), out.data(), 10, 20);
+  const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> expected = b * x;
+  for (int i = 0; i < 40; ++i) {
+    if (i >= 10 && i < 20) {
+      EXPECT_LT((out.row(i) - expected.row(i)).norm(), 1e-12);
+    } else {
+      EXPECT_EQ(out.row(i), Eigen::RowVector3d::Constant(42.0));
+    }
+  }
+}
+
+TEST(PoseTransfer, ApplyDoesNotAllocate) {
+  const auto b = randomB(300, 50, 11);
+  const PoseTransferCsr<float> bf = makePoseTransferCsr<float>(b);
+  std::vector<double> x(150, 1.0);
+  std::vector<float> out(900);
+  const auto view = bf.view();
+  const std::uint64_t before = g_allocations.load();
+  for (int frame = 0; frame < 10; ++frame) applyPoseTransfer(view, x.data(), out.data());
+  EXPECT_EQ(g_allocations.load(), before);
+}
+
+TEST(PoseTransfer, ValidateFindsBrokenStructure) {
+  const auto b = randomB(20, 5, 5);
+  PoseTransferCsr<float> bf = makePoseTransferCsr<float>(b);
+  ASSERT_GT(bf.nonzeros(), 2);
+  {
+    PoseTransferCsr<float> bad = bf;
+    bad.columns[1] = 5;
+    EXPECT_NE(validatePoseTransfer(bad.view()).find("column index out of range at entry 1"), std::string::npos);
+  }
+  {
+    PoseTransferCsr<float> bad = bf;
+    bad.weights[0] = std::numeric_limits<float>::quiet_NaN();
+    EXPECT_NE(validatePoseTransfer(bad.view()).find("non-finite weight at entry 0"), std::string::npos);
+  }
+  {
+    PoseTransferCsr<float> bad = bf;
+    bad.row_offsets[3] = bad.row_offsets[4] + 1;
+    EXPECT_NE(validatePoseTransfer(bad.view()).find("decrease"), std::string::npos);
+  }
+}
+
+}  // namespace
+}  // namespace tetrig

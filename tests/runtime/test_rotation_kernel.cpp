@@ -1,0 +1,133 @@
+// The fused SIMD rotation pass against the scalar references: closestRotation (exact polar) and
+// differentialCoordinates (delta = G^T D g, eq. 2.5).
+#include "scenes.hpp"
+#include "tetrig/laplacian.hpp"
+#include "tetrig/polar.hpp"
+#include "tetrig/rotation_kernel.hpp"
+
+#include <gtest/gtest.h>
+
+#include <random>
+
+namespace tetrig {
+namespace {
+
+struct KernelScene {
+  TetMesh mesh;
+  TetRestFrames frames;
+  std::vector<double> weights;
+  std::vector<TetBlock> blocks;
+  std::vector<double> xyz;  // deformed positions, mesh order (the kernel's "solver order" here)
+};
+
+// A bar with a random smooth deformation plus noise; a few tets can invert when `inverted`.
+KernelScene makeScene(std::uint32_t seed, double noise) {
+  KernelScene s;
+  s.mesh = scenes::makeBar(2, 2, 6);
+  s.frames = computeRestFrames(s.mesh);
+  s.weights = tetWeights(s.frames, {});
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> normal;
+  s.xyz.resize(static_cast<size_t>(s.mesh.vertexCount()) * 3);
+  for (std::int32_t v = 0; v < s.mesh.vertexCount(); ++v) {
+    const Eigen::Vector3d p = s.mesh.vertices.row(v).transpose();
+    // Bend about x by an angle growing along z, plus noise.
+    const Eigen::Vector3d q = Eigen::AngleAxisd(0.15 * p.z(), Eigen::Vector3d::UnitX()) * p;
+    for (int c = 0; c < 3; ++c) s.xyz[3 * static_cast<size_t>(v) + static_cast<size_t>(c)] = q[c] + noise * normal(rng);
+  }
+  const std::int32_t m = s.mesh.tetCount();
+  s.blocks.assign(static_cast<size_t>((m + kTetBlockWidth - 1) / kTetBlockWidth), TetBlock{});
+  for (std::int32_t t = 0; t < static_cast<std::int32_t>(s.blocks.size()) * kTetBlockWidth; ++t) {
+    TetBlock& b = s.blocks[static_cast<size_t>(t / kTetBlockWidth)];
+    const int l = t % kTetBlockWidth;
+    b.rotation[0][l] = 1.0;
+    b.rotation[1][l] = b.rotation[2][l] = b.rotation[3][l] = 0.0;
+    const bool real = t < m;
+    for (int c = 0; c < 4; ++c) b.corner[c][l] = real ? s.mesh.tets(t, c) : 0;
+    for (int i = 0; i < 9; ++i)
+      b.edge_inverse[i][l] = real ? s.frames.edge_inverse[static_cast<size_t>(t)](i / 3, i % 3) : (i % 4 == 0);
+    b.weight[l] = real ? s.weights[static_cast<size_t>(t)] : 0.0;
+  }
+  return s;
+}
+
+Eigen::Quaterniond laneRotation(const KernelScene& s, std::int32_t t) {
+  const TetBlock& b = s.blocks[static_cast<size_t>(t / kTetBlockWidth)];
+  const int l = t % kTetBlockWidth;
+  return {b.rotation[0][l], b.rotation[1][l], b.rotation[2][l], b.rotation[3][l]};
+}
+
+TEST(RotationKernel, ConvergesToTheExactRotationAndMatchesTheReferenceDelta) {
+  KernelScene s = makeScene(1, 0.02);
+  Vertices x(s.mesh.vertexCount(), 3);
+  for (std::int32_t v = 0; v < s.mesh.vertexCount(); ++v)
+    for (int c = 0; c < 3; ++c) x(v, c) = s.xyz[3 * static_cast<size_t>(v) + static_cast<size_t>(c)];
+  // Many passes of 2 steps from a cold start (identity): the warm start carries over between passes.
+  RotationPassStats stats;
+  for (int pass = 0; pass < 30; ++pass) {
+    stats = rotationPass(s.blocks.data(), static_cast<std::int32_t>(s.blocks.size()), s.xyz.data(), nullptr, 2);
+  }
+  std::vector<Eigen::Matrix3d> rotations;
+  double energy = 0.0;
+  for (std::int32_t t = 0; t < s.mesh.tetCount(); ++t) {
+    const Eigen::Matrix3d f = deformationGradient(s.mesh, s.frames, x, t);
+    const Eigen::Quaterniond q = laneRotation(s, t);
+    EXPECT_NEAR(q.norm(), 1.0, 1e-12);
+    // The trace is flat at its maximum (an angle error d changes it by ~d^2), so steps that gain
+    // less than rounding are rejected: the iteration's floor is sqrt(machine eps) ~ 1e-8.
+    EXPECT_LT((q.toRotationMatrix() - closestRotation(f).toRotationMatrix()).norm(), 5e-8) << "tet " << t;
+    rotations.push_back(q.toRotationMatrix());
+    energy += s.weights[static_cast<size_t>(t)] * (f - rotations.back()).squaredNorm();
+  }
+  EXPECT_NEAR(stats.energy, energy, 1e-10 * (1.0 + energy));
+  // One more pass with the scatter: delta equals the reference G^T D g(R).
+  std::vector<double> delta(s.xyz.size(), 0.0);
+  rotationPass(s.blocks.data(), static_cast<std::int32_t>(s.blocks.size()), s.xyz.data(), delta.data(), 2);
+  const Vertices reference = differentialCoordinates(s.mesh, s.frames, s.weights, rotations);
+  for (std::int32_t v = 0; v < s.mesh.vertexCount(); ++v)
+    for (int c = 0; c < 3; ++c)
+      EXPECT_NEAR(delta[3 * static_cast<size_t>(v) + static_cast<size_t>(c)], reference(v, c), 1e-9);
+  // differentialPass gives the same delta from the stored rotations.
+  std::vector<double> delta2(s.xyz.size(), 0.0);
+  differentialPass(s.blocks.data(), static_cast<std::int32_t>(s.blocks.size()), delta2.data());
+  for (size_t i = 0; i < delta.size(); ++i) EXPECT_NEAR(delta2[i], delta[i], 1e-12);
+}
+
+TEST(RotationKernel, InvertedTetsTakeTheExactProperRotation) {
+  KernelScene s = makeScene(2, 0.0);
+  // Reflect the whole deformed mesh through the plane x = 0: every tet is inverted.
+  for (size_t v = 0; v < s.xyz.size(); v += 3) s.xyz[v] = -s.xyz[v];
+  Vertices x(s.mesh.vertexCount(), 3);
+  for (std::int32_t v = 0; v < s.mesh.vertexCount(); ++v)
+    for (int c = 0; c < 3; ++c) x(v, c) = s.xyz[3 * static_cast<size_t>(v) + static_cast<size_t>(c)];
+  const RotationPassStats stats =
+      rotationPass(s.blocks.data(), static_cast<std::int32_t>(s.blocks.size()), s.xyz.data(), nullptr, 2);
+  EXPECT_EQ(stats.exact_fallbacks, s.mesh.tetCount());
+  for (std::int32_t t = 0; t < s.mesh.tetCount(); ++t) {
+    const Eigen::Matrix3d f = deformationGradient(s.mesh, s.frames, x, t);
+    ASSERT_LT(f.determinant(), 0.0);
+    const Eigen::Matrix3d r = laneRotation(s, t).toRotationMatrix();
+    EXPECT_NEAR(r.determinant(), 1.0, 1e-9);
+    EXPECT_NEAR((r.cwiseProduct(f)).sum(), (closestRotation(f).toRotationMatrix().cwiseProduct(f)).sum(), 1e-9);
+  }
+}
+
+TEST(RotationKernel, EachPassNeverLowersAnyTetsTrace) {
+  KernelScene s = makeScene(3, 0.3);  // heavy noise: far from converged, some tets inverted
+  Vertices x(s.mesh.vertexCount(), 3);
+  for (std::int32_t v = 0; v < s.mesh.vertexCount(); ++v)
+    for (int c = 0; c < 3; ++c) x(v, c) = s.xyz[3 * static_cast<size_t>(v) + static_cast<size_t>(c)];
+  std::vector<double> before(static_cast<size_t>(s.mesh.tetCount()), -1e300);
+  for (int pass = 0; pass < 5; ++pass) {
+    rotationPass(s.blocks.data(), static_cast<std::int32_t>(s.blocks.size()), s.xyz.data(), nullptr, 1);
+    for (std::int32_t t = 0; t < s.mesh.tetCount(); ++t) {
+      const Eigen::Matrix3d f = deformationGradient(s.mesh, s.frames, x, t);
+      const double trace = (laneRotation(s, t).toRotationMatrix().cwiseProduct(f)).sum();
+      EXPECT_GE(trace, before[static_cast<size_t>(t)] - 1e-12) << "tet " << t << " pass " << pass;
+      before[static_cast<size_t>(t)] = trace;
+    }
+  }
+}
+
+}  // namespace
+}  // namespace tetrig

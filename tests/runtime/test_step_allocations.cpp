@@ -1,0 +1,131 @@
+// Deformer::step() allocates nothing after the first call: a counting global allocator and
+// Eigen's runtime malloc check (EIGEN_RUNTIME_NO_MALLOC, compiled into tetrig::runtime).
+#include "deformer_test_util.hpp"
+#include "test_data.hpp"
+#include "tetrig/tet_mesh_io.hpp"
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <cstdlib>
+#include <new>
+
+namespace {
+std::atomic<long> g_allocations{0};
+}  // namespace
+
+void* operator new(std::size_t size) {
+  g_allocations.fetch_add(1, std::memory_order_relaxed);
+  if (void* p = std::malloc(size == 0 ? 1 : size)) return p;
+  throw std::bad_alloc();
+}
+void* operator new[](std::size_t size) {
+  g_allocations.fetch_add(1, std::memory_order_relaxed);
+  if (void* p = std::malloc(size == 0 ? 1 : size)) return p;
+  throw std::bad_alloc();
+}
+void* operator new(std::size_t size, std::align_val_t align) {
+  g_allocations.fetch_add(1, std::memory_order_relaxed);
+  const auto a = static_cast<std::size_t>(align);
+  if (void* p = std::aligned_alloc(a, (size + a - 1) / a * a)) return p;
+  throw std::bad_alloc();
+}
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete[](void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
+void operator delete(void* p, std::align_val_t) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
+
+namespace tetrig {
+namespace {
+
+// Runs `frames` frames and returns the allocations counted during all steps after the first;
+// `flags` gets the union of the steps' flags.
+long allocationsDuringSteps(Deformer& deformer, const std::vector<HandleTargets>& frames, int iterations,
+                            std::uint32_t* flags = nullptr) {
+  deformer.step(frames.front(), StepBudget{iterations});  // warm-up
+  std::uint32_t seen = 0;
+  Eigen::internal::set_is_malloc_allowed(false);
+  const long before = g_allocations.load();
+  for (const auto& targets : frames) seen |= deformer.step(targets, StepBudget{iterations}).flags;
+  const long after = g_allocations.load();
+  Eigen::internal::set_is_malloc_allowed(true);
+  if (flags != nullptr) *flags = seen;
+  return after - before;
+}
+
+TEST(StepAllocations, CountingAllocatorSeesTheTestItself) {
+  // The counter works: a vector allocation is seen.
+  const long before = g_allocations.load();
+  auto* v = new std::vector<int>(100);
+  delete v;
+  EXPECT_GE(g_allocations.load() - before, 2);
+}
+
+TEST(StepAllocations, NoneOnABarWithVertexHandles) {
+  const auto bar = scenes::makeBarScene(4, 4, 33);
+  Deformer deformer(bar.mesh, test::endVertexHandles(bar));
+  std::vector<std::vector<Eigen::Vector3d>> positions;
+  for (int f = 0; f < 6; ++f)
+    positions.push_back(test::endTargets(bar, scenes::barAxisTransform(bar, 0.3 * f, Eigen::Vector3d(0, f, 0))));
+  // A last frame that squashes the bar to 40 % inverts tets: the exact-rotation fallback runs too.
+  positions.push_back(test::endTargets(bar, scenes::barAxisTransform(bar, 2.6, Eigen::Vector3d(3, -2, -20))));
+  std::vector<HandleTargets> frames(positions.size());
+  for (size_t f = 0; f < positions.size(); ++f) frames[f].vertex_positions = positions[f];
+  std::uint32_t flags = 0;
+  EXPECT_EQ(allocationsDuringSteps(deformer, frames, 3, &flags), 0);
+  EXPECT_TRUE(flags & kStepExactRotations) << "the fallback path was meant to run";
+}
+
+TEST(StepAllocations, NoneWithRegionsInterpolationRigidGroupsAndPointHandles) {
+  const auto bar = scenes::makeBarScene(4, 4, 20);
+  DeformerSetup setup;
+  setup.region_handles = {RegionHandle{bar.near_tets, true}, RegionHandle{bar.far_tets, true}};
+  setup.rigid_groups = {RigidGroup{{100, 101, 102, 103, 900, 901}}};
+  PointHandle point;
+  point.tet = 200;
+  point.barycentric = Eigen::Vector4d(0.25, 0.25, 0.25, 0.25);
+  setup.point_handles = {point};
+  Deformer deformer(bar.mesh, setup);
+  std::vector<std::vector<RigidTransform>> transforms;
+  std::vector<std::vector<Eigen::Vector3d>> points;
+  for (int f = 0; f < 8; ++f) {
+    const Eigen::Isometry3d far = scenes::barAxisTransform(bar, 0.4 * f, Eigen::Vector3d(0.2 * f, 0, 0));
+    transforms.push_back({RigidTransform{}, RigidTransform{Eigen::Quaterniond(far.rotation()), far.translation()}});
+    points.push_back({Eigen::Vector3d(2.0 + 0.1 * f, 2.0, 9.0)});
+  }
+  std::vector<HandleTargets> frames(transforms.size());
+  for (size_t f = 0; f < frames.size(); ++f) {
+    frames[f].region_transforms = transforms[f];
+    frames[f].point_positions = points[f];
+  }
+  EXPECT_EQ(allocationsDuringSteps(deformer, frames, 3), 0);
+}
+
+TEST(StepAllocations, NoneOnTheArmadilloTetMesh) {
+  TETRIG_REQUIRE_DATA(path, "meshes/PositionBasedDynamics/armadillo_4k.node");
+  const TetMesh mesh = readTetGen(path);
+  // Handles: the 40 lowest and the 40 highest vertices (feet and ears), the top ones moved.
+  std::vector<std::int32_t> order(static_cast<size_t>(mesh.vertexCount()));
+  for (std::int32_t v = 0; v < mesh.vertexCount(); ++v) order[static_cast<size_t>(v)] = v;
+  std::sort(order.begin(), order.end(), [&](auto a, auto b) { return mesh.vertices(a, 1) < mesh.vertices(b, 1); });
+  DeformerSetup setup;
+  setup.vertex_handles.assign(order.begin(), order.begin() + 40);
+  setup.vertex_handles.insert(setup.vertex_handles.end(), order.end() - 40, order.end());
+  Deformer deformer(mesh, setup);
+  std::vector<std::vector<Eigen::Vector3d>> positions(6);
+  std::vector<HandleTargets> frames(6);
+  for (size_t f = 0; f < 6; ++f) {
+    for (size_t i = 0; i < setup.vertex_handles.size(); ++i) {
+      Eigen::Vector3d p = mesh.vertices.row(setup.vertex_handles[i]).transpose();
+      if (i >= 40) p.x() += 0.05 * static_cast<double>(f);
+      positions[f].push_back(p);
+    }
+    frames[f].vertex_positions = positions[f];
+  }
+  EXPECT_EQ(allocationsDuringSteps(deformer, frames, 3), 0);
+}
+
+}  // namespace
+}  // namespace tetrig

@@ -1,0 +1,46 @@
+// Markers bound by invisible tets (Stoll et al. 2007, section 3.2): each marker becomes an extra
+// tet vertex joined to its closest boundary faces by "invisible" tets; it is then driven as a
+// vertex handle. For a boundary face (a, b, c) (outward) and marker m the tet is (a, b, c, m),
+// positively oriented when m lies outside the face's plane. Faces that would give an inverted or
+// degenerate tet (m within min_relative_height * longest face edge of the plane, or behind it)
+// are skipped. A marker below the skin (behind every nearby face) is joined with the reversed
+// faces (a, c, b, m) instead, which are positive too, and reported.
+//
+// Offline, any thread, allocates, throws RigBuildError naming a marker that cannot be bound.
+#pragma once
+
+#include "tetrig/rigbuild/surface_mesh.hpp"
+#include "tetrig/tet_mesh.hpp"
+
+#include <Eigen/Core>
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace tetrig::rigbuild {
+
+struct MarkerBindOptions {
+  int faces_per_marker = 3;          // invisible tets per marker
+  int search_faces = 32;             // nearest boundary faces considered
+  double min_relative_height = 0.05; // marker height over the face plane / longest face edge
+};
+
+struct MarkerBinding {
+  std::int32_t tet_vertex = -1;
+  std::int32_t bound_faces = 0;
+  bool below_skin = false;
+};
+
+struct MarkerBindResult {
+  TetMesh mesh;                          // body vertices, then one vertex per marker; body tets, then invisible tets
+  std::vector<MarkerBinding> bindings;   // one per marker
+  std::int32_t invisible_tets = 0;
+  std::int32_t below_skin = 0;
+};
+
+// body: positively oriented tets. positions/labels: one per marker, rig units.
+MarkerBindResult bindMarkers(const TetMesh& body, const std::vector<Eigen::Vector3d>& positions,
+                             const std::vector<std::string>& labels, const MarkerBindOptions& options = {});
+
+}  // namespace tetrig::rigbuild

@@ -1,0 +1,94 @@
+// The rig description: a small JSON file saying which parts of a mesh are handles, rigid groups
+// and stiff or soft, and how markers bind (documented in docs/rig-format.md, "Rig description").
+//
+// Selections refer to the FINE mesh (vertex ids, a deformation-survey .sel file) or to space in
+// rig units (box, sphere, around a marker); the tet mesh is generated, so they are resolved onto
+// tet vertices and tets after tetrahedralization (see build_rig.hpp).
+//
+// Offline, any thread, allocates, throws RigBuildError with the file name and the JSON path
+// (e.g. "man.json: region_handles[2].select: unknown selection kind 'cube'").
+#pragma once
+
+#include "tetrig/rigbuild/surface_mesh.hpp"
+
+#include <Eigen/Core>
+
+#include <cstdint>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace tetrig::rigbuild {
+
+struct Selection {
+  enum class Kind { kVertices, kSelFile, kBox, kSphere, kNearMarker };
+  Kind kind = Kind::kVertices;
+  std::vector<std::int32_t> vertices;      // kVertices: fine-mesh vertex ids (tet ids for a tet-mesh input)
+  std::filesystem::path sel_file;          // kSelFile: one status per line per fine vertex
+  std::vector<std::int32_t> sel_values;    // kSelFile: statuses selected (e.g. {2} = handle)
+  Eigen::Vector3d min = Eigen::Vector3d::Zero(), max = Eigen::Vector3d::Zero();  // kBox, rig units
+  Eigen::Vector3d center = Eigen::Vector3d::Zero();                             // kSphere
+  double radius = 0.0;                     // kSphere, kNearMarker (rig units)
+  std::string marker;                      // kNearMarker: label
+  int min_corners = 3;                     // a tet is selected when >= this many corners are (1..4)
+  std::string where;                       // JSON path, for messages
+};
+
+struct NamedSelection {
+  std::string name;
+  Selection select;
+  bool oriented = true;    // region handles only
+  double value = 1.0;      // stiffness entries only
+};
+
+struct PointHandleSpec {
+  std::string name;
+  Eigen::Vector3d position = Eigen::Vector3d::Zero();  // rig units, rest pose
+};
+
+struct MarkerOptions {
+  std::filesystem::path clip;              // C3D file; empty = no markers (the CLI's --markers wins)
+  std::int64_t frame = 0;                  // rest frame, 0-based index into the clip
+  std::vector<std::string> labels;         // empty = every labelled physical marker
+  std::vector<std::string> exclude;
+  std::string device_up = "z";             // C3D convention
+  std::string alignment = "auto";          // "auto" (coarse + similarity ICP), "units" (axes and unit only), "matrix"
+  std::vector<double> matrix;              // "matrix": 12 numbers, 3x4 row-major, device mm -> rig units
+  int icp_iterations = 60;
+  bool icp_scale = true;                   // similarity (true) or rigid (false) ICP
+  double max_scale_change = 0.25;          // ICP scale kept within (1 +- this) of the height-based estimate
+  double marker_offset = 0.0;              // expected marker height above the skin (rig units) during ICP
+  double fit_power = 2.0;                  // ICP minimises sum |r|^p (2: least squares; IRLS otherwise)
+  double max_distance = 0.10;              // rig units; a marker further from the surface stops the build
+  int faces_per_marker = 3;                // invisible tets per marker (closest qualifying boundary faces)
+  double invisible_stiffness = 0.1;        // stiffness weight of invisible tets (body tets: 1)
+};
+
+struct RigDescription {
+  std::filesystem::path source;            // the JSON file ("" when built from defaults)
+  std::string name;
+  std::string mesh_unit = "m";             // "m", "cm", "mm" or "auto" (from the mesh's height)
+  std::string mesh_up = "y";
+  std::int32_t tet_vertices = 2500;        // decimation target (surface inputs)
+  double pose_radius_fraction = 0.05;      // paper section 2.4: 5 % of the bounding-box diagonal
+  std::int32_t pose_max_nonzeros = 0;      // 0 = uncapped
+  std::vector<NamedSelection> vertex_handles;
+  std::vector<NamedSelection> region_handles;
+  std::vector<PointHandleSpec> point_handles;
+  std::vector<NamedSelection> rigid_groups;
+  std::vector<NamedSelection> stiffness;   // later entries override earlier ones
+  MarkerOptions markers;
+  int rotation_steps = 2;
+  double point_handle_weight = 1e3;
+};
+
+// Parses a rig description (see docs/rig-format.md). Relative paths in it (sel files, clip) are
+// resolved against the JSON file's directory.
+RigDescription readRigDescription(const std::filesystem::path& path);
+RigDescription parseRigDescription(const std::string& json_text, const std::filesystem::path& source);
+
+// Millimetres -> rig unit factor for a unit name ("m" 0.001, "cm" 0.1, "mm" 1). Throws for others.
+double rigUnitsPerMm(const std::string& unit);
+
+}  // namespace tetrig::rigbuild

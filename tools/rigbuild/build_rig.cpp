@@ -1,0 +1,611 @@
+// The rig-building pipeline behind `tetrig build-rig` (see build_rig.hpp).
+#include "tetrig/rigbuild/build_rig.hpp"
+
+#include "tetrig/drivers/c3d_reader.hpp"
+#include "tetrig/rigbuild/bind_markers.hpp"
+#include "tetrig/rigbuild/boundary_surface.hpp"
+#include "tetrig/rigbuild/import_surface.hpp"
+#include "tetrig/rigbuild/tetrahedralize_surface.hpp"
+#include "tetrig/rigbuild/validate_surface.hpp"
+#include "tetrig/tet_mesh_io.hpp"
+
+#include <Eigen/Geometry>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <limits>
+#include <map>
+#include <sstream>
+#include <unordered_map>
+
+namespace tetrig::rigbuild {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+
+std::string lower(std::string s) {
+  for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return s;
+}
+
+std::string fmt(const char* f, double v) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, f, v);
+  return buf;
+}
+
+// Vertex positions in file order for OBJ ("v x y z") and OFF files: importers reorder vertices
+// (assimp emits one vertex per face corner; welding keeps first appearance), but vertex-id
+// selections (and deformation-survey .sel files) count vertices in file order. Empty for other
+// formats (ids then refer to the imported order).
+std::vector<Eigen::Vector3d> fileVertexOrder(const std::filesystem::path& path) {
+  const std::string ext = lower(path.extension().string());
+  std::vector<Eigen::Vector3d> out;
+  std::ifstream in(path);
+  if (!in) return out;
+  std::string line;
+  if (ext == ".obj") {
+    while (std::getline(in, line)) {
+      if (line.size() > 2 && line[0] == 'v' && (line[1] == ' ' || line[1] == '\t')) {
+        std::istringstream s(line.substr(2));
+        Eigen::Vector3d v;
+        if (!(s >> v.x() >> v.y() >> v.z())) return {};
+        out.push_back(v);
+      }
+    }
+  } else if (ext == ".off") {
+    std::vector<std::string> tokens;
+    std::string tok;
+    while (std::getline(in, line)) {
+      const std::size_t hash = line.find('#');
+      if (hash != std::string::npos) line.resize(hash);
+      std::istringstream s(line);
+      while (s >> tok) tokens.push_back(tok);
+    }
+    if (tokens.size() < 4 || tokens[0] != "OFF") return {};
+    try {
+      const std::size_t nv = std::stoull(tokens[1]);
+      if (tokens.size() < 4 + 3 * nv) return {};
+      for (std::size_t i = 0; i < nv; ++i) {
+        out.emplace_back(std::stod(tokens[4 + 3 * i]), std::stod(tokens[5 + 3 * i]), std::stod(tokens[6 + 3 * i]));
+      }
+    } catch (const std::exception&) {
+      return {};
+    }
+  }
+  return out;
+}
+
+std::vector<std::int32_t> readSelFile(const std::filesystem::path& path) {
+  std::ifstream in(path);
+  if (!in) throw RigBuildError(path.string() + ": cannot open the selection file");
+  std::vector<std::int32_t> out;
+  std::string line;
+  while (std::getline(in, line)) {
+    const std::size_t hash = line.find('#');
+    if (hash != std::string::npos) line.resize(hash);
+    std::istringstream s(line);
+    long v = 0;
+    while (s >> v) out.push_back(static_cast<std::int32_t>(v));
+    if (!s.eof()) throw RigBuildError(path.string() + ": expected one integer status per vertex, found '" + line + "'");
+  }
+  return out;
+}
+
+struct MarkerSet {
+  std::vector<std::string> labels;
+  std::vector<Eigen::Vector3d> device_mm;
+};
+
+MarkerSet readMarkers(const std::filesystem::path& clip_path, std::int64_t frame, const MarkerOptions& options) {
+  const drivers::C3DClip clip = drivers::C3DClip::load(clip_path);
+  if (clip.frameCount() == 0) throw RigBuildError(clip_path.string() + ": the clip has no frames");
+  if (frame < 0 || static_cast<std::size_t>(frame) >= clip.frameCount()) {
+    throw RigBuildError(clip_path.string() + ": rest frame " + std::to_string(frame) + " is outside the clip (0.." +
+                        std::to_string(clip.frameCount() - 1) + ")");
+  }
+  MarkerSet set;
+  const float* pos = clip.positions(static_cast<std::size_t>(frame));
+  std::vector<std::string> wanted = options.labels;
+  for (int p = 0; p < clip.pointCount(); ++p) {
+    std::string label = clip.labels()[static_cast<std::size_t>(p)];
+    const std::size_t colon = label.rfind(':');
+    if (colon != std::string::npos) label = label.substr(colon + 1);
+    if (label.empty()) label = "point" + std::to_string(p);
+    if (!options.labels.empty()) {
+      const auto it = std::find(wanted.begin(), wanted.end(), label);
+      if (it == wanted.end()) continue;
+      wanted.erase(it);
+    } else if (clip.pointKind(p) != drivers::C3DPointKind::kMarker) {
+      continue;
+    }
+    if (std::find(options.exclude.begin(), options.exclude.end(), label) != options.exclude.end()) continue;
+    if (!clip.isValid(static_cast<std::size_t>(frame), p)) {
+      throw RigBuildError(clip_path.string() + ": marker " + label + " is not valid in rest frame " + std::to_string(frame) +
+                          ": choose another frame (--frame) or exclude the marker");
+    }
+    if (std::find(set.labels.begin(), set.labels.end(), label) != set.labels.end()) {
+      throw RigBuildError(clip_path.string() + ": two markers are labelled " + label + ": exclude one");
+    }
+    const double k = clip.unitsToMm();
+    set.labels.push_back(label);
+    set.device_mm.emplace_back(k * pos[3 * p], k * pos[3 * p + 1], k * pos[3 * p + 2]);
+  }
+  if (!wanted.empty()) throw RigBuildError(clip_path.string() + ": marker " + wanted.front() + " named in markers.labels is not in the clip");
+  if (set.labels.empty()) throw RigBuildError(clip_path.string() + ": no labelled markers to bind");
+  return set;
+}
+
+// Everything a selection can be resolved against.
+struct Context {
+  const TetMesh* body = nullptr;
+  bool tet_input = false;
+  std::vector<std::int32_t> file_to_tet;    // tet input: file vertex id -> tet vertex
+  std::vector<std::int32_t> file_to_fine;   // surface input: file vertex id -> fine vertex (identity if unknown)
+  std::vector<std::int32_t> fine_to_tet;    // surface input: fine vertex -> tet vertex kept by decimation, or -1
+  const Vertices* fine = nullptr;
+  const std::vector<std::string>* marker_labels = nullptr;
+  const std::vector<Eigen::Vector3d>* marker_positions = nullptr;
+};
+
+std::int32_t nearestTetVertex(const Context& ctx, const Eigen::Vector3d& p) {
+  std::int32_t best = 0;
+  double best_d = std::numeric_limits<double>::infinity();
+  for (std::int32_t v = 0; v < ctx.body->vertexCount(); ++v) {
+    const double d = (ctx.body->vertices.row(v).transpose() - p).squaredNorm();
+    if (d < best_d) {
+      best_d = d;
+      best = v;
+    }
+  }
+  return best;
+}
+
+std::vector<std::uint8_t> resolveVertices(const Context& ctx, const Selection& s, const std::string& what) {
+  const std::int32_t nv = ctx.body->vertexCount();
+  std::vector<std::uint8_t> mask(static_cast<std::size_t>(nv), 0);
+  auto inside = [&](auto pred) {
+    for (std::int32_t v = 0; v < nv; ++v) {
+      if (pred(Eigen::Vector3d(ctx.body->vertices.row(v).transpose()))) mask[static_cast<std::size_t>(v)] = 1;
+    }
+  };
+  std::vector<std::int32_t> ids;
+  switch (s.kind) {
+    case Selection::Kind::kVertices:
+      ids = s.vertices;
+      break;
+    case Selection::Kind::kSelFile: {
+      const std::vector<std::int32_t> status = readSelFile(s.sel_file);
+      const std::size_t expected = ctx.tet_input ? ctx.file_to_tet.size() : ctx.file_to_fine.size();
+      if (status.size() != expected) {
+        throw RigBuildError(what + ": " + s.sel_file.string() + " has " + std::to_string(status.size()) + " statuses but the mesh file has " +
+                            std::to_string(expected) + " vertices");
+      }
+      for (std::size_t i = 0; i < status.size(); ++i) {
+        if (std::find(s.sel_values.begin(), s.sel_values.end(), status[i]) != s.sel_values.end()) ids.push_back(static_cast<std::int32_t>(i));
+      }
+      break;
+    }
+    case Selection::Kind::kBox:
+      inside([&](const Eigen::Vector3d& p) { return (p.array() >= s.min.array()).all() && (p.array() <= s.max.array()).all(); });
+      break;
+    case Selection::Kind::kSphere:
+      inside([&](const Eigen::Vector3d& p) { return (p - s.center).norm() <= s.radius; });
+      break;
+    case Selection::Kind::kNearMarker: {
+      if (ctx.marker_labels == nullptr || ctx.marker_labels->empty()) {
+        throw RigBuildError(what + ": near_marker '" + s.marker + "' needs markers (--markers CLIP.c3d)");
+      }
+      const auto it = std::find(ctx.marker_labels->begin(), ctx.marker_labels->end(), s.marker);
+      if (it == ctx.marker_labels->end()) throw RigBuildError(what + ": no marker labelled '" + s.marker + "'");
+      const Eigen::Vector3d c = (*ctx.marker_positions)[static_cast<std::size_t>(it - ctx.marker_labels->begin())];
+      inside([&](const Eigen::Vector3d& p) { return (p - c).norm() <= s.radius; });
+      break;
+    }
+  }
+  if (!ids.empty() || s.kind == Selection::Kind::kVertices || s.kind == Selection::Kind::kSelFile) {
+    if (ids.empty()) throw RigBuildError(what + ": the selection names no vertex");
+    const std::size_t file_count = ctx.tet_input ? ctx.file_to_tet.size() : ctx.file_to_fine.size();
+    std::vector<std::int32_t> unkept;
+    for (const std::int32_t id : ids) {
+      if (id < 0 || static_cast<std::size_t>(id) >= file_count) {
+        throw RigBuildError(what + ": vertex id " + std::to_string(id) + " is out of range (the mesh file has " + std::to_string(file_count) +
+                            " vertices)");
+      }
+      if (ctx.tet_input) {
+        const std::int32_t t = ctx.file_to_tet[static_cast<std::size_t>(id)];
+        if (t >= 0) mask[static_cast<std::size_t>(t)] = 1;
+      } else {
+        const std::int32_t f = ctx.file_to_fine[static_cast<std::size_t>(id)];
+        const std::int32_t t = f >= 0 ? ctx.fine_to_tet[static_cast<std::size_t>(f)] : -1;
+        if (t >= 0) {
+          mask[static_cast<std::size_t>(t)] = 1;
+        } else if (f >= 0) {
+          unkept.push_back(f);
+        }
+      }
+    }
+    // Decimation removed every selected vertex: take the nearest tet vertices instead.
+    if (std::find(mask.begin(), mask.end(), 1) == mask.end()) {
+      for (const std::int32_t f : unkept) mask[static_cast<std::size_t>(nearestTetVertex(ctx, ctx.fine->row(f).transpose()))] = 1;
+    }
+  }
+  if (std::find(mask.begin(), mask.end(), 1) == mask.end()) {
+    throw RigBuildError(what + ": the selection contains no tet vertex: enlarge it");
+  }
+  return mask;
+}
+
+std::vector<std::int32_t> resolveTets(const Context& ctx, const Selection& s, const std::string& what) {
+  const std::vector<std::uint8_t> mask = resolveVertices(ctx, s, what);
+  std::vector<std::int32_t> tets;
+  for (std::int32_t t = 0; t < ctx.body->tetCount(); ++t) {
+    int corners = 0;
+    for (int k = 0; k < 4; ++k) corners += mask[static_cast<std::size_t>(ctx.body->tets(t, k))];
+    if (corners >= s.min_corners) tets.push_back(t);
+  }
+  if (tets.empty()) {
+    throw RigBuildError(what + ": no tet has " + std::to_string(s.min_corners) +
+                        " corners in the selection: enlarge it or lower min_corners");
+  }
+  return tets;
+}
+
+}  // namespace
+
+bool isTetMeshPath(const std::filesystem::path& path) {
+  const std::string ext = lower(path.extension().string());
+  return ext == ".node" || ext == ".ele" || ext == ".mesh";
+}
+
+Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress* progress) {
+  BuildRigReport report;
+  Progress quiet("", Progress::Mode::kQuiet);
+  Progress& prog = progress ? *progress : quiet;
+  const RigDescription& desc = inputs.description;
+  const MarkerOptions& mopt = desc.markers;
+  const std::int32_t target = inputs.tet_vertices.value_or(desc.tet_vertices);
+  if (target < 4) throw RigBuildError("--tet-vertices must be at least 4");
+
+  Rig rig;
+  rig.builder = "tetrig build-rig 0.1.0";
+  rig.name = desc.name.empty() ? inputs.mesh.filename().string() : desc.name;
+  SurfaceMesh fine;
+  TetMesh body;
+  Context ctx;
+  Eigen::SparseMatrix<double, Eigen::RowMajor> b;
+
+  if (!std::filesystem::exists(inputs.mesh)) {
+    throw RigBuildError(inputs.mesh.string() + ": no such file (--mesh)");
+  }
+  if (isTetMeshPath(inputs.mesh)) {
+    report.tet_input = true;
+    ctx.tet_input = true;
+    auto t0 = Clock::now();
+    prog.begin("reading tet mesh " + inputs.mesh.filename().string());
+    TetMesh raw = readTetMesh(inputs.mesh);
+    if (raw.tetCount() == 0) throw RigBuildError(inputs.mesh.string() + ": the tet mesh has no tets");
+    if (!raw.vertices.allFinite()) throw RigBuildError(inputs.mesh.string() + ": non-finite vertex coordinates");
+    for (std::int32_t t = 0; t < raw.tetCount(); ++t) {
+      for (int k = 0; k < 4; ++k) {
+        if (raw.tets(t, k) < 0 || raw.tets(t, k) >= raw.vertexCount()) {
+          throw RigBuildError(inputs.mesh.string() + ": tet " + std::to_string(t) + " names a vertex out of range");
+        }
+      }
+    }
+    // Positive orientation (swap two corners of inverted tets); unused vertices removed.
+    std::int32_t flipped = 0;
+    for (std::int32_t t = 0; t < raw.tetCount(); ++t) {
+      if (signedVolume(raw, t) < 0) {
+        std::swap(raw.tets(t, 2), raw.tets(t, 3));
+        ++flipped;
+      }
+    }
+    const TetMeshReport check = checkTetMesh(raw);
+    if (!check.ok()) throw RigBuildError(inputs.mesh.string() + ": unusable tet mesh: " + check.summary());
+    ctx.file_to_tet.assign(static_cast<std::size_t>(raw.vertexCount()), -1);
+    for (std::int32_t t = 0; t < raw.tetCount(); ++t) {
+      for (int k = 0; k < 4; ++k) ctx.file_to_tet[static_cast<std::size_t>(raw.tets(t, k))] = 0;
+    }
+    std::int32_t nv = 0;
+    for (std::int32_t& m : ctx.file_to_tet) m = m == 0 ? nv++ : -1;
+    body.vertices.resize(nv, 3);
+    for (std::size_t v = 0; v < ctx.file_to_tet.size(); ++v) {
+      if (ctx.file_to_tet[v] >= 0) body.vertices.row(ctx.file_to_tet[v]) = raw.vertices.row(static_cast<Eigen::Index>(v));
+    }
+    body.tets.resize(raw.tetCount(), 4);
+    for (std::int32_t t = 0; t < raw.tetCount(); ++t) {
+      for (int k = 0; k < 4; ++k) body.tets(t, k) = ctx.file_to_tet[static_cast<std::size_t>(raw.tets(t, k))];
+    }
+    if (flipped) report.notes.push_back(std::to_string(flipped) + " inverted tets re-oriented");
+    if (nv < raw.vertexCount()) report.notes.push_back(std::to_string(raw.vertexCount() - nv) + " unused vertices removed");
+    // Fine mesh = boundary surface; B picks the boundary vertices.
+    const Triangles faces = boundaryFaces(body);
+    std::vector<std::int32_t> tet_to_fine(static_cast<std::size_t>(nv), -1);
+    for (Eigen::Index f = 0; f < faces.rows(); ++f) {
+      for (int k = 0; k < 3; ++k) tet_to_fine[static_cast<std::size_t>(faces(f, k))] = 0;
+    }
+    std::int32_t nf = 0;
+    std::vector<std::int32_t> fine_to_tet;
+    for (std::int32_t v = 0; v < nv; ++v) {
+      if (tet_to_fine[static_cast<std::size_t>(v)] == 0) {
+        tet_to_fine[static_cast<std::size_t>(v)] = nf++;
+        fine_to_tet.push_back(v);
+      }
+    }
+    fine.vertices.resize(nf, 3);
+    for (std::int32_t i = 0; i < nf; ++i) fine.vertices.row(i) = body.vertices.row(fine_to_tet[static_cast<std::size_t>(i)]);
+    fine.triangles.resize(faces.rows(), 3);
+    for (Eigen::Index f = 0; f < faces.rows(); ++f) {
+      for (int k = 0; k < 3; ++k) fine.triangles(f, k) = tet_to_fine[static_cast<std::size_t>(faces(f, k))];
+    }
+    b.resize(nf, nv);
+    std::vector<Eigen::Triplet<double>> trip;
+    for (std::int32_t i = 0; i < nf; ++i) trip.emplace_back(i, fine_to_tet[static_cast<std::size_t>(i)], 1.0);
+    b.setFromTriplets(trip.begin(), trip.end());
+    report.pose.nonzeros = nf;
+    report.import_seconds = since(t0);
+    prog.end(std::to_string(nv) + " vertices, " + std::to_string(body.tetCount()) + " tets, boundary " + std::to_string(nf) +
+             " vertices / " + std::to_string(faces.rows()) + " triangles");
+  } else {
+    auto t0 = Clock::now();
+    prog.begin("importing " + inputs.mesh.filename().string());
+    fine = importSurface(inputs.mesh);
+    const std::int32_t imported = fine.vertexCount();
+    SurfaceReport surface_report = validateSurface(fine);
+    requireUsableSurface(surface_report, inputs.mesh.string());
+    report.import_seconds = since(t0);
+    prog.end(surface_report.summary());
+    // File order of vertices, for vertex-id selections.
+    const std::vector<Eigen::Vector3d> order = fileVertexOrder(inputs.mesh);
+    if (!order.empty()) {
+      std::map<std::array<double, 3>, std::int32_t> index;
+      for (std::int32_t v = 0; v < fine.vertexCount(); ++v) index.emplace(std::array<double, 3>{fine.vertices(v, 0), fine.vertices(v, 1), fine.vertices(v, 2)}, v);
+      ctx.file_to_fine.resize(order.size(), -1);
+      for (std::size_t i = 0; i < order.size(); ++i) {
+        const auto it = index.find({order[i].x(), order[i].y(), order[i].z()});
+        if (it != index.end()) ctx.file_to_fine[i] = it->second;
+      }
+    } else {
+      ctx.file_to_fine.resize(static_cast<std::size_t>(fine.vertexCount()));
+      for (std::int32_t v = 0; v < fine.vertexCount(); ++v) ctx.file_to_fine[static_cast<std::size_t>(v)] = v;
+      if (imported != fine.vertexCount()) report.notes.push_back("vertex ids refer to the repaired surface's order");
+    }
+    t0 = Clock::now();
+    prog.begin("decimating to " + std::to_string(target) + " vertices and tetrahedralizing (TetGen)");
+    DecimateOptions dec;
+    dec.target_vertices = target;
+    CoarseRig coarse = buildCoarseTetMesh(fine, dec);
+    body = coarse.tets.mesh;
+    report.interior_vertices = coarse.tets.interior_vertices;
+    ctx.fine_to_tet.assign(static_cast<std::size_t>(fine.vertexCount()), -1);
+    for (std::size_t v = 0; v < coarse.tet_to_fine.size(); ++v) {
+      if (coarse.tet_to_fine[v] >= 0) ctx.fine_to_tet[static_cast<std::size_t>(coarse.tet_to_fine[v])] = static_cast<std::int32_t>(v);
+    }
+    for (const std::string& line : coarse.failed_attempts) report.notes.push_back("retried: " + line);
+    if (coarse.repair.moved_vertices > 0) {
+      report.notes.push_back("self-intersection repair moved " + std::to_string(coarse.repair.moved_vertices) + " coarse vertices (max " +
+                             fmt("%.4g", coarse.repair.max_displacement) + ")");
+    }
+    report.tetrahedralize_seconds = since(t0);
+    prog.end(std::to_string(body.vertexCount()) + " vertices, " + std::to_string(body.tetCount()) + " tets");
+    t0 = Clock::now();
+    prog.begin("pose-transfer weights B");
+    PoseTransferOptions popt;
+    popt.radius_fraction = desc.pose_radius_fraction;
+    popt.max_nonzeros_per_row = desc.pose_max_nonzeros;
+    b = poseTransferWeights(fine.vertices, body, popt, &report.pose);
+    report.pose_seconds = since(t0);
+    prog.end(std::to_string(report.pose.nonzeros) + " non-zeros, " + fmt("%.1f", report.pose.mean_nonzeros_per_row) + " per row");
+  }
+  ctx.body = &body;
+  ctx.fine = &fine.vertices;
+  report.fine_vertices = fine.vertexCount();
+  report.fine_triangles = fine.triangleCount();
+  report.body_vertices = body.vertexCount();
+  report.body_tets = body.tetCount();
+
+  // Unit and axes of the rig.
+  std::string unit = desc.mesh_unit;
+  if (unit == "auto") {
+    const Eigen::Vector3d up = axisVector(desc.mesh_up).cwiseAbs();
+    const double height = (fine.vertices.colwise().maxCoeff() - fine.vertices.colwise().minCoeff()).dot(up);
+    unit = height > 100 ? "mm" : height > 10 ? "cm" : "m";
+    report.notes.push_back("mesh unit taken as " + unit + " from its height " + fmt("%.4g", height));
+  }
+  rig.unit = unit;
+  rig.alignment.rig_units_per_mm = rigUnitsPerMm(unit);
+  rig.alignment.linear = rig.alignment.rig_units_per_mm * Eigen::Matrix3d::Identity();
+  rig.alignment.rig_up = desc.mesh_up;
+  rig.alignment.device_up = mopt.device_up;
+
+  // Markers: rest frame, alignment, distance check.
+  MarkerSet markers;
+  std::vector<Eigen::Vector3d> marker_rig;
+  std::vector<double> marker_distance;
+  const std::optional<std::filesystem::path> clip = inputs.clip ? inputs.clip : (mopt.clip.empty() ? std::nullopt : std::optional(mopt.clip));
+  if (clip) {
+    auto t0 = Clock::now();
+    const std::int64_t frame = inputs.frame.value_or(mopt.frame);
+    prog.begin("aligning markers of " + clip->filename().string() + " (frame " + std::to_string(frame) + ")");
+    markers = readMarkers(*clip, frame, mopt);
+    AlignmentOptions aopt;
+    aopt.device_up = mopt.device_up;
+    aopt.rig_up = desc.mesh_up;
+    aopt.rig_units_per_mm = rig.alignment.rig_units_per_mm;
+    aopt.mode = mopt.alignment;
+    aopt.matrix = mopt.matrix;
+    aopt.icp_iterations = mopt.icp_iterations;
+    aopt.icp_scale = mopt.icp_scale;
+    aopt.max_scale_change = mopt.max_scale_change;
+    aopt.marker_offset = mopt.marker_offset;
+    aopt.fit_power = mopt.fit_power;
+    aopt.progress = [&prog](double f) { prog.update(f); };
+    AlignmentResult aligned = alignMarkers(markers.device_mm, fine, aopt);
+    rig.alignment = aligned.alignment;
+    marker_rig = aligned.rig_positions;
+    marker_distance = aligned.distances;
+    report.align_seconds = since(t0);
+    prog.end(std::to_string(markers.labels.size()) + " markers, distance to surface median " + fmt("%.4g", aligned.median_distance) +
+             " max " + fmt("%.4g", aligned.max_distance) + " " + unit + ", scale " + fmt("%.4f", aligned.alignment.fit_scale));
+    report.alignment = aligned;
+    const double limit = inputs.max_marker_distance.value_or(mopt.max_distance);
+    std::string far;
+    std::size_t worst = 0;
+    for (std::size_t i = 0; i < marker_distance.size(); ++i) {
+      if (marker_distance[i] > marker_distance[worst]) worst = i;
+      if (marker_distance[i] > limit) far += (far.empty() ? "" : ", ") + markers.labels[i] + " (" + fmt("%.4g", marker_distance[i]) + ")";
+    }
+    if (!far.empty()) {
+      throw RigBuildError("marker " + markers.labels[worst] + " is " + fmt("%.4g", marker_distance[worst]) + " " + unit +
+                          " from the surface after alignment, beyond the limit " + fmt("%.4g", limit) + " " + unit + " (too far: " + far +
+                          "); check the clip's rest frame and axes, exclude the marker, or raise --max-marker-distance");
+    }
+  }
+  ctx.marker_labels = &markers.labels;
+  ctx.marker_positions = &marker_rig;
+
+  // Selections onto the body tet mesh.
+  DeformerSetup& setup = rig.setup;
+  setup.options.rotation_steps = desc.rotation_steps;
+  setup.options.point_handle_weight = desc.point_handle_weight;
+  std::vector<std::string> vertex_owner(static_cast<std::size_t>(body.vertexCount()));
+  auto claim = [&](std::int32_t v, const std::string& who) {
+    std::string& owner = vertex_owner[static_cast<std::size_t>(v)];
+    if (!owner.empty() && owner != who) {
+      throw RigBuildError("tet vertex " + std::to_string(v) + " belongs to both " + owner + " and " + who +
+                          ": handles may not overlap; shrink one of the selections");
+    }
+    owner = who;
+  };
+  for (std::size_t h = 0; h < desc.vertex_handles.size(); ++h) {
+    const NamedSelection& n = desc.vertex_handles[h];
+    const std::string who = "vertex handle '" + n.name + "'";
+    const std::vector<std::uint8_t> mask = resolveVertices(ctx, n.select, who);
+    for (std::int32_t v = 0; v < body.vertexCount(); ++v) {
+      if (!mask[static_cast<std::size_t>(v)]) continue;
+      claim(v, who);
+      setup.vertex_handles.push_back(v);
+      rig.vertex_handle_names.push_back(n.name);
+    }
+  }
+  for (const NamedSelection& n : desc.region_handles) {
+    const std::string who = "region handle '" + n.name + "'";
+    RegionHandle region;
+    region.tets = resolveTets(ctx, n.select, who);
+    region.oriented = n.oriented;
+    std::vector<std::int32_t> corners;
+    for (const std::int32_t t : region.tets) {
+      for (int k = 0; k < 4; ++k) corners.push_back(body.tets(t, k));
+    }
+    std::sort(corners.begin(), corners.end());
+    corners.erase(std::unique(corners.begin(), corners.end()), corners.end());
+    for (const std::int32_t v : corners) claim(v, who);
+    setup.region_handles.push_back(std::move(region));
+    rig.region_handle_names.push_back(n.name);
+  }
+  for (const PointHandleSpec& p : desc.point_handles) {
+    // The tet holding the point best (largest smallest barycentric coordinate).
+    PointHandle best;
+    double best_min = -std::numeric_limits<double>::infinity();
+    for (std::int32_t t = 0; t < body.tetCount(); ++t) {
+      Eigen::Matrix3d e;
+      const Eigen::Vector3d d = body.vertices.row(body.tets(t, 3));
+      for (int k = 0; k < 3; ++k) e.col(k) = body.vertices.row(body.tets(t, k)).transpose() - d;
+      const Eigen::Vector3d l = e.partialPivLu().solve(p.position - d);
+      const Eigen::Vector4d bary(l[0], l[1], l[2], 1.0 - l.sum());
+      if (bary.allFinite() && bary.minCoeff() > best_min) {
+        best_min = bary.minCoeff();
+        best.tet = t;
+        best.barycentric = bary;
+      }
+    }
+    if (best.tet < 0) throw RigBuildError("point handle '" + p.name + "': no tet can carry it");
+    setup.point_handles.push_back(best);
+    rig.point_handle_names.push_back(p.name);
+  }
+  std::vector<std::string> group_of(static_cast<std::size_t>(body.tetCount()));
+  for (const NamedSelection& n : desc.rigid_groups) {
+    RigidGroup g;
+    g.tets = resolveTets(ctx, n.select, "rigid group '" + n.name + "'");
+    for (const std::int32_t t : g.tets) {
+      std::string& owner = group_of[static_cast<std::size_t>(t)];
+      if (!owner.empty()) {
+        throw RigBuildError("tet " + std::to_string(t) + " is in rigid groups '" + owner + "' and '" + n.name +
+                            "': groups must be disjoint; shrink one");
+      }
+      owner = n.name;
+    }
+    setup.rigid_groups.push_back(std::move(g));
+    rig.rigid_group_names.push_back(n.name);
+  }
+  std::vector<double> stiffness(static_cast<std::size_t>(body.tetCount()), 1.0);
+  for (const NamedSelection& n : desc.stiffness) {
+    for (const std::int32_t t : resolveTets(ctx, n.select, "stiffness '" + n.name + "'")) stiffness[static_cast<std::size_t>(t)] = n.value;
+  }
+
+  // Markers bound by invisible tets.
+  TetMesh full = body;
+  if (!markers.labels.empty()) {
+    auto t0 = Clock::now();
+    prog.begin("binding markers by invisible tets");
+    MarkerBindOptions bopt;
+    bopt.faces_per_marker = mopt.faces_per_marker;
+    MarkerBindResult bound = bindMarkers(body, marker_rig, markers.labels, bopt);
+    full = bound.mesh;
+    report.invisible_tets = bound.invisible_tets;
+    report.markers_below_skin = bound.below_skin;
+    for (std::size_t m = 0; m < markers.labels.size(); ++m) {
+      RigMarker rm;
+      rm.label = markers.labels[m];
+      rm.tet_vertex = bound.bindings[m].tet_vertex;
+      rm.vertex_handle = static_cast<std::int32_t>(setup.vertex_handles.size());
+      rm.rest_position = marker_rig[m];
+      rm.bound_faces = bound.bindings[m].bound_faces;
+      rm.surface_distance = marker_distance[m];
+      setup.vertex_handles.push_back(rm.tet_vertex);
+      rig.vertex_handle_names.push_back("marker:" + rm.label);
+      rig.markers.push_back(rm);
+    }
+    stiffness.resize(static_cast<std::size_t>(full.tetCount()), mopt.invisible_stiffness);
+    report.bind_seconds = since(t0);
+    prog.end(std::to_string(bound.invisible_tets) + " invisible tets" +
+             (bound.below_skin ? ", " + std::to_string(bound.below_skin) + " markers below the skin" : std::string()));
+  }
+  report.markers = static_cast<std::int32_t>(markers.labels.size());
+  report.marker_labels = markers.labels;
+
+  rig.tet_mesh = full;
+  rig.body_vertex_count = body.vertexCount();
+  rig.body_tet_count = body.tetCount();
+  rig.fine_vertices = fine.vertices;
+  rig.fine_triangles = fine.triangles;
+  b.conservativeResize(b.rows(), full.vertexCount());
+  b.makeCompressed();
+  rig.pose_transfer = makePoseTransferCsr<double>(b);
+  rig.pose_transfer.cols = full.vertexCount();
+  const bool uniform = std::all_of(stiffness.begin(), stiffness.end(), [](double s) { return s == 1.0; });
+  if (!uniform) setup.stiffness = stiffness;
+
+  if (std::string e = validateRig(rig); !e.empty()) throw RigBuildError("the built rig is inconsistent: " + e);
+  if (inputs.check_deformer) {
+    auto t0 = Clock::now();
+    prog.begin("checking the rig (Deformer: Laplacian, factorization)");
+    try {
+      const Deformer deformer(rig.tet_mesh, rig.setup);
+      report.factorize_seconds = deformer.factorizeSeconds();
+    } catch (const std::exception& e) {
+      throw RigBuildError(std::string("the rig does not load: ") + e.what());
+    }
+    report.check_seconds = since(t0);
+    prog.end("factorized in " + fmt("%.3f", report.factorize_seconds) + " s");
+  }
+  if (report_out) *report_out = std::move(report);
+  return rig;
+}
+
+}  // namespace tetrig::rigbuild

@@ -1,0 +1,92 @@
+// `tetrig inspect`: a rig's contents as text.
+#include "tetrig/rigbuild/describe_rig.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <sstream>
+
+namespace tetrig::rigbuild {
+
+std::string describeRig(const Rig& rig, std::int64_t file_bytes, bool list_markers) {
+  std::ostringstream o;
+  char buf[256];
+  auto line = [&](const char* f, auto... args) {
+    std::snprintf(buf, sizeof buf, f, args...);
+    o << buf << '\n';
+  };
+  line("rig:           %s", rig.name.c_str());
+  line("built by:      %s (format version %u)", rig.builder.c_str(), kRigFormatVersion);
+  line("unit:          %s, up axis %s", rig.unit.c_str(), rig.alignment.rig_up.c_str());
+  const Eigen::Vector3d lo = rig.fine_vertices.colwise().minCoeff(), hi = rig.fine_vertices.colwise().maxCoeff();
+  line("bounding box:  [%.4g %.4g %.4g] .. [%.4g %.4g %.4g] (size %.4g x %.4g x %.4g)", lo.x(), lo.y(), lo.z(), hi.x(), hi.y(), hi.z(),
+       hi.x() - lo.x(), hi.y() - lo.y(), hi.z() - lo.z());
+  line("fine mesh:     %d vertices, %d triangles", static_cast<int>(rig.fine_vertices.rows()), static_cast<int>(rig.fine_triangles.rows()));
+  line("tet mesh:      %d vertices (%d body + %d marker), %d tets (%d body + %d invisible)", rig.tet_mesh.vertexCount(),
+       rig.body_vertex_count, rig.tet_mesh.vertexCount() - rig.body_vertex_count, rig.tet_mesh.tetCount(), rig.body_tet_count,
+       rig.tet_mesh.tetCount() - rig.body_tet_count);
+  const PoseTransferCsr<double>& b = rig.pose_transfer;
+  std::int32_t max_row = 0;
+  for (std::int32_t r = 0; r < b.rows; ++r) max_row = std::max(max_row, b.row_offsets[static_cast<std::size_t>(r) + 1] - b.row_offsets[static_cast<std::size_t>(r)]);
+  line("pose transfer: B %d x %d, %lld non-zeros (%.1f per row, max %d)", b.rows, b.cols, static_cast<long long>(b.nonzeros()),
+       b.rows ? static_cast<double>(b.nonzeros()) / b.rows : 0.0, max_row);
+  const DeformerSetup& s = rig.setup;
+  line("handles:       %zu vertex (%zu markers), %zu region, %zu point", s.vertex_handles.size(), rig.markers.size(),
+       s.region_handles.size(), s.point_handles.size());
+  std::string last;
+  std::size_t run = 0;
+  auto flush = [&]() {
+    if (run > 0 && last.rfind("marker:", 0) != 0) line("  vertex handle '%s': %zu vertices", last.c_str(), run);
+  };
+  for (const std::string& n : rig.vertex_handle_names) {
+    if (n != last) {
+      flush();
+      last = n;
+      run = 0;
+    }
+    ++run;
+  }
+  flush();
+  for (std::size_t r = 0; r < s.region_handles.size(); ++r) {
+    line("  region handle '%s': %zu tets, %s", rig.region_handle_names[r].c_str(), s.region_handles[r].tets.size(),
+         s.region_handles[r].oriented ? "oriented" : "position only");
+  }
+  for (std::size_t p = 0; p < s.point_handles.size(); ++p) {
+    line("  point handle '%s': tet %d", rig.point_handle_names[p].c_str(), s.point_handles[p].tet);
+  }
+  line("rigid groups:  %zu", s.rigid_groups.size());
+  for (std::size_t g = 0; g < s.rigid_groups.size(); ++g) {
+    line("  rigid group '%s': %zu tets", rig.rigid_group_names[g].c_str(), s.rigid_groups[g].tets.size());
+  }
+  if (s.stiffness.empty()) {
+    line("stiffness:     uniform (1)");
+  } else {
+    const auto [mn, mx] = std::minmax_element(s.stiffness.begin(), s.stiffness.end());
+    line("stiffness:     per tet, %.4g .. %.4g", *mn, *mx);
+  }
+  if (!rig.markers.empty()) {
+    std::vector<double> d;
+    for (const RigMarker& m : rig.markers) d.push_back(m.surface_distance);
+    std::sort(d.begin(), d.end());
+    line("markers:       %zu, rest distance to surface median %.4g max %.4g %s", rig.markers.size(), d[d.size() / 2], d.back(),
+         rig.unit.c_str());
+    if (list_markers) {
+      for (const RigMarker& m : rig.markers) {
+        line("  %-10s vertex %6d  rest [%.4f %.4f %.4f]  %d faces  distance %.4f", m.label.c_str(), m.tet_vertex, m.rest_position.x(),
+             m.rest_position.y(), m.rest_position.z(), m.bound_faces, m.surface_distance);
+      }
+    }
+  }
+  const RigAlignment& a = rig.alignment;
+  line("alignment:     device mm (up %s) -> rig %s: scale %.5g (units %.5g x fit %.5g)", a.device_up.c_str(), rig.unit.c_str(),
+       std::cbrt(std::abs(a.linear.determinant())), a.rig_units_per_mm, a.fit_scale);
+  for (int r = 0; r < 3; ++r) {
+    line("  [% .6g % .6g % .6g | % .6g]", a.linear(r, 0), a.linear(r, 1), a.linear(r, 2), a.translation[r]);
+  }
+  line("deformer:      rotation_steps %d, point_handle_weight %.4g", s.options.rotation_steps, s.options.point_handle_weight);
+  line("memory:        %.2f MB of rig arrays%s", static_cast<double>(rigMemoryBytes(rig)) / 1e6,
+       file_bytes > 0 ? (", file " + std::to_string(file_bytes) + " bytes").c_str() : "");
+  return o.str();
+}
+
+}  // namespace tetrig::rigbuild

@@ -1,0 +1,299 @@
+// Rig description JSON reader (format: docs/rig-format.md, "Rig description").
+#include "tetrig/rigbuild/rig_description.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <cmath>
+#include <fstream>
+#include <limits>
+#include <set>
+#include <sstream>
+
+namespace tetrig::rigbuild {
+namespace {
+
+using nlohmann::json;
+
+class Reader {
+ public:
+  Reader(std::string file, std::filesystem::path base) : file_(std::move(file)), base_(std::move(base)) {}
+
+  [[noreturn]] void fail(const std::string& where, const std::string& what) const {
+    throw RigBuildError(file_ + ": " + (where.empty() ? std::string("top level") : where) + ": " + what);
+  }
+
+  void allowKeys(const json& j, const std::string& where, std::initializer_list<const char*> keys) const {
+    if (!j.is_object()) fail(where, "expected an object");
+    std::set<std::string> allowed;
+    for (const char* k : keys) allowed.insert(k);
+    for (auto it = j.begin(); it != j.end(); ++it) {
+      if (!allowed.count(it.key())) {
+        std::string list;
+        for (const char* k : keys) list += std::string(list.empty() ? "" : ", ") + k;
+        fail(where, "unknown key '" + it.key() + "' (allowed: " + list + ")");
+      }
+    }
+  }
+
+  double number(const json& j, const std::string& where) const {
+    if (!j.is_number()) fail(where, "expected a number");
+    const double v = j.get<double>();
+    if (!std::isfinite(v)) fail(where, "expected a finite number");
+    return v;
+  }
+  std::int64_t integer(const json& j, const std::string& where) const {
+    if (!j.is_number_integer()) fail(where, "expected an integer");
+    return j.get<std::int64_t>();
+  }
+  std::string string(const json& j, const std::string& where) const {
+    if (!j.is_string()) fail(where, "expected a string");
+    return j.get<std::string>();
+  }
+  bool boolean(const json& j, const std::string& where) const {
+    if (!j.is_boolean()) fail(where, "expected true or false");
+    return j.get<bool>();
+  }
+  Eigen::Vector3d vec3(const json& j, const std::string& where) const {
+    if (!j.is_array() || j.size() != 3) fail(where, "expected [x, y, z]");
+    return {number(j[0], where + "[0]"), number(j[1], where + "[1]"), number(j[2], where + "[2]")};
+  }
+  std::vector<std::string> strings(const json& j, const std::string& where) const {
+    if (!j.is_array()) fail(where, "expected an array of strings");
+    std::vector<std::string> out;
+    for (std::size_t i = 0; i < j.size(); ++i) out.push_back(string(j[i], where + "[" + std::to_string(i) + "]"));
+    return out;
+  }
+  std::filesystem::path path(const json& j, const std::string& where) const {
+    std::filesystem::path p = string(j, where);
+    if (p.is_relative()) p = base_ / p;
+    return p;
+  }
+
+  Selection selection(const json& j, const std::string& where) const {
+    allowKeys(j, where, {"vertices", "sel_file", "sel_values", "box", "sphere", "near_marker", "radius", "min_corners"});
+    Selection s;
+    s.where = where;
+    int kinds = 0;
+    if (j.contains("vertices")) {
+      ++kinds;
+      s.kind = Selection::Kind::kVertices;
+      const json& v = j["vertices"];
+      if (!v.is_array() || v.empty()) fail(where + ".vertices", "expected a non-empty array of vertex ids");
+      for (std::size_t i = 0; i < v.size(); ++i) {
+        const std::int64_t id = integer(v[i], where + ".vertices[" + std::to_string(i) + "]");
+        if (id < 0 || id > std::numeric_limits<std::int32_t>::max()) fail(where + ".vertices", "negative or huge vertex id");
+        s.vertices.push_back(static_cast<std::int32_t>(id));
+      }
+    }
+    if (j.contains("sel_file")) {
+      ++kinds;
+      s.kind = Selection::Kind::kSelFile;
+      s.sel_file = path(j["sel_file"], where + ".sel_file");
+      if (!j.contains("sel_values")) fail(where, "sel_file needs sel_values, e.g. [2] for the handle of a deformation-survey .sel");
+      const json& v = j["sel_values"];
+      if (!v.is_array() || v.empty()) fail(where + ".sel_values", "expected a non-empty array of integers");
+      for (std::size_t i = 0; i < v.size(); ++i) {
+        s.sel_values.push_back(static_cast<std::int32_t>(integer(v[i], where + ".sel_values[" + std::to_string(i) + "]")));
+      }
+    } else if (j.contains("sel_values")) {
+      fail(where, "sel_values without sel_file");
+    }
+    if (j.contains("box")) {
+      ++kinds;
+      s.kind = Selection::Kind::kBox;
+      allowKeys(j["box"], where + ".box", {"min", "max"});
+      if (!j["box"].contains("min") || !j["box"].contains("max")) fail(where + ".box", "needs min and max");
+      s.min = vec3(j["box"]["min"], where + ".box.min");
+      s.max = vec3(j["box"]["max"], where + ".box.max");
+      if ((s.max.array() < s.min.array()).any()) fail(where + ".box", "max is below min on some axis");
+    }
+    if (j.contains("sphere")) {
+      ++kinds;
+      s.kind = Selection::Kind::kSphere;
+      allowKeys(j["sphere"], where + ".sphere", {"center", "radius"});
+      if (!j["sphere"].contains("center") || !j["sphere"].contains("radius")) fail(where + ".sphere", "needs center and radius");
+      s.center = vec3(j["sphere"]["center"], where + ".sphere.center");
+      s.radius = number(j["sphere"]["radius"], where + ".sphere.radius");
+      if (!(s.radius > 0)) fail(where + ".sphere.radius", "must be positive");
+    }
+    if (j.contains("near_marker")) {
+      ++kinds;
+      s.kind = Selection::Kind::kNearMarker;
+      s.marker = string(j["near_marker"], where + ".near_marker");
+      if (!j.contains("radius")) fail(where, "near_marker needs a radius (rig units)");
+      s.radius = number(j["radius"], where + ".radius");
+      if (!(s.radius > 0)) fail(where + ".radius", "must be positive");
+    } else if (j.contains("radius")) {
+      fail(where, "radius belongs to near_marker (a sphere takes sphere.radius)");
+    }
+    if (kinds != 1) fail(where, "give exactly one of vertices, sel_file, box, sphere, near_marker");
+    if (j.contains("min_corners")) {
+      const std::int64_t c = integer(j["min_corners"], where + ".min_corners");
+      if (c < 1 || c > 4) fail(where + ".min_corners", "must be 1, 2, 3 or 4");
+      s.min_corners = static_cast<int>(c);
+    }
+    return s;
+  }
+
+  std::vector<NamedSelection> list(const json& root, const char* key, bool region, bool stiffness) const {
+    std::vector<NamedSelection> out;
+    if (!root.contains(key)) return out;
+    const json& arr = root[key];
+    if (!arr.is_array()) fail(key, "expected an array");
+    for (std::size_t i = 0; i < arr.size(); ++i) {
+      const std::string where = std::string(key) + "[" + std::to_string(i) + "]";
+      if (region) {
+        allowKeys(arr[i], where, {"name", "select", "oriented"});
+      } else if (stiffness) {
+        allowKeys(arr[i], where, {"name", "select", "value"});
+      } else {
+        allowKeys(arr[i], where, {"name", "select"});
+      }
+      NamedSelection n;
+      n.name = arr[i].contains("name") ? string(arr[i]["name"], where + ".name") : std::string(key) + std::to_string(i);
+      if (!arr[i].contains("select")) fail(where, "needs a select");
+      n.select = selection(arr[i]["select"], where + ".select");
+      if (region && arr[i].contains("oriented")) n.oriented = boolean(arr[i]["oriented"], where + ".oriented");
+      if (stiffness) {
+        if (!arr[i].contains("value")) fail(where, "needs a value (stiffness weight; body tets default to 1)");
+        n.value = number(arr[i]["value"], where + ".value");
+        if (!(n.value > 0)) fail(where + ".value", "must be positive");
+      }
+      out.push_back(std::move(n));
+    }
+    return out;
+  }
+
+  std::string file_;
+  std::filesystem::path base_;
+};
+
+}  // namespace
+
+double rigUnitsPerMm(const std::string& unit) {
+  if (unit == "m") return 1e-3;
+  if (unit == "cm") return 1e-1;
+  if (unit == "mm") return 1.0;
+  throw RigBuildError("unknown unit '" + unit + "': use m, cm or mm");
+}
+
+RigDescription parseRigDescription(const std::string& json_text, const std::filesystem::path& source) {
+  const std::string file = source.empty() ? std::string("rig description") : source.string();
+  Reader r(file, source.empty() ? std::filesystem::path(".") : source.parent_path());
+  json root;
+  try {
+    root = json::parse(json_text);
+  } catch (const json::parse_error& e) {
+    throw RigBuildError(file + ": not valid JSON at byte " + std::to_string(e.byte) + ": fix the syntax");
+  }
+  r.allowKeys(root, "", {"format", "version", "name", "mesh_unit", "mesh_up", "tet_vertices", "pose_transfer", "vertex_handles",
+                         "region_handles", "point_handles", "rigid_groups", "stiffness", "markers", "deformer"});
+  if (root.contains("format") && r.string(root["format"], "format") != "tetrig-rig") {
+    r.fail("format", "expected \"tetrig-rig\"");
+  }
+  if (root.contains("version") && r.integer(root["version"], "version") != 1) r.fail("version", "this program reads version 1");
+  RigDescription d;
+  d.source = source;
+  if (root.contains("name")) d.name = r.string(root["name"], "name");
+  if (root.contains("mesh_unit")) {
+    d.mesh_unit = r.string(root["mesh_unit"], "mesh_unit");
+    if (d.mesh_unit != "auto") {
+      try {
+        (void)rigUnitsPerMm(d.mesh_unit);
+      } catch (const RigBuildError& e) {
+        r.fail("mesh_unit", e.what());
+      }
+    }
+  }
+  if (root.contains("mesh_up")) d.mesh_up = r.string(root["mesh_up"], "mesh_up");
+  if (root.contains("tet_vertices")) {
+    const std::int64_t n = r.integer(root["tet_vertices"], "tet_vertices");
+    if (n < 4 || n > 10'000'000) r.fail("tet_vertices", "must be in [4, 10000000]");
+    d.tet_vertices = static_cast<std::int32_t>(n);
+  }
+  if (root.contains("pose_transfer")) {
+    const json& p = root["pose_transfer"];
+    r.allowKeys(p, "pose_transfer", {"radius_fraction", "max_nonzeros_per_row"});
+    if (p.contains("radius_fraction")) d.pose_radius_fraction = r.number(p["radius_fraction"], "pose_transfer.radius_fraction");
+    if (!(d.pose_radius_fraction > 0)) r.fail("pose_transfer.radius_fraction", "must be positive");
+    if (p.contains("max_nonzeros_per_row")) {
+      d.pose_max_nonzeros = static_cast<std::int32_t>(r.integer(p["max_nonzeros_per_row"], "pose_transfer.max_nonzeros_per_row"));
+    }
+  }
+  d.vertex_handles = r.list(root, "vertex_handles", false, false);
+  d.region_handles = r.list(root, "region_handles", true, false);
+  d.rigid_groups = r.list(root, "rigid_groups", false, false);
+  d.stiffness = r.list(root, "stiffness", false, true);
+  if (root.contains("point_handles")) {
+    const json& arr = root["point_handles"];
+    if (!arr.is_array()) r.fail("point_handles", "expected an array");
+    for (std::size_t i = 0; i < arr.size(); ++i) {
+      const std::string where = "point_handles[" + std::to_string(i) + "]";
+      r.allowKeys(arr[i], where, {"name", "position"});
+      PointHandleSpec p;
+      p.name = arr[i].contains("name") ? r.string(arr[i]["name"], where + ".name") : "point" + std::to_string(i);
+      if (!arr[i].contains("position")) r.fail(where, "needs a position [x, y, z] in rig units");
+      p.position = r.vec3(arr[i]["position"], where + ".position");
+      d.point_handles.push_back(p);
+    }
+  }
+  if (root.contains("markers")) {
+    const json& m = root["markers"];
+    r.allowKeys(m, "markers", {"clip", "frame", "labels", "exclude", "device_up", "alignment", "matrix", "icp_iterations", "icp_scale",
+                               "max_scale_change", "marker_offset", "fit_power", "max_distance", "faces_per_marker", "invisible_stiffness"});
+    MarkerOptions& o = d.markers;
+    if (m.contains("clip")) o.clip = r.path(m["clip"], "markers.clip");
+    if (m.contains("frame")) {
+      o.frame = r.integer(m["frame"], "markers.frame");
+      if (o.frame < 0) r.fail("markers.frame", "must be >= 0");
+    }
+    if (m.contains("labels")) o.labels = r.strings(m["labels"], "markers.labels");
+    if (m.contains("exclude")) o.exclude = r.strings(m["exclude"], "markers.exclude");
+    if (m.contains("device_up")) o.device_up = r.string(m["device_up"], "markers.device_up");
+    if (m.contains("alignment")) {
+      o.alignment = r.string(m["alignment"], "markers.alignment");
+      if (o.alignment != "auto" && o.alignment != "units" && o.alignment != "matrix") {
+        r.fail("markers.alignment", "expected \"auto\", \"units\" or \"matrix\"");
+      }
+    }
+    if (m.contains("matrix")) {
+      const json& a = m["matrix"];
+      if (!a.is_array() || a.size() != 12) r.fail("markers.matrix", "expected 12 numbers (3x4 row-major, device mm -> rig units)");
+      for (std::size_t i = 0; i < 12; ++i) o.matrix.push_back(r.number(a[i], "markers.matrix[" + std::to_string(i) + "]"));
+    }
+    if (o.alignment == "matrix" && o.matrix.empty()) r.fail("markers", "alignment \"matrix\" needs markers.matrix");
+    if (m.contains("icp_iterations")) o.icp_iterations = static_cast<int>(r.integer(m["icp_iterations"], "markers.icp_iterations"));
+    if (o.icp_iterations < 0 || o.icp_iterations > 10000) r.fail("markers.icp_iterations", "must be in [0, 10000]");
+    if (m.contains("icp_scale")) o.icp_scale = r.boolean(m["icp_scale"], "markers.icp_scale");
+    if (m.contains("max_scale_change")) o.max_scale_change = r.number(m["max_scale_change"], "markers.max_scale_change");
+    if (!(o.max_scale_change >= 0 && o.max_scale_change < 1)) r.fail("markers.max_scale_change", "must be in [0, 1)");
+    if (m.contains("marker_offset")) o.marker_offset = r.number(m["marker_offset"], "markers.marker_offset");
+    if (m.contains("fit_power")) o.fit_power = r.number(m["fit_power"], "markers.fit_power");
+    if (!(o.fit_power >= 1.0 && o.fit_power <= 16.0)) r.fail("markers.fit_power", "must be in [1, 16]");
+    if (m.contains("max_distance")) o.max_distance = r.number(m["max_distance"], "markers.max_distance");
+    if (!(o.max_distance > 0)) r.fail("markers.max_distance", "must be positive");
+    if (m.contains("faces_per_marker")) o.faces_per_marker = static_cast<int>(r.integer(m["faces_per_marker"], "markers.faces_per_marker"));
+    if (o.faces_per_marker < 1 || o.faces_per_marker > 16) r.fail("markers.faces_per_marker", "must be in [1, 16]");
+    if (m.contains("invisible_stiffness")) o.invisible_stiffness = r.number(m["invisible_stiffness"], "markers.invisible_stiffness");
+    if (!(o.invisible_stiffness > 0)) r.fail("markers.invisible_stiffness", "must be positive");
+  }
+  if (root.contains("deformer")) {
+    const json& m = root["deformer"];
+    r.allowKeys(m, "deformer", {"rotation_steps", "point_handle_weight"});
+    if (m.contains("rotation_steps")) d.rotation_steps = static_cast<int>(r.integer(m["rotation_steps"], "deformer.rotation_steps"));
+    if (d.rotation_steps < 0 || d.rotation_steps > 64) r.fail("deformer.rotation_steps", "must be in [0, 64]");
+    if (m.contains("point_handle_weight")) d.point_handle_weight = r.number(m["point_handle_weight"], "deformer.point_handle_weight");
+    if (!(d.point_handle_weight > 0)) r.fail("deformer.point_handle_weight", "must be positive");
+  }
+  return d;
+}
+
+RigDescription readRigDescription(const std::filesystem::path& path) {
+  std::ifstream in(path);
+  if (!in) throw RigBuildError(path.string() + ": cannot open the rig description (missing or unreadable)");
+  std::stringstream s;
+  s << in.rdbuf();
+  return parseRigDescription(s.str(), path);
+}
+
+}  // namespace tetrig::rigbuild
