@@ -135,14 +135,15 @@ Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(s
         h >= 0 ? free_count_ + h : factor_.position(free_index[static_cast<size_t>(v)]);
   }
   const auto n3 = static_cast<size_t>(vertex_count_) * 3;
-  rest_solver_.resize(n3);
+  const auto n4 = static_cast<size_t>(vertex_count_) * kVectorStride;  // x, y, z, 0 per vertex
+  rest_solver_.assign(n4, 0.0);
   for (std::int32_t v = 0; v < vertex_count_; ++v)
     for (int c = 0; c < 3; ++c)
-      rest_solver_[3 * static_cast<size_t>(solver_index_[static_cast<size_t>(v)]) + static_cast<size_t>(c)] =
+      rest_solver_[kVectorStride * static_cast<size_t>(solver_index_[static_cast<size_t>(v)]) + static_cast<size_t>(c)] =
           mesh.vertices(v, c);
   x_ = rest_solver_;
-  delta_.assign(n3, 0.0);
-  rhs_constant_.assign(static_cast<size_t>(free_count_) * 3, 0.0);
+  delta_.assign(n4, 0.0);
+  rhs_constant_.assign(static_cast<size_t>(free_count_) * kVectorStride, 0.0);
   positions_.assign(n3, 0.0);
 
   // --- Coupling -L_fh as CSR over free rows in solver order. ---
@@ -267,14 +268,14 @@ void Deformer::reset() {
   }
   x_ = rest_solver_;
   for (std::int32_t h = 0; h < vertex_handle_count_; ++h) {
-    const double* p = &rest_solver_[3 * static_cast<size_t>(free_count_ + h)];
+    const double* p = &rest_solver_[kVectorStride * static_cast<size_t>(free_count_ + h)];
     vertex_targets_[static_cast<size_t>(h)] = Eigen::Vector3d(p[0], p[1], p[2]);
   }
   for (auto& region : region_targets_) region = RigidTransform{};
   for (size_t p = 0; p < point_targets_.size(); ++p) {
     Eigen::Vector3d rest = Eigen::Vector3d::Zero();
     for (int c = 0; c < 4; ++c) {
-      const double* q = &rest_solver_[3 * static_cast<size_t>(point_corner_[4 * p + static_cast<size_t>(c)])];
+      const double* q = &rest_solver_[kVectorStride * static_cast<size_t>(point_corner_[4 * p + static_cast<size_t>(c)])];
       rest += point_weight_[4 * p + static_cast<size_t>(c)] * Eigen::Vector3d(q[0], q[1], q[2]);
     }
     point_targets_[p] = rest;
@@ -326,13 +327,13 @@ bool Deformer::acceptTargets(const HandleTargets& targets, std::uint32_t& flags)
 void Deformer::updateConstantRhs() {
   // Handle positions into the handle slots of x.
   for (std::int32_t h = 0; h < handle_count_; ++h) {
-    double* out = &x_[3 * static_cast<size_t>(free_count_ + h)];
+    double* out = &x_[kVectorStride * static_cast<size_t>(free_count_ + h)];
     const std::int32_t region = handle_region_[static_cast<size_t>(h)];
     Eigen::Vector3d p;
     if (region < 0) {
       p = vertex_targets_[static_cast<size_t>(h)];
     } else {
-      const double* rest = &rest_solver_[3 * static_cast<size_t>(free_count_ + h)];
+      const double* rest = &rest_solver_[kVectorStride * static_cast<size_t>(free_count_ + h)];
       const RigidTransform& t = region_targets_[static_cast<size_t>(region)];
       p = t.rotation * Eigen::Vector3d(rest[0], rest[1], rest[2]) + t.translation;
     }
@@ -341,19 +342,19 @@ void Deformer::updateConstantRhs() {
     out[2] = p[2];
   }
   // -L_fh x_h.
-  const double* handles = x_.data() + 3 * static_cast<size_t>(free_count_);
+  const double* handles = x_.data() + kVectorStride * static_cast<size_t>(free_count_);
   for (std::int32_t i = 0; i < free_count_; ++i) {
     double s0 = 0.0, s1 = 0.0, s2 = 0.0;
     for (auto p = coupling_start_[static_cast<size_t>(i)]; p < coupling_start_[static_cast<size_t>(i) + 1]; ++p) {
-      const double* xh = handles + 3 * coupling_handle_[static_cast<size_t>(p)];
+      const double* xh = handles + kVectorStride * coupling_handle_[static_cast<size_t>(p)];
       const double value = coupling_value_[static_cast<size_t>(p)];
       s0 += value * xh[0];
       s1 += value * xh[1];
       s2 += value * xh[2];
     }
-    rhs_constant_[3 * static_cast<size_t>(i)] = s0;
-    rhs_constant_[3 * static_cast<size_t>(i) + 1] = s1;
-    rhs_constant_[3 * static_cast<size_t>(i) + 2] = s2;
+    rhs_constant_[kVectorStride * static_cast<size_t>(i)] = s0;
+    rhs_constant_[kVectorStride * static_cast<size_t>(i) + 1] = s1;
+    rhs_constant_[kVectorStride * static_cast<size_t>(i) + 2] = s2;
   }
   // Point handles: lambda b_a (p - sum_{handle corners h} b_h x_h) for each free corner a.
   for (size_t p = 0; p < point_targets_.size(); ++p) {
@@ -361,7 +362,7 @@ void Deformer::updateConstantRhs() {
     for (int c = 0; c < 4; ++c) {
       const std::int32_t s = point_corner_[4 * p + static_cast<size_t>(c)];
       if (s >= free_count_) {
-        const double* xh = &x_[3 * static_cast<size_t>(s)];
+        const double* xh = &x_[kVectorStride * static_cast<size_t>(s)];
         target -= point_weight_[4 * p + static_cast<size_t>(c)] * Eigen::Vector3d(xh[0], xh[1], xh[2]);
       }
     }
@@ -369,7 +370,7 @@ void Deformer::updateConstantRhs() {
       const std::int32_t s = point_corner_[4 * p + static_cast<size_t>(c)];
       if (s >= free_count_) continue;
       const double w = point_lambda_ * point_weight_[4 * p + static_cast<size_t>(c)];
-      for (int k = 0; k < 3; ++k) rhs_constant_[3 * static_cast<size_t>(s) + static_cast<size_t>(k)] += w * target[k];
+      for (int k = 0; k < 3; ++k) rhs_constant_[kVectorStride * static_cast<size_t>(s) + static_cast<size_t>(k)] += w * target[k];
     }
   }
 }
@@ -404,7 +405,7 @@ void Deformer::rebuildDelta() {
 
 void Deformer::writePositions() {
   for (std::int32_t v = 0; v < vertex_count_; ++v) {
-    const double* p = &x_[3 * static_cast<size_t>(solver_index_[static_cast<size_t>(v)])];
+    const double* p = &x_[kVectorStride * static_cast<size_t>(solver_index_[static_cast<size_t>(v)])];
     double* out = &positions_[3 * static_cast<size_t>(v)];
     out[0] = p[0];
     out[1] = p[1];
@@ -424,11 +425,11 @@ StepStats Deformer::step(const HandleTargets& targets, const StepBudget& budget)
   }
   const auto block_count = static_cast<std::int32_t>(blocks_.size());
   const bool has_groups = !group_slot_.empty();
-  const size_t free3 = static_cast<size_t>(free_count_) * 3;
+  const size_t free4 = static_cast<size_t>(free_count_) * kVectorStride;
   for (int iteration = 0; iteration < budget.max_iterations; ++iteration) {
     // 1. Linear solve: L_ff x_f = delta_f - L_fh x_h (+ point terms).
     const auto t0 = Clock::now();
-    for (size_t i = 0; i < free3; ++i) x_[i] = delta_[i] + rhs_constant_[i];
+    for (size_t i = 0; i < free4; ++i) x_[i] = delta_[i] + rhs_constant_[i];
     if (free_count_ > 0) factor_.solveInPlace(x_.data());
     const auto t1 = Clock::now();
     stats.solve_ns += nanosecondsBetween(t0, t1);

@@ -6,19 +6,13 @@
 // source. Scalar code remains only for the gathers/scatters and the rare exact fallback.
 #include "tetrig/rotation_kernel.hpp"
 
+#include "tetrig/ldlt_factor.hpp"
 #include "tetrig/polar.hpp"
 
 #include <cmath>
 #include <cstring>
 
-// x86-64 with GCC: the kernels are compiled for x86-64-v4 (AVX-512), x86-64-v3 (AVX2 + FMA) and
-// the baseline, and the dynamic loader picks one (ifunc). Elsewhere (clang, aarch64) the portable build only.
-#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && !defined(TETRIG_NO_MULTIVERSION)
-#define TETRIG_KERNEL_CLONES __attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default")))
-#define TETRIG_KERNEL_MULTIVERSION 1
-#else
-#define TETRIG_KERNEL_CLONES
-#endif
+#include "multiversion.hpp"
 
 namespace tetrig {
 
@@ -69,12 +63,12 @@ inline void scatterBlock(const TetBlock& block, const Matrix& r, double* delta) 
                                  r.m[3 * row + 2] * e[3 * k + 2]));
   for (int l = 0; l < W; ++l) {
     for (int k = 0; k < 3; ++k) {
-      double* d = delta + 3 * block.corner[k][l];
+      double* d = delta + kVectorStride * block.corner[k][l];
       d[0] += m[k][l];
       d[1] += m[3 + k][l];
       d[2] += m[6 + k][l];
     }
-    double* d = delta + 3 * block.corner[3][l];
+    double* d = delta + kVectorStride * block.corner[3][l];
     d[0] -= m[0][l] + m[1][l] + m[2][l];
     d[1] -= m[3][l] + m[4][l] + m[5][l];
     d[2] -= m[6][l] + m[7][l] + m[8][l];
@@ -83,7 +77,7 @@ inline void scatterBlock(const TetBlock& block, const Matrix& r, double* delta) 
 
 }  // namespace
 
-TETRIG_KERNEL_CLONES
+TETRIG_MULTIVERSION
 RotationPassStats rotationPass(TetBlock* blocks, std::int32_t block_count, const double* xyz, double* delta,
                                int steps) {
   RotationPassStats stats;
@@ -94,7 +88,7 @@ RotationPassStats rotationPass(TetBlock* blocks, std::int32_t block_count, const
     // scalars avoids a store-then-vector-load round trip through memory).
     const double* p[4][W];
     for (int k = 0; k < 4; ++k)
-      for (int l = 0; l < W; ++l) p[k][l] = xyz + 3 * block.corner[k][l];
+      for (int l = 0; l < W; ++l) p[k][l] = xyz + kVectorStride * block.corner[k][l];
     auto gather = [&p](int k, int c) {
       return Lanes{p[k][0][c], p[k][1][c], p[k][2][c], p[k][3][c], p[k][4][c], p[k][5][c], p[k][6][c], p[k][7][c]};
     };
@@ -213,7 +207,7 @@ RotationPassStats rotationPass(TetBlock* blocks, std::int32_t block_count, const
 }
 
 const char* rotationKernelInstructionSet() {
-#if defined(TETRIG_KERNEL_MULTIVERSION)
+#if defined(TETRIG_MULTIVERSION_ENABLED)
   // Same order as the target_clones resolver: the widest supported clone wins.
   if (__builtin_cpu_supports("x86-64-v4")) return "x86-64-v4 (AVX-512)";
   if (__builtin_cpu_supports("x86-64-v3")) return "x86-64-v3 (AVX2, FMA)";
@@ -225,7 +219,7 @@ const char* rotationKernelInstructionSet() {
 #endif
 }
 
-TETRIG_KERNEL_CLONES
+TETRIG_MULTIVERSION
 void differentialPass(const TetBlock* blocks, std::int32_t block_count, double* delta) {
   for (std::int32_t b = 0; b < block_count; ++b) {
     const TetBlock& block = blocks[b];

@@ -2,6 +2,7 @@
 // differentialCoordinates (delta = G^T D g, eq. 2.5).
 #include "scenes.hpp"
 #include "tetrig/laplacian.hpp"
+#include "tetrig/ldlt_factor.hpp"
 #include "tetrig/polar.hpp"
 #include "tetrig/rotation_kernel.hpp"
 
@@ -17,7 +18,7 @@ struct KernelScene {
   TetRestFrames frames;
   std::vector<double> weights;
   std::vector<TetBlock> blocks;
-  std::vector<double> xyz;  // deformed positions, mesh order (the kernel's "solver order" here)
+  std::vector<double> xyz;  // deformed positions, kVectorStride per vertex, mesh order (= solver order here)
 };
 
 // A bar with a random smooth deformation plus noise; a few tets can invert when `inverted`.
@@ -28,12 +29,12 @@ KernelScene makeScene(std::uint32_t seed, double noise) {
   s.weights = tetWeights(s.frames, {});
   std::mt19937 rng(seed);
   std::normal_distribution<double> normal;
-  s.xyz.resize(static_cast<size_t>(s.mesh.vertexCount()) * 3);
+  s.xyz.assign(static_cast<size_t>(s.mesh.vertexCount()) * kVectorStride, 0.0);
   for (std::int32_t v = 0; v < s.mesh.vertexCount(); ++v) {
     const Eigen::Vector3d p = s.mesh.vertices.row(v).transpose();
     // Bend about x by an angle growing along z, plus noise.
     const Eigen::Vector3d q = Eigen::AngleAxisd(0.15 * p.z(), Eigen::Vector3d::UnitX()) * p;
-    for (int c = 0; c < 3; ++c) s.xyz[3 * static_cast<size_t>(v) + static_cast<size_t>(c)] = q[c] + noise * normal(rng);
+    for (int c = 0; c < 3; ++c) s.xyz[kVectorStride * static_cast<size_t>(v) + static_cast<size_t>(c)] = q[c] + noise * normal(rng);
   }
   const std::int32_t m = s.mesh.tetCount();
   s.blocks.assign(static_cast<size_t>((m + kTetBlockWidth - 1) / kTetBlockWidth), TetBlock{});
@@ -61,7 +62,7 @@ TEST(RotationKernel, ConvergesToTheExactRotationAndMatchesTheReferenceDelta) {
   KernelScene s = makeScene(1, 0.02);
   Vertices x(s.mesh.vertexCount(), 3);
   for (std::int32_t v = 0; v < s.mesh.vertexCount(); ++v)
-    for (int c = 0; c < 3; ++c) x(v, c) = s.xyz[3 * static_cast<size_t>(v) + static_cast<size_t>(c)];
+    for (int c = 0; c < 3; ++c) x(v, c) = s.xyz[kVectorStride * static_cast<size_t>(v) + static_cast<size_t>(c)];
   // Many passes of 2 steps from a cold start (identity): the warm start carries over between passes.
   RotationPassStats stats;
   for (int pass = 0; pass < 30; ++pass) {
@@ -86,7 +87,7 @@ TEST(RotationKernel, ConvergesToTheExactRotationAndMatchesTheReferenceDelta) {
   const Vertices reference = differentialCoordinates(s.mesh, s.frames, s.weights, rotations);
   for (std::int32_t v = 0; v < s.mesh.vertexCount(); ++v)
     for (int c = 0; c < 3; ++c)
-      EXPECT_NEAR(delta[3 * static_cast<size_t>(v) + static_cast<size_t>(c)], reference(v, c), 1e-9);
+      EXPECT_NEAR(delta[kVectorStride * static_cast<size_t>(v) + static_cast<size_t>(c)], reference(v, c), 1e-9);
   // differentialPass gives the same delta from the stored rotations.
   std::vector<double> delta2(s.xyz.size(), 0.0);
   differentialPass(s.blocks.data(), static_cast<std::int32_t>(s.blocks.size()), delta2.data());
@@ -96,10 +97,10 @@ TEST(RotationKernel, ConvergesToTheExactRotationAndMatchesTheReferenceDelta) {
 TEST(RotationKernel, InvertedTetsTakeTheExactProperRotation) {
   KernelScene s = makeScene(2, 0.0);
   // Reflect the whole deformed mesh through the plane x = 0: every tet is inverted.
-  for (size_t v = 0; v < s.xyz.size(); v += 3) s.xyz[v] = -s.xyz[v];
+  for (size_t v = 0; v < s.xyz.size(); v += kVectorStride) s.xyz[v] = -s.xyz[v];
   Vertices x(s.mesh.vertexCount(), 3);
   for (std::int32_t v = 0; v < s.mesh.vertexCount(); ++v)
-    for (int c = 0; c < 3; ++c) x(v, c) = s.xyz[3 * static_cast<size_t>(v) + static_cast<size_t>(c)];
+    for (int c = 0; c < 3; ++c) x(v, c) = s.xyz[kVectorStride * static_cast<size_t>(v) + static_cast<size_t>(c)];
   const RotationPassStats stats =
       rotationPass(s.blocks.data(), static_cast<std::int32_t>(s.blocks.size()), s.xyz.data(), nullptr, 2);
   EXPECT_EQ(stats.exact_fallbacks, s.mesh.tetCount());
@@ -116,7 +117,7 @@ TEST(RotationKernel, EachPassNeverLowersAnyTetsTrace) {
   KernelScene s = makeScene(3, 0.3);  // heavy noise: far from converged, some tets inverted
   Vertices x(s.mesh.vertexCount(), 3);
   for (std::int32_t v = 0; v < s.mesh.vertexCount(); ++v)
-    for (int c = 0; c < 3; ++c) x(v, c) = s.xyz[3 * static_cast<size_t>(v) + static_cast<size_t>(c)];
+    for (int c = 0; c < 3; ++c) x(v, c) = s.xyz[kVectorStride * static_cast<size_t>(v) + static_cast<size_t>(c)];
   std::vector<double> before(static_cast<size_t>(s.mesh.tetCount()), -1e300);
   for (int pass = 0; pass < 5; ++pass) {
     rotationPass(s.blocks.data(), static_cast<std::int32_t>(s.blocks.size()), s.xyz.data(), nullptr, 1);

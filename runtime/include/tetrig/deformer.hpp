@@ -156,7 +156,7 @@ class Deformer {
 
   // Vertex ordering: free vertex v lives at solver index factor position; handle slot h at free_count_ + h.
   std::vector<std::int32_t> solver_index_;    // mesh vertex -> solver index
-  std::vector<double> rest_solver_;           // rest positions, solver order, 3 per vertex
+  std::vector<double> rest_solver_;           // rest positions, solver order, kVectorStride per vertex
   std::vector<double> x_;                     // current positions, solver order (free then handles)
   std::vector<double> delta_;                 // differential coordinates, solver order
   std::vector<double> rhs_constant_;          // -L_fh x_h + point terms, free part

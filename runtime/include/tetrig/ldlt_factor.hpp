@@ -5,9 +5,13 @@
 // for A = P^T L D L^T P, solving A x = b is y = P b, L z = y, w = D^-1 z, L^T v = w, x = P^T v.
 // SplitLdlt keeps vectors in the factor's (permuted) order, so the frame path never permutes:
 // callers store vertex i at position position(i). Three right-hand sides (x, y, z) are
-// interleaved, so each factor entry is read once for all three.
+// interleaved (stride kVectorStride), so each factor entry is read once, as one vector FMA.
 //
-// Storage: L strictly lower, compressed by column (CSC), unit diagonal implied; D^-1 cached.
+// Storage (built once at load from SimplicialLDLT's own CSC factor): supernodes. Consecutive
+// columns c0..c0+k whose below-diagonal structure is nested (column j+1's rows are column j's
+// minus row j+1) form a supernode with a dense unit-lower k x k triangle and a dense r x k block
+// below it sharing one list of r row indices. Both triangular solves then stream contiguous
+// memory and read one index per block row instead of one per entry. D^-1 is cached.
 #pragma once
 
 #include <Eigen/SparseCore>
@@ -17,6 +21,10 @@
 
 namespace tetrig {
 
+// Per-vertex vectors on the frame path hold x, y, z and one padding lane (kept 0), so one
+// 4-double vector operation updates all three coordinates.
+inline constexpr int kVectorStride = 4;
+
 class SplitLdlt {
  public:
   // Factors the symmetric positive definite matrix `a` (only its lower triangle is read).
@@ -25,22 +33,32 @@ class SplitLdlt {
   void factorize(const Eigen::SparseMatrix<double>& a);
 
   std::int32_t size() const { return static_cast<std::int32_t>(d_inv_.size()); }
-  std::int64_t factorNonZeros() const { return static_cast<std::int64_t>(values_.size()); }
+  std::int64_t factorNonZeros() const { return factor_non_zeros_; }
+  std::int32_t supernodeCount() const { return static_cast<std::int32_t>(supernodes_.size()); }
 
   // Factor position of original index i (y = P b means y[position(i)] = b[i]).
   std::int32_t position(std::int32_t i) const { return position_[static_cast<size_t>(i)]; }
   const std::vector<std::int32_t>& positions() const { return position_; }
 
   // Solves A x = b in place for 3 interleaved right-hand sides held in factor order:
-  // xyz[3 * position(i) + c] is component c of row i. No allocation, no exceptions.
-  void solveInPlace(double* xyz) const;
+  // xyzw[kVectorStride * position(i) + c] is component c (0..2) of row i; lane 3 is carried along
+  // (keep it 0). No allocation, no exceptions.
+  void solveInPlace(double* xyzw) const;
 
  private:
-  std::vector<std::int32_t> col_start_;  // n + 1
-  std::vector<std::int32_t> row_;        // row index of each stored entry (row > column)
-  std::vector<double> values_;           // L entries
+  struct Supernode {
+    std::int32_t first_column;  // c0
+    std::int32_t width;         // k
+    std::int32_t row_begin;     // rows_[row_begin .. row_begin + row_count): rows below the triangle
+    std::int32_t row_count;     // r
+    std::int64_t value_begin;   // values_: k x k triangle (row-major, strict lower used), then r x k block
+  };
+  std::vector<Supernode> supernodes_;
+  std::vector<std::int32_t> rows_;
+  std::vector<double> values_;
   std::vector<double> d_inv_;            // 1 / D
   std::vector<std::int32_t> position_;   // original index -> factor position
+  std::int64_t factor_non_zeros_ = 0;    // strictly lower non-zeros of L
 };
 
 }  // namespace tetrig

@@ -29,9 +29,9 @@ struct RotationPassStats {
   std::int32_t exact_fallbacks = 0;  // tets that took the exact rotation (inverted/degenerate)
 };
 
-// Updates every rotation from positions `xyz` (3 interleaved doubles per vertex, solver order)
-// with `steps` refinement steps; if `delta` is not null, also adds each tet's a R G into it
-// (3 doubles per vertex; the caller zeroes it first).
+// Updates every rotation from positions `xyz` (kVectorStride doubles per vertex: x, y, z, pad;
+// solver order) with `steps` refinement steps; if `delta` is not null, also adds each tet's a R G
+// into it (same layout; the caller zeroes it first).
 RotationPassStats rotationPass(TetBlock* blocks, std::int32_t block_count, const double* xyz, double* delta,
                                int steps);
 
