@@ -419,7 +419,7 @@ std::vector<std::uint8_t> serializeRig(const Rig& rig) {
     w.f64(o.max_abs_coordinate);
     writeSection(out, table, kTagOptions, w.bytes());
   }
-  out.pad8();
+  // No padding after the last section: the file ends where it does.
   std::vector<std::uint8_t>& bytes = out.bytes();
   // Section table.
   for (std::size_t i = 0; i < table.size(); ++i) {

@@ -55,7 +55,16 @@ extern "C" void __asan_init();
 std::string asanRuntimePath() {
 #ifdef TETRIG_TEST_ASAN
   Dl_info info{};
-  if (dladdr(reinterpret_cast<void*>(&__asan_init), &info) != 0 && info.dli_fname != nullptr) return info.dli_fname;
+  if (dladdr(reinterpret_cast<void*>(&__asan_init), &info) != 0 && info.dli_fname != nullptr) {
+    // A static runtime (clang's default) lives in the executable: nothing to preload.
+    char self[4096];
+    const ssize_t n = readlink("/proc/self/exe", self, sizeof(self) - 1);
+    char* resolved = realpath(info.dli_fname, nullptr);
+    std::string path = resolved != nullptr ? resolved : info.dli_fname;
+    std::free(resolved);
+    if (n > 0 && path == std::string(self, static_cast<std::size_t>(n))) return {};
+    return path;
+  }
 #endif
   return {};
 }

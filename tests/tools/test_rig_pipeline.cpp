@@ -3,6 +3,7 @@
 #include "tetrig/rigbuild/decimate_surface.hpp"
 #include "tetrig/rigbuild/import_surface.hpp"
 #include "tetrig/rigbuild/pose_transfer_weights.hpp"
+#include "tetrig/rigbuild/rig_geometry.hpp"
 #include "tetrig/rigbuild/tetrahedralize_surface.hpp"
 #include "tetrig/rigbuild/validate_surface.hpp"
 #include "test_data.hpp"
@@ -13,6 +14,8 @@
 
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
+#include <fstream>
 #include <string>
 
 namespace tetrig::rigbuild {
@@ -259,6 +262,38 @@ void checkRig(const std::string& relative, std::int32_t target, bool with_caps) 
                 mode == WeightCap::kDropFarTets ? "drop far tets" : "drop small entries", err,
                 cs.mean_nonzeros_per_row, pose_difference);
   }
+}
+
+TEST(RigGeometry, KnightInOneCallWithProgress) {
+  TETRIG_REQUIRE_DATA(path, "meshes/libigl-tutorial-data/decimated-knight.off");
+  RigGeometryOptions options;
+  options.decimate.target_vertices = 300;
+  int lines = 0;
+  const RigGeometry g = buildRigGeometry(path, options, [&lines](const std::string&) { ++lines; });
+  EXPECT_EQ(lines, 4);
+  EXPECT_EQ(g.fine.vertexCount(), 502);
+  EXPECT_TRUE(checkTetMesh(g.coarse.tets.mesh).ok());
+  EXPECT_EQ(g.b.rows(), 502);
+  EXPECT_EQ(g.b.cols(), g.coarse.tets.mesh.vertexCount());
+  EXPECT_LT(g.rest_error, 1e-5);
+  // An open surface is refused with the file name and what to do.
+  SurfaceMesh open = importSurface(path);
+  open.triangles.conservativeResize(open.triangleCount() - 1, 3);
+  const std::filesystem::path open_path = std::filesystem::temp_directory_path() / "tetrig_open_knight.off";
+  {
+    std::ofstream out(open_path);
+    out << "OFF\n" << open.vertexCount() << ' ' << open.triangleCount() << " 0\n";
+    for (std::int32_t v = 0; v < open.vertexCount(); ++v) out << open.vertices.row(v) << '\n';
+    for (std::int32_t f = 0; f < open.triangleCount(); ++f) out << "3 " << open.triangles.row(f) << '\n';
+  }
+  try {
+    (void)buildRigGeometry(open_path, options);
+    ADD_FAILURE() << "no exception";
+  } catch (const RigBuildError& e) {
+    EXPECT_CONTAINS(e.what(), "tetrig_open_knight.off: surface refused");
+    EXPECT_CONTAINS(e.what(), "3 boundary edges");
+  }
+  std::filesystem::remove(open_path);
 }
 
 TEST(RigPipeline, DecimatedKnight) { checkRig("meshes/libigl-tutorial-data/decimated-knight.off", 300, true); }

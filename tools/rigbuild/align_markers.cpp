@@ -1,6 +1,6 @@
 // Marker-to-mesh alignment: axes/unit, coarse heading from principal horizontal axes, then
 // similarity ICP with the closed-form least-squares similarity of Umeyama (IEEE PAMI 1991)
-// through Eigen::umeyama. See align_markers.hpp.
+// (closed form, weighted). See align_markers.hpp.
 #include "tetrig/rigbuild/align_markers.hpp"
 
 #include "tetrig/rigbuild/closest_point.hpp"

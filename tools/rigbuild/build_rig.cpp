@@ -363,13 +363,20 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
     // File order of vertices, for vertex-id selections.
     const std::vector<Eigen::Vector3d> order = fileVertexOrder(inputs.mesh);
     if (!order.empty()) {
-      std::map<std::array<double, 3>, std::int32_t> index;
-      for (std::int32_t v = 0; v < fine.vertexCount(); ++v) index.emplace(std::array<double, 3>{fine.vertices(v, 0), fine.vertices(v, 1), fine.vertices(v, 2)}, v);
+      // Keys rounded to float: importers (assimp) keep single precision.
+      auto key = [](double x, double y, double z) {
+        return std::array<float, 3>{static_cast<float>(x), static_cast<float>(y), static_cast<float>(z)};
+      };
+      std::map<std::array<float, 3>, std::int32_t> index;
+      for (std::int32_t v = 0; v < fine.vertexCount(); ++v) index.emplace(key(fine.vertices(v, 0), fine.vertices(v, 1), fine.vertices(v, 2)), v);
       ctx.file_to_fine.resize(order.size(), -1);
+      std::size_t unmatched = 0;
       for (std::size_t i = 0; i < order.size(); ++i) {
-        const auto it = index.find({order[i].x(), order[i].y(), order[i].z()});
+        const auto it = index.find(key(order[i].x(), order[i].y(), order[i].z()));
+        unmatched += it == index.end();
         if (it != index.end()) ctx.file_to_fine[i] = it->second;
       }
+      if (unmatched > 0) report.notes.push_back(std::to_string(unmatched) + " file vertices have no imported vertex (vertex-id selections skip them)");
     } else {
       ctx.file_to_fine.resize(static_cast<std::size_t>(fine.vertexCount()));
       for (std::int32_t v = 0; v < fine.vertexCount(); ++v) ctx.file_to_fine[static_cast<std::size_t>(v)] = v;

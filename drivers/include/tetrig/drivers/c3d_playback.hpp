@@ -65,6 +65,7 @@ struct C3DPlaybackOptions {
   double rate_override_hz = 0.0;  // > 0: use instead of the clip's rate (e.g. a clip without one)
 };
 
+// Holds one MarkerFrame (about 9.3 KB) as its output buffer.
 class C3DPlayback {
  public:
   // Builds the point selection and the combined transform. The clip must outlive the playback.

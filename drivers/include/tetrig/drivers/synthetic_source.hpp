@@ -48,6 +48,7 @@ struct SyntheticOptions {
   std::uint64_t max_frames = 0;  // 0: run until stopped
 };
 
+// Holds one MarkerFrame (about 9.3 KB) as its output buffer.
 class SyntheticSource {
  public:
   // Validates and copies the options. Throws std::invalid_argument on more than kMaxMarkers or
