@@ -373,8 +373,25 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
       std::size_t unmatched = 0;
       for (std::size_t i = 0; i < order.size(); ++i) {
         const auto it = index.find(key(order[i].x(), order[i].y(), order[i].z()));
-        unmatched += it == index.end();
-        if (it != index.end()) ctx.file_to_fine[i] = it->second;
+        if (it != index.end()) {
+          ctx.file_to_fine[i] = it->second;
+          continue;
+        }
+        // Parsers round differently in the last bit: take the nearest vertex within 1e-6 of the diagonal.
+        std::int32_t best = -1;
+        double best_d = std::numeric_limits<double>::infinity();
+        for (std::int32_t v = 0; v < fine.vertexCount(); ++v) {
+          const double d = (fine.vertices.row(v).transpose() - order[i]).squaredNorm();
+          if (d < best_d) {
+            best_d = d;
+            best = v;
+          }
+        }
+        if (std::sqrt(best_d) <= 1e-6 * surface_report.bbox_diagonal) {
+          ctx.file_to_fine[i] = best;
+        } else {
+          ++unmatched;
+        }
       }
       if (unmatched > 0) report.notes.push_back(std::to_string(unmatched) + " file vertices have no imported vertex (vertex-id selections skip them)");
     } else {
