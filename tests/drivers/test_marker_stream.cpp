@@ -19,21 +19,7 @@
 
 #include "tetrig/drivers/crc32c.hpp"
 
-// Allocation counter for the "decoding does not allocate" test. (GCC's -Wmismatched-new-delete
-// misreads the malloc/free pair of a replaced operator new/delete.)
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
-#endif
-namespace {
-std::atomic<std::uint64_t> g_allocations{0};
-}  // namespace
-void* operator new(std::size_t size) {
-  g_allocations.fetch_add(1, std::memory_order_relaxed);
-  if (void* p = std::malloc(size == 0 ? 1 : size)) return p;
-  throw std::bad_alloc();
-}
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+#include "counting_allocator.hpp"
 
 namespace {
 
@@ -792,11 +778,11 @@ TEST(MarkerStream, DecodingDoesNotAllocate) {
   MarkerStreamDecoder dec;
   MarkerStreamDecoder hid;
   auto out = std::make_unique<MarkerFrame>();
-  const std::uint64_t before = g_allocations.load();
+  const std::uint64_t before = ::tetrig::test::allocationCount();
   for (const auto& f : frames) EXPECT_EQ(dec.decodeFrame(f, 0, *out), S::kFrame);
   int decoded = 0;
   for (const auto& r : reports) decoded += hid.decodeHidReport(r, 0, *out) == S::kFrame ? 1 : 0;
-  EXPECT_EQ(g_allocations.load(), before);
+  EXPECT_EQ(::tetrig::test::allocationCount(), before);
   EXPECT_EQ(decoded, 48);
 }
 

@@ -19,26 +19,7 @@
 #include "tetrig/frame_mailbox.hpp"
 #include "test_data.hpp"
 
-// Counting global allocator for this test binary: counts operator new calls while enabled.
-namespace {
-std::atomic<long> g_allocations{0};
-std::atomic<bool> g_counting{false};
-}  // namespace
-void* operator new(std::size_t size) {
-  if (g_counting.load(std::memory_order_relaxed)) g_allocations.fetch_add(1, std::memory_order_relaxed);
-  if (void* p = std::malloc(size == 0 ? 1 : size)) return p;
-  throw std::bad_alloc();
-}
-// GCC pairs the inlined free() with a new-expression and warns; the pairing is intended here.
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
-#endif
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic pop
-#endif
+#include "counting_allocator.hpp"
 
 namespace tetrig::drivers {
 namespace {
@@ -354,8 +335,7 @@ TEST(PlaybackSources, RunAllocatesNothingPerFrame) {
   const RawRecording recording = RawRecording::parse(bytes, "empty.trr");
   RawReplay replay(recording, {Pacing::kAsFastAsPossible, 1.0, false});
   std::uint64_t frames = 0;
-  g_allocations = 0;
-  g_counting = true;
+  const std::uint64_t before = ::tetrig::test::allocationCount();
   playback.run([&](const MarkerFrame& f) {
     mailbox->publish(f);
     ++frames;
@@ -365,15 +345,13 @@ TEST(PlaybackSources, RunAllocatesNothingPerFrame) {
     ++frames;
   });
   replay.run([&](const RawRecordView&) { ++frames; });
-  g_counting = false;
+  const std::uint64_t after = ::tetrig::test::allocationCount();
   EXPECT_EQ(frames, 2000u);
-  EXPECT_EQ(g_allocations.load(), 0);
-  // The counter works: an allocation while counting is seen.
-  g_counting = true;
-  auto* probe = new int(5);
-  g_counting = false;
-  delete probe;
-  EXPECT_EQ(g_allocations.load(), 1);
+  EXPECT_EQ(after - before, 0u);
+  // The counter works: an allocation is seen.
+  void* probe = ::operator new(16);  // explicit: new-expressions may be elided
+  ::operator delete(probe);
+  EXPECT_EQ(::tetrig::test::allocationCount() - after, 1u);
 }
 
 TEST(C3DPlaybackRealData, Hdm05ZUpToYUpInMillimetres) {

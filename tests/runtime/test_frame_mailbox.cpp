@@ -12,24 +12,7 @@
 #include <thread>
 #include <vector>
 
-// Global allocation counter: proves that publish/take never allocate. (GCC's
-// -Wmismatched-new-delete misreads the malloc/free pair of a replaced operator new/delete.)
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
-#endif
-namespace {
-std::atomic<std::uint64_t> g_allocations{0};
-}  // namespace
-
-void* operator new(std::size_t size) {
-  g_allocations.fetch_add(1, std::memory_order_relaxed);
-  if (void* p = std::malloc(size == 0 ? 1 : size)) {
-    return p;
-  }
-  throw std::bad_alloc();
-}
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+#include "counting_allocator.hpp"
 
 namespace {
 
@@ -168,7 +151,7 @@ TEST(FrameMailbox, PublishAndTakeDoNotAllocate) {
   auto box = std::make_unique<FrameMailbox>();
   auto in = std::make_unique<MarkerFrame>();
   auto out = std::make_unique<MarkerFrame>();
-  const std::uint64_t before = g_allocations.load();
+  const std::uint64_t before = ::tetrig::test::allocationCount();
   for (std::uint64_t c = 1; c < 1000; ++c) {
     stamp(*in, c);
     box->publish(*in);
@@ -177,7 +160,7 @@ TEST(FrameMailbox, PublishAndTakeDoNotAllocate) {
     }
     (void)box->tryAcquireLatest();
   }
-  EXPECT_EQ(g_allocations.load(), before);
+  EXPECT_EQ(::tetrig::test::allocationCount(), before);
 }
 
 // Several independent producer/consumer pairs (the mailbox is SPSC) plus observer threads that

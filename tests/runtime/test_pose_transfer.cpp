@@ -11,21 +11,7 @@
 #include <random>
 #include <vector>
 
-// Global allocation counter: proves that applyPoseTransfer never allocates. (GCC's
-// -Wmismatched-new-delete misreads the malloc/free pair of a replaced operator new/delete.)
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
-#endif
-namespace {
-std::atomic<std::uint64_t> g_allocations{0};
-}  // namespace
-void* operator new(std::size_t size) {
-  g_allocations.fetch_add(1, std::memory_order_relaxed);
-  if (void* p = std::malloc(size == 0 ? 1 : size)) return p;
-  throw std::bad_alloc();
-}
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+#include "counting_allocator.hpp"
 
 namespace tetrig {
 namespace {
@@ -93,9 +79,9 @@ TEST(PoseTransfer, ApplyDoesNotAllocate) {
   std::vector<double> x(150, 1.0);
   std::vector<float> out(900);
   const auto view = bf.view();
-  const std::uint64_t before = g_allocations.load();
+  const std::uint64_t before = ::tetrig::test::allocationCount();
   for (int frame = 0; frame < 10; ++frame) applyPoseTransfer(view, x.data(), out.data());
-  EXPECT_EQ(g_allocations.load(), before);
+  EXPECT_EQ(::tetrig::test::allocationCount(), before);
 }
 
 TEST(PoseTransfer, ValidateFindsBrokenStructure) {
