@@ -122,15 +122,7 @@ PacedRunStats C3DPlayback::run(Sink&& sink, const std::atomic<bool>* stop, Clock
         return stats;
       }
       if (options_.max_frames != 0 && counter >= options_.max_frames) return stats;
-      if (real_time) {
-        const std::int64_t target = start + detail::clampedNs(static_cast<double>(counter) * step_ns);
-        const std::int64_t now = clock.nowNs();
-        if (now < target) {
-          clock.sleepUntilNs(target);
-        } else if (static_cast<double>(now - target) > step_ns) {
-          ++stats.late_items;
-        }
-      }
+      if (real_time) detail::waitForItem(clock, start, counter, step_ns, stats);
       fillFrame(f, counter, frame_);
       frame_.receive_timestamp_ns = clock.nowNs();
       ++counter;

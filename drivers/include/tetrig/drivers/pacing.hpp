@@ -62,6 +62,18 @@ inline std::int64_t clampedNs(double ns) noexcept {
 inline bool stopRequested(const std::atomic<bool>* stop) noexcept {
   return stop != nullptr && stop->load(std::memory_order_relaxed);
 }
+// Real-time pacing of item `counter` of a run that started at `start_ns` with one item every
+// `step_ns`: sleeps until the item's time, or counts it late when it is more than a step behind.
+template <class Clock>
+void waitForItem(Clock& clock, std::int64_t start_ns, std::uint64_t counter, double step_ns, PacedRunStats& stats) {
+  const std::int64_t target = start_ns + clampedNs(static_cast<double>(counter) * step_ns);
+  const std::int64_t now = clock.nowNs();
+  if (now < target) {
+    clock.sleepUntilNs(target);
+  } else if (static_cast<double>(now - target) > step_ns) {
+    ++stats.late_items;
+  }
+}
 }  // namespace detail
 
 // Sink adapter for a latest-frame mailbox (tetrig::FrameMailbox or anything with
