@@ -3,7 +3,8 @@
 //
 // Lanes: one `Lanes` value holds one quantity of the kTetBlockWidth (8) tets of a block, written
 // with GCC/Clang vector extensions so every build (AVX-512, AVX2, SSE2, NEON) vectorises the same
-// source. Scalar code remains only for the gathers/scatters and the rare exact fallback.
+// source. Corner positions move between per-vertex vectors (x, y, z, pad) and lanes by shuffles;
+// scalar code remains only for the rare exact fallback.
 #include "tetrig/rotation_kernel.hpp"
 
 #include "tetrig/ldlt_factor.hpp"
@@ -39,6 +40,51 @@ inline Lanes squareRoot(Lanes x) {
   return load(lanes);
 }
 
+// One vertex's x, y, z, pad (stride kVectorStride), and the 8-lane <-> 8 x 4 transposes between
+// per-vertex vectors and per-coordinate lanes (shuffles instead of scalar loads and inserts).
+using Vec4 = double __attribute__((vector_size(4 * sizeof(double))));
+static_assert(W == 8 && kVectorStride == 4, "the transposes below are written for 8 lanes of 4");
+inline Vec4 load4(const double* p) {
+  Vec4 v;
+  std::memcpy(&v, p, sizeof v);
+  return v;
+}
+inline void store4(double* p, Vec4 v) { std::memcpy(p, &v, sizeof v); }
+inline Lanes concat(Vec4 a, Vec4 b) { return __builtin_shufflevector(a, b, 0, 1, 2, 3, 4, 5, 6, 7); }
+
+// v[l] = (x, y, z, pad) of lane l  ->  x, y, z as lanes.
+inline void transposeIn(const Vec4 (&v)[W], Lanes& x, Lanes& y, Lanes& z) {
+  const Lanes a = concat(v[0], v[1]), b = concat(v[2], v[3]), c = concat(v[4], v[5]), d = concat(v[6], v[7]);
+  const Lanes ab_xy = __builtin_shufflevector(a, b, 0, 4, 8, 12, 1, 5, 9, 13);  // x0..x3 y0..y3
+  const Lanes ab_z = __builtin_shufflevector(a, b, 2, 6, 10, 14, 3, 7, 11, 15);  // z0..z3 pad
+  const Lanes cd_xy = __builtin_shufflevector(c, d, 0, 4, 8, 12, 1, 5, 9, 13);
+  const Lanes cd_z = __builtin_shufflevector(c, d, 2, 6, 10, 14, 3, 7, 11, 15);
+  x = __builtin_shufflevector(ab_xy, cd_xy, 0, 1, 2, 3, 8, 9, 10, 11);
+  y = __builtin_shufflevector(ab_xy, cd_xy, 4, 5, 6, 7, 12, 13, 14, 15);
+  z = __builtin_shufflevector(ab_z, cd_z, 0, 1, 2, 3, 8, 9, 10, 11);
+}
+
+// x, y, z lanes  ->  v[l] = (x_l, y_l, z_l, 0).
+inline void transposeOut(Lanes x, Lanes y, Lanes z, Vec4 (&v)[W]) {
+  const Lanes zero = splat(0.0);
+  const Lanes xy_lo = __builtin_shufflevector(x, y, 0, 8, 1, 9, 2, 10, 3, 11);   // x0 y0 x1 y1 x2 y2 x3 y3
+  const Lanes xy_hi = __builtin_shufflevector(x, y, 4, 12, 5, 13, 6, 14, 7, 15);
+  const Lanes z0_lo = __builtin_shufflevector(z, zero, 0, 8, 1, 9, 2, 10, 3, 11);  // z0 0 z1 0 ...
+  const Lanes z0_hi = __builtin_shufflevector(z, zero, 4, 12, 5, 13, 6, 14, 7, 15);
+  const Lanes l01 = __builtin_shufflevector(xy_lo, z0_lo, 0, 1, 8, 9, 2, 3, 10, 11);  // lane 0, lane 1
+  const Lanes l23 = __builtin_shufflevector(xy_lo, z0_lo, 4, 5, 12, 13, 6, 7, 14, 15);
+  const Lanes l45 = __builtin_shufflevector(xy_hi, z0_hi, 0, 1, 8, 9, 2, 3, 10, 11);
+  const Lanes l67 = __builtin_shufflevector(xy_hi, z0_hi, 4, 5, 12, 13, 6, 7, 14, 15);
+  v[0] = __builtin_shufflevector(l01, l01, 0, 1, 2, 3);
+  v[1] = __builtin_shufflevector(l01, l01, 4, 5, 6, 7);
+  v[2] = __builtin_shufflevector(l23, l23, 0, 1, 2, 3);
+  v[3] = __builtin_shufflevector(l23, l23, 4, 5, 6, 7);
+  v[4] = __builtin_shufflevector(l45, l45, 0, 1, 2, 3);
+  v[5] = __builtin_shufflevector(l45, l45, 4, 5, 6, 7);
+  v[6] = __builtin_shufflevector(l67, l67, 0, 1, 2, 3);
+  v[7] = __builtin_shufflevector(l67, l67, 4, 5, 6, 7);
+}
+
 // Rotation matrix (row-major r[3 * row + col]) of unit quaternions (w, x, y, z).
 struct Matrix {
   Lanes m[9];
@@ -56,22 +102,23 @@ inline void scatterBlock(const TetBlock& block, const Matrix& r, double* delta) 
   const Lanes a = load(block.weight);
   Lanes e[9];
   for (int i = 0; i < 9; ++i) e[i] = load(block.edge_inverse[i]);
-  double m[9][W];  // m[3 * row + k]: component `row` of a R grad phi_k
-  for (int row = 0; row < 3; ++row)
-    for (int k = 0; k < 3; ++k)
-      store(m[3 * row + k], a * (r.m[3 * row] * e[3 * k] + r.m[3 * row + 1] * e[3 * k + 1] +
-                                 r.m[3 * row + 2] * e[3 * k + 2]));
-  for (int l = 0; l < W; ++l) {
-    for (int k = 0; k < 3; ++k) {
-      double* d = delta + kVectorStride * block.corner[k][l];
-      d[0] += m[k][l];
-      d[1] += m[3 + k][l];
-      d[2] += m[6 + k][l];
+  Lanes m[3][3];  // m[k][row]: component `row` of a R grad phi_k
+  for (int k = 0; k < 3; ++k)
+    for (int row = 0; row < 3; ++row)
+      m[k][row] = a * (r.m[3 * row] * e[3 * k] + r.m[3 * row + 1] * e[3 * k + 1] + r.m[3 * row + 2] * e[3 * k + 2]);
+  Vec4 v[W];
+  for (int k = 0; k < 4; ++k) {
+    if (k < 3) {
+      transposeOut(m[k][0], m[k][1], m[k][2], v);
+    } else {
+      transposeOut(-(m[0][0] + m[1][0] + m[2][0]), -(m[0][1] + m[1][1] + m[2][1]), -(m[0][2] + m[1][2] + m[2][2]), v);
     }
-    double* d = delta + kVectorStride * block.corner[3][l];
-    d[0] -= m[0][l] + m[1][l] + m[2][l];
-    d[1] -= m[3][l] + m[4][l] + m[5][l];
-    d[2] -= m[6][l] + m[7][l] + m[8][l];
+    // One read-modify-write per corner; lanes are applied in order, so two lanes naming the same
+    // vertex both land.
+    for (int l = 0; l < W; ++l) {
+      double* d = delta + kVectorStride * block.corner[k][l];
+      store4(d, load4(d) + v[l]);
+    }
   }
 }
 
@@ -84,22 +131,21 @@ RotationPassStats rotationPass(TetBlock* blocks, std::int32_t block_count, const
   Lanes energy = splat(0.0);
   for (std::int32_t b = 0; b < block_count; ++b) {
     TetBlock& block = blocks[b];
-    // Edges x_ck - x_c3 of the deformed tets, gathered straight into lanes (building vectors from
-    // scalars avoids a store-then-vector-load round trip through memory).
-    const double* p[4][W];
-    for (int k = 0; k < 4; ++k)
-      for (int l = 0; l < W; ++l) p[k][l] = xyz + kVectorStride * block.corner[k][l];
-    auto gather = [&p](int k, int c) {
-      return Lanes{p[k][0][c], p[k][1][c], p[k][2][c], p[k][3][c], p[k][4][c], p[k][5][c], p[k][6][c], p[k][7][c]};
-    };
-    static_assert(W == 8, "gather() lists 8 lanes");
+    // Corner positions (x, y, z, pad: one 4-wide load each), transposed into lanes.
+    Lanes px[4], py[4], pz[4];
+    for (int k = 0; k < 4; ++k) {
+      Vec4 v[W];
+      for (int l = 0; l < W; ++l) v[l] = load4(xyz + kVectorStride * block.corner[k][l]);
+      transposeIn(v, px[k], py[k], pz[k]);
+    }
     // F = E' E^-1: F(row, col) = sum_k edge_k[row] Einv(k, col)   (eq. 2.6)
     Matrix f;
     {
       Lanes e[9], inv[9];
-      for (int c = 0; c < 3; ++c) {
-        const Lanes p3 = gather(3, c);
-        for (int k = 0; k < 3; ++k) e[3 * k + c] = gather(k, c) - p3;
+      for (int k = 0; k < 3; ++k) {  // edges x_ck - x_c3
+        e[3 * k] = px[k] - px[3];
+        e[3 * k + 1] = py[k] - py[3];
+        e[3 * k + 2] = pz[k] - pz[3];
       }
       for (int i = 0; i < 9; ++i) inv[i] = load(block.edge_inverse[i]);
       for (int row = 0; row < 3; ++row)
