@@ -83,10 +83,10 @@ int main(int argc, char** argv) {
   build_cmd->add_option("--markers", build.markers, "C3D clip whose rest frame gives the markers to bind (overrides markers.clip)");
   build_cmd->add_option("--tet-vertices", build.tet_vertices, "Decimation target: tet-mesh surface vertices (default 2500)")
       ->check(CLI::Range(4, 10000000));
-  build_cmd->add_option("--frame", build.frame, "Rest frame of the clip, 0-based (default 0: the first)")->check(CLI::NonNegativeNumber);
+  build_cmd->add_option("--frame", build.frame, "Rest frame of the clip, 0-based (default 0: the first)")->check(CLI::Range(0, 100000000));
   build_cmd->add_option("--max-marker-distance", build.max_marker_distance,
                         "Stop when a marker is further than this from the surface after alignment, rig units (default 0.1)")
-      ->check(CLI::PositiveNumber);
+      ->check(CLI::Range(1e-6, 1e6));
   build_cmd->add_option("--mesh-unit", build.mesh_unit, "Unit of the mesh: m, cm, mm or auto (default m)");
   build_cmd->add_option("--mesh-up", build.mesh_up, "Up axis of the mesh: x, y, z, -x, -y, -z (default y)");
   build_cmd->add_option("--device-up", build.device_up, "Up axis of the marker clip (default z, the C3D convention)");
@@ -104,13 +104,13 @@ int main(int argc, char** argv) {
 
   tetrig::tools::DemoOptions demo;
   CLI::App* demo_cmd = app.add_subcommand("demo", "Run the deformation demo on the project's own default data");
-  demo_cmd->add_option("--frames", demo.frames, "Frames to run")->capture_default_str()->check(CLI::PositiveNumber);
+  demo_cmd->add_option("--frames", demo.frames, "Frames to run")->capture_default_str()->check(CLI::Range(1, 100000000));
   demo_cmd->add_option("--iterations", demo.iterations, "Iterations per frame (also bounded by the budget)")
       ->capture_default_str()
       ->check(CLI::Range(1, 1000));
   demo_cmd->add_option("--budget-ms", demo.frame_budget_ms, "Per-frame time budget in milliseconds")
       ->capture_default_str()
-      ->check(CLI::PositiveNumber);
+      ->check(CLI::Range(0.001, 60000.0));
   demo_cmd->add_option("--out", demo.out_obj, "Write the final deformed surface to this OBJ file");
   demo_cmd->add_flag("-q,--quiet", demo.quiet, "Less output");
 
