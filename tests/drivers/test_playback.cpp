@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "fake_clock.hpp"
 #include "c3d_test_writer.hpp"
 #include "tetrig/drivers/c3d_playback.hpp"
 #include "tetrig/drivers/raw_recording.hpp"
@@ -28,16 +29,7 @@ using test::smallSpec;
 using test::TestC3DSpec;
 using test::writeTestC3D;
 
-// Fake clock: time only moves when the source sleeps (plus a fixed cost per reading).
-struct FakeClock {
-  std::int64_t* now;
-  std::vector<std::int64_t>* sleeps;
-  std::int64_t nowNs() const { return *now; }
-  void sleepUntilNs(std::int64_t t) const {
-    sleeps->push_back(t);
-    if (t > *now) *now = t;
-  }
-};
+using test::FakeClock;
 
 struct Captured {
   std::uint64_t counter;

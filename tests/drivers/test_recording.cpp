@@ -12,20 +12,13 @@
 #include <string>
 #include <vector>
 
+#include "fake_clock.hpp"
 #include "tetrig/drivers/raw_recording.hpp"
 
 namespace tetrig::drivers {
 namespace {
 
-struct FakeClock {
-  std::int64_t* now;
-  std::vector<std::int64_t>* sleeps;
-  std::int64_t nowNs() const { return *now; }
-  void sleepUntilNs(std::int64_t t) const {
-    sleeps->push_back(t);
-    if (t > *now) *now = t;
-  }
-};
+using test::FakeClock;
 
 struct Rec {
   std::int64_t ns;
