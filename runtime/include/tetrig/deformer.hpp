@@ -144,7 +144,6 @@ class Deformer {
   bool acceptTargets(const HandleTargets& targets, std::uint32_t& flags);
   void updateConstantRhs();
   void interpolateRotations();
-  void applyRigidGroups();
   void rebuildDelta();
   void writePositions();
   std::int32_t slotOfTet(std::int32_t t) const { return tet_slot_[static_cast<size_t>(t)]; }
