@@ -3,6 +3,7 @@
 // replug, a few seconds for a whole exchange) and exist to turn a hang into a failure.
 #include <tetrig/drivers/hid_transport.hpp>
 
+#include "transport_test_util.hpp"
 #include "umockdev_devices.hpp"
 
 #include <gtest/gtest.h>
@@ -22,56 +23,8 @@ using tetrig::devices::ReceivedReport;
 using tetrig::devices::TransportEvent;
 using tetrig::devices::TransportStatus;
 
-template <class Pred>
-bool waitFor(Pred pred, std::chrono::milliseconds timeout) {
-  const auto deadline = std::chrono::steady_clock::now() + timeout;
-  while (!pred()) {
-    if (std::chrono::steady_clock::now() > deadline) return pred();
-    std::this_thread::sleep_for(1ms);
-  }
-  return true;
-}
-
-// Collects what the transport hands out (sink and status run on the driver thread).
-struct Recorder {
-  std::mutex mutex;
-  std::vector<std::vector<std::uint8_t>> reports;
-  std::vector<std::int64_t> stamps;
-  std::vector<TransportEvent> events;
-  std::vector<std::string> details;
-
-  std::string log() {
-    std::lock_guard lock(mutex);
-    std::string out;
-    for (const auto& d : details) out += "\n  " + d;
-    return out;
-  }
-
-  tetrig::devices::ReportSink sink() {
-    return [this](const ReceivedReport& r) {
-      std::lock_guard lock(mutex);
-      reports.emplace_back(r.bytes.begin(), r.bytes.end());
-      stamps.push_back(r.receive_ns);
-    };
-  }
-  tetrig::devices::StatusSink status() {
-    return [this](const TransportStatus& s) {
-      std::lock_guard lock(mutex);
-      events.push_back(s.event);
-      details.emplace_back(std::string(s.device) + ": " + std::string(s.detail));
-    };
-  }
-  std::size_t reportCount() {
-    std::lock_guard lock(mutex);
-    return reports.size();
-  }
-  int count(TransportEvent e) {
-    std::lock_guard lock(mutex);
-    int n = 0;
-    for (auto x : events) n += (x == e);
-    return n;
-  }
-};
+using tetrig::testing::waitFor;
+using Recorder = tetrig::testing::TransportRecorder;
 
 std::vector<std::uint8_t> numberedReport(std::size_t size, std::uint32_t n) {
   std::vector<std::uint8_t> r(size);

@@ -3,6 +3,7 @@
 // libusb busy-polls the emulated usbfs node, so time bounds here are only hang guards.
 #include <tetrig/drivers/usb_transport.hpp>
 
+#include "transport_test_util.hpp"
 #include "umockdev_devices.hpp"
 
 #include <gtest/gtest.h>
@@ -23,53 +24,8 @@ using tetrig::devices::TransportStatus;
 using tetrig::devices::UsbTransport;
 using tetrig::devices::UsbTransportConfig;
 
-template <class Pred>
-bool waitFor(Pred pred, std::chrono::milliseconds timeout) {
-  const auto deadline = std::chrono::steady_clock::now() + timeout;
-  while (!pred()) {
-    if (std::chrono::steady_clock::now() > deadline) return pred();
-    std::this_thread::sleep_for(1ms);
-  }
-  return true;
-}
-
-struct Recorder {
-  std::mutex mutex;
-  std::vector<std::vector<std::uint8_t>> chunks;
-  std::vector<TransportEvent> events;
-  std::vector<std::string> details;
-
-  tetrig::devices::ReportSink sink() {
-    return [this](const ReceivedReport& r) {
-      std::lock_guard lock(mutex);
-      chunks.emplace_back(r.bytes.begin(), r.bytes.end());
-    };
-  }
-  tetrig::devices::StatusSink status() {
-    return [this](const TransportStatus& s) {
-      std::lock_guard lock(mutex);
-      events.push_back(s.event);
-      details.emplace_back(std::string(tetrig::devices::transportEventName(s.event)) + " " + std::string(s.device) +
-                           ": " + std::string(s.detail));
-    };
-  }
-  std::size_t chunkCount() {
-    std::lock_guard lock(mutex);
-    return chunks.size();
-  }
-  int count(TransportEvent e) {
-    std::lock_guard lock(mutex);
-    int n = 0;
-    for (auto x : events) n += (x == e);
-    return n;
-  }
-  std::string log() {
-    std::lock_guard lock(mutex);
-    std::string out;
-    for (const auto& d : details) out += "\n  " + d;
-    return out;
-  }
-};
+using tetrig::testing::waitFor;
+using Recorder = tetrig::testing::TransportRecorder;
 
 std::vector<std::uint8_t> frameBytes(std::uint32_t n, std::size_t size = 100) {
   std::vector<std::uint8_t> f(size);
@@ -125,11 +81,11 @@ TEST_F(UsbTransportTest, StreamsBulkFramesWithFourTransfersInFlight) {
     device_->pushIn(frameBytes(i));
     if (i % 20 == 19) std::this_thread::sleep_for(1ms);
   }
-  ASSERT_TRUE(waitFor([&] { return rec.chunkCount() >= kFrames; }, 5s)) << "got " << rec.chunkCount() << rec.log();
+  ASSERT_TRUE(waitFor([&] { return rec.reportCount() >= kFrames; }, 5s)) << "got " << rec.reportCount() << rec.log();
   {
     std::lock_guard lock(rec.mutex);
-    ASSERT_EQ(rec.chunks.size(), kFrames);
-    for (std::uint32_t i = 0; i < kFrames; ++i) ASSERT_EQ(rec.chunks[i], frameBytes(i)) << "frame " << i;
+    ASSERT_EQ(rec.reports.size(), kFrames);
+    for (std::uint32_t i = 0; i < kFrames; ++i) ASSERT_EQ(rec.reports[i], frameBytes(i)) << "frame " << i;
   }
   // Resubmitted from the callback: all four are back in flight, never more.
   ASSERT_TRUE(waitFor([&] { return device_->urbsPending() == 4; }, 2s));
@@ -152,11 +108,11 @@ TEST_F(UsbTransportTest, InterruptEndpointUsesTheSameAsyncPath) {
   startTransport(config);
   ASSERT_TRUE(waitFor([&] { return device_->urbsPending() == 2; }, 2s)) << rec.log();
   for (std::uint32_t i = 0; i < 20; ++i) device_->pushIn(frameBytes(i, 64));
-  ASSERT_TRUE(waitFor([&] { return rec.chunkCount() == 20; }, 3s)) << rec.log();
+  ASSERT_TRUE(waitFor([&] { return rec.reportCount() == 20; }, 3s)) << rec.log();
   EXPECT_EQ(device_->maxUrbsPending(), 2);
   EXPECT_EQ(device_->lastInUrbType(), 1) << "expected USBDEVFS_URB_TYPE_INTERRUPT";
   std::lock_guard lock(rec.mutex);
-  EXPECT_EQ(rec.chunks[19], frameBytes(19, 64));
+  EXPECT_EQ(rec.reports[19], frameBytes(19, 64));
 }
 
 TEST_F(UsbTransportTest, SendsStartCommandOnBulkOutBeforeStreaming) {
@@ -182,9 +138,9 @@ TEST_F(UsbTransportTest, TimedOutTransfersAreCountedAndResubmitted) {
   EXPECT_EQ(transport_->stats().disconnects, 0u);
   // Still streaming afterwards.
   device_->pushIn(frameBytes(7));
-  ASSERT_TRUE(waitFor([&] { return rec.chunkCount() == 1; }, 2s));
+  ASSERT_TRUE(waitFor([&] { return rec.reportCount() == 1; }, 2s));
   std::lock_guard lock(rec.mutex);
-  EXPECT_EQ(rec.chunks[0], frameBytes(7));
+  EXPECT_EQ(rec.reports[0], frameBytes(7));
 }
 
 TEST_F(UsbTransportTest, StopCancelsAndReapsEveryTransfer) {
@@ -207,7 +163,7 @@ TEST_F(UsbTransportTest, SurpriseUnplugIsReportedAndReplugResumes) {
   startTransport(baseConfig());
   ASSERT_TRUE(waitFor([&] { return device_->urbsPending() == 4; }, 2s)) << rec.log();
   for (std::uint32_t i = 0; i < 10; ++i) device_->pushIn(frameBytes(i));
-  ASSERT_TRUE(waitFor([&] { return rec.chunkCount() == 10; }, 2s));
+  ASSERT_TRUE(waitFor([&] { return rec.reportCount() == 10; }, 2s));
 
   device_->unplug();
   ASSERT_TRUE(waitFor([&] { return !transport_->connected(); }, 2s)) << "unplug not detected" << rec.log();
@@ -219,10 +175,10 @@ TEST_F(UsbTransportTest, SurpriseUnplugIsReportedAndReplugResumes) {
   ASSERT_TRUE(waitFor([&] { return transport_->connected(); }, 1s)) << "replug not picked up within 1 s" << rec.log();
   ASSERT_TRUE(waitFor([&] { return device_->urbsPending() == 4; }, 1s));
   for (std::uint32_t i = 100; i < 110; ++i) device_->pushIn(frameBytes(i));
-  ASSERT_TRUE(waitFor([&] { return rec.chunkCount() == 20; }, 2s)) << "stream did not resume" << rec.log();
+  ASSERT_TRUE(waitFor([&] { return rec.reportCount() == 20; }, 2s)) << "stream did not resume" << rec.log();
   std::lock_guard lock(rec.mutex);
-  EXPECT_EQ(rec.chunks[10], frameBytes(100));
-  EXPECT_EQ(rec.chunks[19], frameBytes(109));
+  EXPECT_EQ(rec.reports[10], frameBytes(100));
+  EXPECT_EQ(rec.reports[19], frameBytes(109));
 }
 
 TEST_F(UsbTransportTest, HotplugArrivalOpensTheDeviceWithoutPolling) {
@@ -236,7 +192,7 @@ TEST_F(UsbTransportTest, HotplugArrivalOpensTheDeviceWithoutPolling) {
   EXPECT_GE(transport_->stats().hotplug_arrivals, 1u);
   ASSERT_TRUE(waitFor([&] { return device_->urbsPending() == 4; }, 1s));
   device_->pushIn(frameBytes(1));
-  ASSERT_TRUE(waitFor([&] { return rec.chunkCount() == 1; }, 2s));
+  ASSERT_TRUE(waitFor([&] { return rec.reportCount() == 1; }, 2s));
 }
 
 TEST_F(UsbTransportTest, TransferErrorsAreReportedAndRepeatedOnesReopenTheDevice) {
@@ -249,7 +205,7 @@ TEST_F(UsbTransportTest, TransferErrorsAreReportedAndRepeatedOnesReopenTheDevice
   device_->pushInError(-EPROTO);
   device_->pushInError(-EPIPE);
   device_->pushIn(frameBytes(1));
-  ASSERT_TRUE(waitFor([&] { return rec.chunkCount() == 1; }, 2s)) << rec.log();
+  ASSERT_TRUE(waitFor([&] { return rec.reportCount() == 1; }, 2s)) << rec.log();
   EXPECT_EQ(transport_->stats().read_errors, 2u);
   EXPECT_EQ(rec.count(TransportEvent::kReadError), 2);
   EXPECT_EQ(transport_->stats().disconnects, 0u);
@@ -259,7 +215,7 @@ TEST_F(UsbTransportTest, TransferErrorsAreReportedAndRepeatedOnesReopenTheDevice
   EXPECT_EQ(transport_->stats().disconnects, 1u);
   ASSERT_TRUE(waitFor([&] { return device_->urbsPending() == 4; }, 2s));
   device_->pushIn(frameBytes(2));
-  ASSERT_TRUE(waitFor([&] { return rec.chunkCount() == 2; }, 2s));
+  ASSERT_TRUE(waitFor([&] { return rec.reportCount() == 2; }, 2s));
 }
 
 TEST_F(UsbTransportTest, AbsentDeviceIsReportedOnceAndStopIsClean) {
