@@ -181,6 +181,7 @@ Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(s
   std::stable_sort(order.begin(), order.end(), [&](std::int32_t a, std::int32_t b) { return key(a) < key(b); });
   const std::int32_t block_count = (tet_count_ + kTetBlockWidth - 1) / kTetBlockWidth;
   blocks_.assign(static_cast<size_t>(block_count), TetBlock{});
+  exact_lanes_.assign(static_cast<size_t>(block_count), 0);
   tet_slot_.assign(static_cast<size_t>(tet_count_), -1);
   for (std::int32_t b = 0; b < block_count; ++b) {
     TetBlock& block = blocks_[static_cast<size_t>(b)];
@@ -189,14 +190,15 @@ Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(s
       block.rotation[0][l] = 1.0;
       block.rotation[1][l] = block.rotation[2][l] = block.rotation[3][l] = 0.0;
       if (s >= tet_count_) {  // padding lane: weight 0, identity frame, corners at vertex 0
-        for (int c = 0; c < 4; ++c) block.corner[c][l] = 0;
+        for (int c = 0; c < 4; ++c) block.corner_offset[c][l] = 0;
         for (int i = 0; i < 9; ++i) block.edge_inverse[i][l] = (i % 4 == 0) ? 1.0 : 0.0;
         block.weight[l] = 0.0;
         continue;
       }
       const std::int32_t t = order[static_cast<size_t>(s)];
       tet_slot_[static_cast<size_t>(t)] = s;
-      for (int c = 0; c < 4; ++c) block.corner[c][l] = solver_index_[static_cast<size_t>(mesh.tets(t, c))];
+      for (int c = 0; c < 4; ++c)
+        block.corner_offset[c][l] = kVectorStride * solver_index_[static_cast<size_t>(mesh.tets(t, c))];
       const Eigen::Matrix3d& e = frames.edge_inverse[static_cast<size_t>(t)];
       for (int i = 0; i < 9; ++i) block.edge_inverse[i][l] = e(i / 3, i % 3);
       block.weight[l] = weights[static_cast<size_t>(t)];
@@ -429,7 +431,7 @@ StepStats Deformer::step(const HandleTargets& targets, const StepBudget& budget)
       std::fill(delta_.begin(), delta_.end(), 0.0);
       const RotationPassStats pass =
           rotationPass(blocks_.data(), block_count, x_.data(), has_groups ? nullptr : delta_.data(),
-                       options_.rotation_steps);
+                       options_.rotation_steps, exact_lanes_.data());
       stats.energy = pass.energy;
       stats.exact_rotations += pass.exact_fallbacks;
       std::int64_t rigid_ns = 0;

@@ -111,37 +111,66 @@ inline void store4(double* p, Vec4 v) { std::memcpy(p, &v, sizeof v); }
 
 }  // namespace
 
+// Both triangular solves are chains of 4-cycle FMAs if written as one running sum per row; the
+// dense parts of a supernode are instead processed four rows (forward) or four columns
+// (backward) at a time: four independent sums that share each vector load. Measured 1.2x on the
+// bars' factors (the large one is 68 % supernodes wider than 16 columns).
 TETRIG_MULTIVERSION
 void SplitLdlt::solveInPlace(double* xyzw) const {
+  constexpr std::int64_t S = kVectorStride;
   const std::int32_t* rows = rows_.data();
   const double* d_inv = d_inv_.data();
   // Forward, L z = y, supernode by supernode: the dense unit triangle, then the block below
   // (z_R -= B z_block for the shared rows R).
   for (const Supernode& node : supernodes_) {
     const std::int32_t k = node.width;
+    const std::int32_t n = node.row_count;
     const double* triangle = values_.data() + node.value_begin;
     const double* block = triangle + static_cast<std::int64_t>(k) * k;
-    double* z = xyzw + kVectorStride * node.first_column;
-    for (std::int32_t i = 1; i < k; ++i) {
-      const double* t = triangle + static_cast<std::int64_t>(i) * k;
-      Vec4 sum = load4(z + kVectorStride * i);
-      for (std::int32_t c = 0; c < i; ++c) sum -= t[c] * load4(z + kVectorStride * c);
-      store4(z + kVectorStride * i, sum);
-    }
     const std::int32_t* r = rows + node.row_begin;
+    double* z = xyzw + S * node.first_column;
     if (k == 1) {  // a single column: the common case outside separators
       const Vec4 z0 = load4(z);
-      for (std::int32_t i = 0; i < node.row_count; ++i) {
-        double* target = xyzw + kVectorStride * r[i];
+      for (std::int32_t i = 0; i < n; ++i) {
+        double* target = xyzw + S * r[i];
         store4(target, load4(target) - block[i] * z0);
       }
       continue;
     }
-    for (std::int32_t i = 0; i < node.row_count; ++i) {
+    for (std::int32_t i = 1; i < k; ++i) {
+      const double* t = triangle + static_cast<std::int64_t>(i) * k;
+      Vec4 sum = load4(z + S * i);
+      for (std::int32_t c = 0; c < i; ++c) sum -= t[c] * load4(z + S * c);
+      store4(z + S * i, sum);
+    }
+    std::int32_t i = 0;
+    for (; i + 4 <= n; i += 4) {
+      const double* b0 = block + static_cast<std::int64_t>(i) * k;
+      const double* b1 = b0 + k;
+      const double* b2 = b1 + k;
+      const double* b3 = b2 + k;
+      Vec4 s0{}, s1{}, s2{}, s3{};
+      for (std::int32_t c = 0; c < k; ++c) {
+        const Vec4 zc = load4(z + S * c);
+        s0 += b0[c] * zc;
+        s1 += b1[c] * zc;
+        s2 += b2[c] * zc;
+        s3 += b3[c] * zc;
+      }
+      double* t0 = xyzw + S * r[i];
+      double* t1 = xyzw + S * r[i + 1];
+      double* t2 = xyzw + S * r[i + 2];
+      double* t3 = xyzw + S * r[i + 3];
+      store4(t0, load4(t0) - s0);
+      store4(t1, load4(t1) - s1);
+      store4(t2, load4(t2) - s2);
+      store4(t3, load4(t3) - s3);
+    }
+    for (; i < n; ++i) {
       const double* b = block + static_cast<std::int64_t>(i) * k;
-      Vec4 sum = b[0] * load4(z);
-      for (std::int32_t c = 1; c < k; ++c) sum += b[c] * load4(z + kVectorStride * c);
-      double* target = xyzw + kVectorStride * r[i];
+      Vec4 sum{};
+      for (std::int32_t c = 0; c < k; ++c) sum += b[c] * load4(z + S * c);
+      double* target = xyzw + S * r[i];
       store4(target, load4(target) - sum);
     }
   }
@@ -150,26 +179,52 @@ void SplitLdlt::solveInPlace(double* xyzw) const {
   for (auto it = supernodes_.rbegin(); it != supernodes_.rend(); ++it) {
     const Supernode& node = *it;
     const std::int32_t k = node.width;
+    const std::int32_t n = node.row_count;
     const double* triangle = values_.data() + node.value_begin;
     const double* block = triangle + static_cast<std::int64_t>(k) * k;
-    double* x = xyzw + kVectorStride * node.first_column;
     const std::int32_t* r = rows + node.row_begin;
-    if (k == 1) {
-      Vec4 sum = load4(x) * d_inv[node.first_column];
-      for (std::int32_t i = 0; i < node.row_count; ++i) sum -= block[i] * load4(xyzw + kVectorStride * r[i]);
-      store4(x, sum);
+    double* x = xyzw + S * node.first_column;
+    const double* dk = d_inv + node.first_column;
+    if (k == 1) {  // two sums, alternating rows
+      Vec4 s0 = load4(x) * dk[0], s1{};
+      std::int32_t i = 0;
+      for (; i + 2 <= n; i += 2) {
+        s0 -= block[i] * load4(xyzw + S * r[i]);
+        s1 -= block[i + 1] * load4(xyzw + S * r[i + 1]);
+      }
+      if (i < n) s0 -= block[i] * load4(xyzw + S * r[i]);
+      store4(x, s0 + s1);
       continue;
     }
-    for (std::int32_t c = 0; c < k; ++c) store4(x + kVectorStride * c, load4(x + kVectorStride * c) * d_inv[node.first_column + c]);
-    for (std::int32_t i = 0; i < node.row_count; ++i) {
-      const double* b = block + static_cast<std::int64_t>(i) * k;
-      const Vec4 source = load4(xyzw + kVectorStride * r[i]);
-      for (std::int32_t c = 0; c < k; ++c) store4(x + kVectorStride * c, load4(x + kVectorStride * c) - b[c] * source);
+    std::int32_t c = 0;
+    for (; c + 4 <= k; c += 4) {
+      Vec4 s0 = load4(x + S * c) * dk[c];
+      Vec4 s1 = load4(x + S * (c + 1)) * dk[c + 1];
+      Vec4 s2 = load4(x + S * (c + 2)) * dk[c + 2];
+      Vec4 s3 = load4(x + S * (c + 3)) * dk[c + 3];
+      const double* b = block + c;
+      for (std::int32_t i = 0; i < n; ++i, b += k) {
+        const Vec4 source = load4(xyzw + S * r[i]);
+        s0 -= b[0] * source;
+        s1 -= b[1] * source;
+        s2 -= b[2] * source;
+        s3 -= b[3] * source;
+      }
+      store4(x + S * c, s0);
+      store4(x + S * (c + 1), s1);
+      store4(x + S * (c + 2), s2);
+      store4(x + S * (c + 3), s3);
     }
-    for (std::int32_t c = k - 2; c >= 0; --c) {
-      Vec4 sum = load4(x + kVectorStride * c);
-      for (std::int32_t i = c + 1; i < k; ++i) sum -= triangle[static_cast<std::int64_t>(i) * k + c] * load4(x + kVectorStride * i);
-      store4(x + kVectorStride * c, sum);
+    for (; c < k; ++c) {
+      Vec4 sum = load4(x + S * c) * dk[c];
+      const double* b = block + c;
+      for (std::int32_t i = 0; i < n; ++i, b += k) sum -= b[0] * load4(xyzw + S * r[i]);
+      store4(x + S * c, sum);
+    }
+    for (c = k - 2; c >= 0; --c) {
+      Vec4 sum = load4(x + S * c);
+      for (std::int32_t i = c + 1; i < k; ++i) sum -= triangle[static_cast<std::int64_t>(i) * k + c] * load4(x + S * i);
+      store4(x + S * c, sum);
     }
   }
 }

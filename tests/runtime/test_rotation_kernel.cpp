@@ -19,7 +19,20 @@ struct KernelScene {
   std::vector<double> weights;
   std::vector<TetBlock> blocks;
   std::vector<double> xyz;  // deformed positions, kVectorStride per vertex, mesh order (= solver order here)
+  std::vector<std::uint8_t> exact_lanes;  // rotationPass scratch
 };
+
+RotationPassStats runPass(KernelScene& s, double* delta, int steps) {
+  return rotationPass(s.blocks.data(), static_cast<std::int32_t>(s.blocks.size()), s.xyz.data(), delta, steps,
+                      s.exact_lanes.data());
+}
+
+Vertices positions(const KernelScene& s) {
+  Vertices x(s.mesh.vertexCount(), 3);
+  for (std::int32_t v = 0; v < s.mesh.vertexCount(); ++v)
+    for (int c = 0; c < 3; ++c) x(v, c) = s.xyz[kVectorStride * static_cast<size_t>(v) + static_cast<size_t>(c)];
+  return x;
+}
 
 // A bar with a random smooth deformation plus noise; a few tets can invert when `inverted`.
 KernelScene makeScene(std::uint32_t seed, double noise) {
@@ -38,13 +51,14 @@ KernelScene makeScene(std::uint32_t seed, double noise) {
   }
   const std::int32_t m = s.mesh.tetCount();
   s.blocks.assign(static_cast<size_t>((m + kTetBlockWidth - 1) / kTetBlockWidth), TetBlock{});
+  s.exact_lanes.assign(s.blocks.size(), 0xff);
   for (std::int32_t t = 0; t < static_cast<std::int32_t>(s.blocks.size()) * kTetBlockWidth; ++t) {
     TetBlock& b = s.blocks[static_cast<size_t>(t / kTetBlockWidth)];
     const int l = t % kTetBlockWidth;
     b.rotation[0][l] = 1.0;
     b.rotation[1][l] = b.rotation[2][l] = b.rotation[3][l] = 0.0;
     const bool real = t < m;
-    for (int c = 0; c < 4; ++c) b.corner[c][l] = real ? s.mesh.tets(t, c) : 0;
+    for (int c = 0; c < 4; ++c) b.corner_offset[c][l] = real ? kVectorStride * s.mesh.tets(t, c) : 0;
     for (int i = 0; i < 9; ++i)
       b.edge_inverse[i][l] = real ? s.frames.edge_inverse[static_cast<size_t>(t)](i / 3, i % 3) : (i % 4 == 0);
     b.weight[l] = real ? s.weights[static_cast<size_t>(t)] : 0.0;
@@ -60,13 +74,11 @@ Eigen::Quaterniond laneRotation(const KernelScene& s, std::int32_t t) {
 
 TEST(RotationKernel, ConvergesToTheExactRotationAndMatchesTheReferenceDelta) {
   KernelScene s = makeScene(1, 0.02);
-  Vertices x(s.mesh.vertexCount(), 3);
-  for (std::int32_t v = 0; v < s.mesh.vertexCount(); ++v)
-    for (int c = 0; c < 3; ++c) x(v, c) = s.xyz[kVectorStride * static_cast<size_t>(v) + static_cast<size_t>(c)];
+  const Vertices x = positions(s);
   // Many passes of 2 steps from a cold start (identity): the warm start carries over between passes.
   RotationPassStats stats;
   for (int pass = 0; pass < 30; ++pass) {
-    stats = rotationPass(s.blocks.data(), static_cast<std::int32_t>(s.blocks.size()), s.xyz.data(), nullptr, 2);
+    stats = runPass(s, nullptr, 2);
   }
   std::vector<Eigen::Matrix3d> rotations;
   double energy = 0.0;
@@ -83,7 +95,7 @@ TEST(RotationKernel, ConvergesToTheExactRotationAndMatchesTheReferenceDelta) {
   EXPECT_NEAR(stats.energy, energy, 1e-10 * (1.0 + energy));
   // One more pass with the scatter: delta equals the reference G^T D g(R).
   std::vector<double> delta(s.xyz.size(), 0.0);
-  rotationPass(s.blocks.data(), static_cast<std::int32_t>(s.blocks.size()), s.xyz.data(), delta.data(), 2);
+  runPass(s, delta.data(), 2);
   const Vertices reference = differentialCoordinates(s.mesh, s.frames, s.weights, rotations);
   for (std::int32_t v = 0; v < s.mesh.vertexCount(); ++v)
     for (int c = 0; c < 3; ++c)
@@ -98,11 +110,8 @@ TEST(RotationKernel, InvertedTetsTakeTheExactProperRotation) {
   KernelScene s = makeScene(2, 0.0);
   // Reflect the whole deformed mesh through the plane x = 0: every tet is inverted.
   for (size_t v = 0; v < s.xyz.size(); v += kVectorStride) s.xyz[v] = -s.xyz[v];
-  Vertices x(s.mesh.vertexCount(), 3);
-  for (std::int32_t v = 0; v < s.mesh.vertexCount(); ++v)
-    for (int c = 0; c < 3; ++c) x(v, c) = s.xyz[kVectorStride * static_cast<size_t>(v) + static_cast<size_t>(c)];
-  const RotationPassStats stats =
-      rotationPass(s.blocks.data(), static_cast<std::int32_t>(s.blocks.size()), s.xyz.data(), nullptr, 2);
+  const Vertices x = positions(s);
+  const RotationPassStats stats = runPass(s, nullptr, 2);
   EXPECT_EQ(stats.exact_fallbacks, s.mesh.tetCount());
   for (std::int32_t t = 0; t < s.mesh.tetCount(); ++t) {
     const Eigen::Matrix3d f = deformationGradient(s.mesh, s.frames, x, t);
@@ -115,18 +124,53 @@ TEST(RotationKernel, InvertedTetsTakeTheExactProperRotation) {
 
 TEST(RotationKernel, EachPassNeverLowersAnyTetsTrace) {
   KernelScene s = makeScene(3, 0.3);  // heavy noise: far from converged, some tets inverted
-  Vertices x(s.mesh.vertexCount(), 3);
-  for (std::int32_t v = 0; v < s.mesh.vertexCount(); ++v)
-    for (int c = 0; c < 3; ++c) x(v, c) = s.xyz[kVectorStride * static_cast<size_t>(v) + static_cast<size_t>(c)];
+  const Vertices x = positions(s);
   std::vector<double> before(static_cast<size_t>(s.mesh.tetCount()), -1e300);
   for (int pass = 0; pass < 5; ++pass) {
-    rotationPass(s.blocks.data(), static_cast<std::int32_t>(s.blocks.size()), s.xyz.data(), nullptr, 1);
+    runPass(s, nullptr, 1);
     for (std::int32_t t = 0; t < s.mesh.tetCount(); ++t) {
       const Eigen::Matrix3d f = deformationGradient(s.mesh, s.frames, x, t);
       const double trace = (laneRotation(s, t).toRotationMatrix().cwiseProduct(f)).sum();
       EXPECT_GE(trace, before[static_cast<size_t>(t)] - 1e-12) << "tet " << t << " pass " << pass;
       before[static_cast<size_t>(t)] = trace;
     }
+  }
+}
+
+// Some tets inverted, most not: the exact fix-up after the pass replaces exactly the flagged
+// lanes' rotations, and corrects delta and the energy as if the pass had used them from the start.
+TEST(RotationKernel, MixedInvertedTetsGetTheExactRotationInDeltaAndEnergy) {
+  KernelScene s = makeScene(4, 0.25);
+  const Vertices x = positions(s);
+  std::vector<double> delta(s.xyz.size(), 0.0);
+  const RotationPassStats stats = runPass(s, delta.data(), 2);
+  std::int32_t inverted = 0;
+  std::vector<Eigen::Matrix3d> rotations;
+  double energy = 0.0;
+  for (std::int32_t t = 0; t < s.mesh.tetCount(); ++t) {
+    const Eigen::Matrix3d f = deformationGradient(s.mesh, s.frames, x, t);
+    const bool flagged = (s.exact_lanes[static_cast<size_t>(t / kTetBlockWidth)] >> (t % kTetBlockWidth)) & 1;
+    EXPECT_EQ(flagged, f.determinant() <= 1e-12) << "tet " << t;
+    const Eigen::Matrix3d r = laneRotation(s, t).toRotationMatrix();
+    if (f.determinant() <= 1e-12) {
+      ++inverted;
+      EXPECT_LT((r - closestRotation(f).toRotationMatrix()).norm(), 1e-9) << "tet " << t;
+    }
+    rotations.push_back(r);
+    energy += s.weights[static_cast<size_t>(t)] * (f - r).squaredNorm();
+  }
+  ASSERT_GT(inverted, 0) << "the scene must invert some tets";
+  ASSERT_LT(inverted, s.mesh.tetCount() / 2) << "and keep most of them proper";
+  EXPECT_EQ(stats.exact_fallbacks, inverted);
+  EXPECT_NEAR(stats.energy, energy, 1e-9 * (1.0 + energy));
+  const Vertices reference = differentialCoordinates(s.mesh, s.frames, s.weights, rotations);
+  for (std::int32_t v = 0; v < s.mesh.vertexCount(); ++v)
+    for (int c = 0; c < 3; ++c)
+      EXPECT_NEAR(delta[kVectorStride * static_cast<size_t>(v) + static_cast<size_t>(c)], reference(v, c), 1e-9);
+  // The padding lanes of the last block (weight 0) are never flagged.
+  const std::int32_t used = s.mesh.tetCount() % kTetBlockWidth;
+  if (used != 0) {
+    EXPECT_EQ(s.exact_lanes.back() >> used, 0);
   }
 }
 

@@ -31,6 +31,7 @@
 #pragma once
 
 #include "tetrig/ldlt_factor.hpp"
+#include "tetrig/aligned_vector.hpp"
 #include "tetrig/rotation_kernel.hpp"
 #include "tetrig/tet_mesh.hpp"
 
@@ -155,10 +156,10 @@ class Deformer {
 
   // Vertex ordering: free vertex v lives at solver index factor position; handle slot h at free_count_ + h.
   std::vector<std::int32_t> solver_index_;    // mesh vertex -> solver index
-  std::vector<double> rest_solver_;           // rest positions, solver order, kVectorStride per vertex
-  std::vector<double> x_;                     // current positions, solver order (free then handles)
-  std::vector<double> delta_;                 // differential coordinates, solver order
-  std::vector<double> rhs_constant_;          // -L_fh x_h + point terms, free part
+  AlignedVector<double> rest_solver_;           // rest positions, solver order, kVectorStride per vertex
+  AlignedVector<double> x_;                     // current positions, solver order (free then handles)
+  AlignedVector<double> delta_;                 // differential coordinates, solver order
+  AlignedVector<double> rhs_constant_;          // -L_fh x_h + point terms, free part
   std::vector<double> positions_;             // mesh order output
 
   // -L_fh as CSR over free rows (solver order), columns = handle slots.
@@ -180,6 +181,7 @@ class Deformer {
 
   // Tets in blocks.
   std::vector<TetBlock> blocks_;
+  std::vector<std::uint8_t> exact_lanes_;  // rotationPass scratch: one byte per block
   std::vector<std::int32_t> tet_slot_;  // mesh tet -> block * kTetBlockWidth + lane
 
   // Rotation interpolation: per oriented region, harmonic weights over tets and the rotation the

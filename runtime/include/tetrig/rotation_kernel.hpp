@@ -6,9 +6,10 @@
 //   R_j     <- warm-started refinement of R_j towards argmax tr(R^T F_j)       (eq. 2.7-2.8)
 //   energy  += a_j ||F_j - R_j||^2 = a_j (||F_j||^2 - 2 tr(R_j^T F_j) + 3)
 //   delta_ck += a_j R_j grad phi_k  (k = 0..2),  delta_c3 -= sum_k a_j R_j grad phi_k   (eq. 2.5)
-// Inverted or degenerate tets (det F_j <= 0) take the exact rotation (closestRotation).
+// Inverted or degenerate tets (det F_j <= 1e-12) take the exact rotation (closestRotation).
 // Structure of arrays per block so the lane loops vectorise (8 doubles = one AVX-512 register).
-// No allocation; the caller owns every buffer.
+// No allocation; the caller owns every buffer. Per-vertex buffers should be 64-byte aligned: a
+// vertex's (x, y, z, pad) then never straddles a cache line.
 #pragma once
 
 #include <cstdint>
@@ -18,7 +19,7 @@ namespace tetrig {
 inline constexpr int kTetBlockWidth = 8;
 
 struct alignas(64) TetBlock {
-  std::int32_t corner[4][kTetBlockWidth];     // solver-order vertex index of each corner
+  std::int32_t corner_offset[4][kTetBlockWidth];  // kVectorStride * solver-order vertex index of each corner
   double edge_inverse[9][kTetBlockWidth];     // E^-1, row-major (rows: grad phi_1..3)
   double weight[kTetBlockWidth];              // a_j = stiffness * volume; 0 on padding lanes
   double rotation[4][kTetBlockWidth];         // R_j as a unit quaternion (w, x, y, z)
@@ -31,9 +32,10 @@ struct RotationPassStats {
 
 // Updates every rotation from positions `xyz` (kVectorStride doubles per vertex: x, y, z, pad;
 // solver order) with `steps` refinement steps; if `delta` is not null, also adds each tet's a R G
-// into it (same layout; the caller zeroes it first).
+// into it (same layout; the caller zeroes it first). `exact_lanes` is the caller's scratch of
+// block_count bytes: the pass writes there which lanes took the exact rotation (bit l = lane l).
 RotationPassStats rotationPass(TetBlock* blocks, std::int32_t block_count, const double* xyz, double* delta,
-                               int steps);
+                               int steps, std::uint8_t* exact_lanes);
 
 // The instruction set the kernels run with on this machine ("avx512f", "avx2", "baseline").
 const char* rotationKernelInstructionSet();
