@@ -152,13 +152,16 @@ Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(s
         if (fr >= 0) rows[static_cast<size_t>(factor_.position(fr))].emplace_back(h, -it.value());
       }
     }
-    coupling_start_.assign(static_cast<size_t>(free_count_) + 1, 0);
+    // Only rows next to a handle: the others' -L_fh x_h is 0 and never changes.
+    coupling_start_.push_back(0);
     for (std::int32_t i = 0; i < free_count_; ++i) {
+      if (rows[static_cast<size_t>(i)].empty()) continue;
+      coupling_row_.push_back(i);
       for (auto [h, value] : rows[static_cast<size_t>(i)]) {
         coupling_handle_.push_back(h);
         coupling_value_.push_back(value);
       }
-      coupling_start_[static_cast<size_t>(i) + 1] = static_cast<std::int32_t>(coupling_handle_.size());
+      coupling_start_.push_back(static_cast<std::int32_t>(coupling_handle_.size()));
     }
   }
 
@@ -338,20 +341,25 @@ void Deformer::updateConstantRhs() {
     out[1] = p[1];
     out[2] = p[2];
   }
-  // -L_fh x_h.
+  // Rows that take point terms start again from 0 (the coupling loop below overwrites its rows).
+  for (const std::int32_t s : point_corner_) {
+    if (s < free_count_) std::fill_n(&rhs_constant_[kVectorStride * static_cast<size_t>(s)], 3, 0.0);
+  }
+  // -L_fh x_h, on the rows next to a handle (0 elsewhere, and never changes there).
   const double* handles = x_.data() + kVectorStride * static_cast<size_t>(free_count_);
-  for (std::int32_t i = 0; i < free_count_; ++i) {
+  for (size_t r = 0; r < coupling_row_.size(); ++r) {
+    const auto i = static_cast<size_t>(coupling_row_[r]);
     double s0 = 0.0, s1 = 0.0, s2 = 0.0;
-    for (auto p = coupling_start_[static_cast<size_t>(i)]; p < coupling_start_[static_cast<size_t>(i) + 1]; ++p) {
+    for (auto p = coupling_start_[r]; p < coupling_start_[r + 1]; ++p) {
       const double* xh = handles + kVectorStride * coupling_handle_[static_cast<size_t>(p)];
       const double value = coupling_value_[static_cast<size_t>(p)];
       s0 += value * xh[0];
       s1 += value * xh[1];
       s2 += value * xh[2];
     }
-    rhs_constant_[kVectorStride * static_cast<size_t>(i)] = s0;
-    rhs_constant_[kVectorStride * static_cast<size_t>(i) + 1] = s1;
-    rhs_constant_[kVectorStride * static_cast<size_t>(i) + 2] = s2;
+    rhs_constant_[kVectorStride * i] = s0;
+    rhs_constant_[kVectorStride * i + 1] = s1;
+    rhs_constant_[kVectorStride * i + 2] = s2;
   }
   // Point handles: lambda b_a (p - sum_{handle corners h} b_h x_h) for each free corner a.
   for (size_t p = 0; p < point_targets_.size(); ++p) {

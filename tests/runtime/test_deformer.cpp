@@ -345,6 +345,14 @@ TEST(Deformer, PointHandlesPullTheirPointSoftly) {
   std::printf("point handle: moved 2.0, residual %.4f\n", (reached - goal[0]).norm());
   EXPECT_LT((reached - goal[0]).norm(), 0.05);  // soft, but close (lambda = 1e3 x mean diag L)
   EXPECT_GT((reached - rest_point).norm(), 1.9);
+  // Back to the rest target: the rest shape again (no point term of an earlier frame lingers).
+  const std::vector<Eigen::Vector3d> back = {rest_point};
+  targets.point_positions = back;
+  for (int f = 0; f < 40; ++f) deformer.step(targets, StepBudget{50});
+  double worst = 0.0;
+  for (std::int32_t v = 0; v < bar.mesh.vertexCount(); ++v)
+    worst = std::max(worst, (deformer.position(v) - bar.mesh.vertices.row(v).transpose()).norm());
+  EXPECT_LT(worst, 1e-6);
 }
 
 TEST(Deformer, SetupErrorsNameTheProblem) {

@@ -162,8 +162,9 @@ class Deformer {
   AlignedVector<double> rhs_constant_;          // -L_fh x_h + point terms, free part
   std::vector<double> positions_;             // mesh order output
 
-  // -L_fh as CSR over free rows (solver order), columns = handle slots.
-  std::vector<std::int32_t> coupling_start_, coupling_handle_;
+  // -L_fh as CSR over the free rows next to a handle (coupling_row_: their solver index),
+  // columns = handle slots.
+  std::vector<std::int32_t> coupling_row_, coupling_start_, coupling_handle_;
   std::vector<double> coupling_value_;
 
   // Handles. Handle slot h: mesh vertex handle_vertex_[h], driven by vertex target or region.
