@@ -99,6 +99,9 @@ TEST(RealRig, SmplBoundToHdm05Markers) {
   EXPECT_LE(med, 0.03);
   // Max: the brief asks <= 8 cm; the wider stance of the subject keeps the lateral foot markers
   // at ~10.6 cm for the least-squares similarity (see the comment above): asserted at 12 cm.
+  // Measured alternatives (docs/rig-builder.md): the lowest max any similarity near this one
+  // reaches is 8.7 cm (minimax fit, median 3.9 cm); the 1.8 / 6.1 cm is matched only by a
+  // free-scale point-to-plane ICP (1.80 / 5.88 cm) that shrinks the markers to 69 % of their size.
   EXPECT_LE(worst, 0.12);
 
   // Every marker is bound by positive invisible tets to three body vertices.

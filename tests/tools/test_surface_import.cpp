@@ -1,4 +1,5 @@
 // Surface import (assimp + welding) and validation/repair of the rig builder.
+#include "tetrig/rigbuild/file_vertex_list.hpp"
 #include "tetrig/rigbuild/import_surface.hpp"
 #include "tetrig/rigbuild/validate_surface.hpp"
 #include "tetrig/rigbuild/weld_vertices.hpp"
@@ -6,11 +7,16 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <array>
+#include <bit>
 #include <cctype>
 #include <cstdint>
 #include <limits>
 #include <cstring>
 #include <filesystem>
+#include <iterator>
+#include <optional>
 #include <fstream>
 #include <sstream>
 #include <string>
@@ -161,6 +167,203 @@ TEST(ImportSurface, CubeInEveryFormat) {
   expectUnitCube(dir.write("cube.gltf", gltf.str()), 2.0);
 }
 
+// ---- file vertex order (OBJ, OFF, PLY keep the file's order) ----
+
+// Triangles as sorted lists of corner triples, each rotated so its smallest index comes first
+// (orientation kept): equal lists = the same triangles over the same vertex numbering.
+std::vector<std::array<std::int32_t, 3>> canonicalTriangles(const Triangles& t) {
+  std::vector<std::array<std::int32_t, 3>> out;
+  for (Eigen::Index f = 0; f < t.rows(); ++f) {
+    std::array<std::int32_t, 3> c{t(f, 0), t(f, 1), t(f, 2)};
+    while (c[0] > c[1] || c[0] > c[2]) std::rotate(c.begin(), c.begin() + 1, c.end());
+    out.push_back(c);
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+void appendBytes(std::string& out, const void* p, std::size_t n, bool big) {
+  const auto* b = static_cast<const unsigned char*>(p);
+  for (std::size_t i = 0; i < n; ++i) out += static_cast<char>(b[big ? n - 1 - i : i]);  // the host is little-endian
+}
+
+// The unit cube scaled by 0.3 and shifted by 0.1 (coordinates not representable in float), its
+// vertices written in a scrambled order: file vertex i is cube corner kPerm[i]. The first face
+// uses file vertices 3, 1, 4, so "order of first use" differs from file order.
+constexpr int kPerm[8] = {5, 2, 7, 0, 3, 6, 1, 4};
+
+TEST(ImportSurface, KeepsTheFileVertexOrder) {
+  ASSERT_EQ(std::endian::native, std::endian::little);
+  TempDir dir;
+  SurfaceMesh file;  // what the files say, in file numbering
+  file.vertices.resize(8, 3);
+  int inverse[8];
+  for (int i = 0; i < 8; ++i) {
+    file.vertices.row(i) = corner(kPerm[i]) * 0.3 + Eigen::RowVector3d::Constant(0.1);
+    inverse[kPerm[i]] = i;
+  }
+  const SurfaceMesh c = cube();
+  file.triangles.resize(12, 3);
+  for (int f = 0; f < 12; ++f) {
+    for (int k = 0; k < 3; ++k) file.triangles(f, k) = inverse[c.triangles(f, k)];
+  }
+  ASSERT_EQ(file.triangles.row(0), (Eigen::Matrix<std::int32_t, 1, 3>(3, 1, 4)));
+
+  std::ostringstream obj, off, ply;
+  obj.precision(17);
+  off.precision(17);
+  ply.precision(17);
+  off << "OFF\n# a comment\n8 12 0\n";
+  ply << "ply\nformat ascii 1.0\ncomment written by the test\nelement vertex 8\nproperty double x\nproperty double y\n"
+         "property double z\nelement face 12\nproperty list uchar int vertex_indices\nend_header\n";
+  for (int i = 0; i < 8; ++i) {
+    const Eigen::RowVector3d p = file.vertices.row(i);
+    obj << "v " << p[0] << ' ' << p[1] << ' ' << p[2] << "\n";
+    off << p[0] << ' ' << p[1] << ' ' << p[2] << "\n";
+    ply << p[0] << ' ' << p[1] << ' ' << p[2] << "\n";
+  }
+  for (int f = 0; f < 12; ++f) {
+    const auto t = file.triangles.row(f);
+    obj << "f " << t[0] + 1 << ' ' << t[1] + 1 << ' ' << t[2] + 1 << "\n";
+    off << "3 " << t[0] << ' ' << t[1] << ' ' << t[2] << "\n";
+    ply << "3 " << t[0] << ' ' << t[1] << ' ' << t[2] << "\n";
+  }
+  // Binary PLY, both byte orders: float positions plus an extra per-vertex byte to skip.
+  std::string binary[2];
+  for (int big = 0; big < 2; ++big) {
+    std::string& b = binary[big];
+    b = std::string("ply\nformat ") + (big ? "binary_big_endian" : "binary_little_endian") +
+        " 1.0\nelement vertex 8\nproperty float x\nproperty float y\nproperty float z\nproperty uchar flags\n"
+        "element face 12\nproperty list uchar int vertex_indices\nend_header\n";
+    for (int i = 0; i < 8; ++i) {
+      for (int k = 0; k < 3; ++k) {
+        const float x = static_cast<float>(file.vertices(i, k));
+        appendBytes(b, &x, 4, big != 0);
+      }
+      b += static_cast<char>(0x7f);
+    }
+    for (int f = 0; f < 12; ++f) {
+      b += static_cast<char>(3);
+      for (int k = 0; k < 3; ++k) {
+        const std::int32_t v = file.triangles(f, k);
+        appendBytes(b, &v, 4, big != 0);
+      }
+    }
+  }
+  const std::vector<std::array<std::int32_t, 3>> expected_triangles = canonicalTriangles(file.triangles);
+  struct Case {
+    std::filesystem::path path;
+    bool single_precision;
+  };
+  const Case cases[] = {{dir.write("order.obj", obj.str()), false},
+                        {dir.write("order.off", off.str()), false},
+                        {dir.write("order.ply", ply.str()), false},
+                        {dir.write("order_le.ply", binary[0]), true},
+                        {dir.write("order_be.ply", binary[1]), true}};
+  for (const Case& k : cases) {
+    SCOPED_TRACE(k.path.filename().string());
+    ImportStats stats;
+    const SurfaceMesh m = importSurface(k.path, {}, &stats);
+    EXPECT_TRUE(stats.file_order);
+    EXPECT_EQ(stats.file_vertices, 8);
+    EXPECT_EQ(stats.unreferenced_vertices, 0);
+    ASSERT_EQ(m.vertexCount(), 8);
+    for (int i = 0; i < 8; ++i) {
+      for (int a = 0; a < 3; ++a) {
+        // Text: the file's double itself (not assimp's float); binary float: that float.
+        const double want = k.single_precision ? static_cast<double>(static_cast<float>(file.vertices(i, a))) : file.vertices(i, a);
+        EXPECT_EQ(m.vertices(i, a), want) << "vertex " << i << " axis " << a;
+      }
+      EXPECT_EQ(stats.file_to_vertex[static_cast<std::size_t>(i)], i);
+    }
+    EXPECT_EQ(canonicalTriangles(m.triangles), expected_triangles);
+  }
+
+  // The vertex-list reader on every truncation of these files: a list of at most 8 vertices, each
+  // one of the file's (a cut inside the last number may shorten it), or nothing; never a throw.
+  for (const Case& k : cases) {
+    SCOPED_TRACE(k.path.filename().string());
+    std::ifstream in(k.path, std::ios::binary);
+    const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const std::filesystem::path cut = dir.write("cut" + k.path.extension().string(), "");
+    for (std::size_t n = 0; n < bytes.size(); ++n) {
+      std::ofstream(cut, std::ios::binary | std::ios::trunc) << bytes.substr(0, n);
+      std::optional<Vertices> list;
+      ASSERT_NO_THROW(list = readFileVertexList(cut)) << n;
+      if (list) {
+        ASSERT_LE(list->rows(), 8) << n;
+      }
+    }
+    const std::optional<Vertices> full = readFileVertexList(k.path);
+    ASSERT_TRUE(full.has_value());
+    EXPECT_EQ(full->rows(), 8);
+  }
+  // Absurd counts are refused before anything is allocated for them.
+  EXPECT_FALSE(readFileVertexList(dir.write("huge.off", "OFF\n2000000000 1 0\n0 0 0\n")).has_value());
+  EXPECT_FALSE(readFileVertexList(dir.write("huge.ply", "ply\nformat binary_little_endian 1.0\nelement vertex 2000000000\n"
+                                                         "property double x\nproperty double y\nproperty double z\nend_header\n"))
+                   .has_value());
+  EXPECT_FALSE(readFileVertexList(dir.write("mesh.stl", "solid x\nendsolid x\n")).has_value());  // no shared list
+}
+
+TEST(ImportSurface, DuplicateAndUnusedFileVertices) {
+  // File vertices: 0..1 = cube corners kPerm[0..1], 2 = an unused point, 3..8 = corners kPerm[2..7],
+  // 9 = an exact copy of vertex 0 that half of the faces use instead of vertex 0.
+  TempDir dir;
+  std::vector<Eigen::RowVector3d> v;
+  int file_of_corner[8];
+  for (int i = 0; i < 8; ++i) {
+    if (i == 2) v.push_back(Eigen::RowVector3d(5, 5, 5));
+    file_of_corner[kPerm[i]] = static_cast<int>(v.size());
+    v.push_back(corner(kPerm[i]));
+  }
+  v.push_back(v[0]);
+  std::ostringstream obj;
+  for (const auto& p : v) obj << "v " << p[0] << ' ' << p[1] << ' ' << p[2] << "\n";
+  const SurfaceMesh c = cube();
+  int uses_copy = 0;
+  for (int f = 0; f < 12; ++f) {
+    obj << "f";
+    for (int k = 0; k < 3; ++k) {
+      int id = file_of_corner[c.triangles(f, k)];
+      if (id == 0 && (f % 2) == 1) {
+        id = 9;
+        ++uses_copy;
+      }
+      obj << ' ' << id + 1;
+    }
+    obj << "\n";
+  }
+  ASSERT_GT(uses_copy, 0);
+  ImportStats stats;
+  SurfaceMesh m = importSurface(dir.write("dup.obj", obj.str()), {}, &stats);
+  EXPECT_TRUE(stats.file_order);
+  EXPECT_EQ(stats.file_vertices, 10);
+  EXPECT_EQ(stats.welded_vertices, 1);        // the copy joins vertex 0
+  EXPECT_EQ(stats.unreferenced_vertices, 1);  // the unused point is still there
+  ASSERT_EQ(m.vertexCount(), 9);
+  ASSERT_EQ(stats.file_to_vertex.size(), 10u);
+  for (int i = 0; i < 9; ++i) EXPECT_EQ(stats.file_to_vertex[static_cast<std::size_t>(i)], i);
+  EXPECT_EQ(stats.file_to_vertex[9], 0);
+  for (int i = 0; i < 9; ++i) EXPECT_EQ(m.vertices.row(i), v[static_cast<std::size_t>(i)]) << i;
+
+  // Validation removes the unused point: later ids shift down by one.
+  const SurfaceReport r = validateSurface(m);
+  EXPECT_TRUE(r.ok()) << r.summary();
+  ASSERT_EQ(m.vertexCount(), 8);
+  ASSERT_EQ(r.vertex_map.size(), 9u);
+  EXPECT_EQ(r.vertex_map[0], 0);
+  EXPECT_EQ(r.vertex_map[1], 1);
+  EXPECT_EQ(r.vertex_map[2], -1);
+  for (int i = 3; i < 9; ++i) EXPECT_EQ(r.vertex_map[static_cast<std::size_t>(i)], i - 1);
+  for (int i = 0; i < 9; ++i) {
+    if (r.vertex_map[static_cast<std::size_t>(i)] >= 0) {
+      EXPECT_EQ(m.vertices.row(r.vertex_map[static_cast<std::size_t>(i)]), v[static_cast<std::size_t>(i)]);
+    }
+  }
+  EXPECT_NEAR(r.volume, 1.0, 1e-12);
+}
+
 TEST(ImportSurface, MissingAndUnreadableFiles) {
   TempDir dir;
   try {
@@ -248,6 +451,13 @@ TEST(ValidateSurface, KeepLargestComponentOnRequest) {
   EXPECT_EQ(r.dropped_component_faces, 12);
   EXPECT_NEAR(r.volume, 1.0, 1e-12);
   EXPECT_LT(m.vertices.col(0).maxCoeff(), 1.5);  // the small cube at x = 3 is gone
+  // vertex_map: the first cube's 8 corners keep their ids, the small cube's 8 are gone, the
+  // face-centre vertex (input 16) moves down to 8.
+  ASSERT_EQ(r.vertex_map.size(), 17u);
+  for (int v = 0; v < 8; ++v) EXPECT_EQ(r.vertex_map[static_cast<std::size_t>(v)], v);
+  for (int v = 8; v < 16; ++v) EXPECT_EQ(r.vertex_map[static_cast<std::size_t>(v)], -1);
+  EXPECT_EQ(r.vertex_map[16], 8);
+  EXPECT_EQ(m.vertices.row(8), Eigen::RowVector3d(0.7, 0.3, 1.0));
 }
 
 // ---- validation: refusals, with what to do ----
@@ -331,6 +541,63 @@ TEST_P(RealSurface, ImportsAndValidatesClosedGenusZero) {
   EXPECT_EQ(r.genus, 0);
   EXPECT_EQ(r.components, 1);
   EXPECT_GT(r.volume, 0.0);
+}
+
+// The real file read by the test itself (OBJ "v"/"f" lines, OFF): imported vertex i is the
+// file's vertex i at the file's coordinates, the triangles are the file's faces, and validation
+// (the files are clean) keeps every vertex where it is.
+TEST_P(RealSurface, KeepsTheFileVertexOrder) {
+  TETRIG_REQUIRE_DATA(path, GetParam().path);
+  std::vector<Eigen::RowVector3d> v;
+  std::vector<std::array<std::int32_t, 3>> faces;
+  std::ifstream in(path);
+  if (path.extension() == ".off") {
+    std::string magic;
+    std::size_t nv = 0, nf = 0, ne = 0;
+    in >> magic >> nv >> nf >> ne;
+    ASSERT_EQ(magic, "OFF");
+    v.resize(nv);
+    for (auto& p : v) in >> p[0] >> p[1] >> p[2];
+    for (std::size_t f = 0; f < nf; ++f) {
+      int n = 0;
+      std::array<std::int32_t, 3> t{};
+      in >> n >> t[0] >> t[1] >> t[2];
+      ASSERT_EQ(n, 3);
+      faces.push_back(t);
+    }
+  } else {
+    for (std::string line; std::getline(in, line);) {
+      std::istringstream s(line);
+      std::string tag;
+      s >> tag;
+      if (tag == "v") {
+        Eigen::RowVector3d p;
+        s >> p[0] >> p[1] >> p[2];
+        v.push_back(p);
+      } else if (tag == "f") {
+        std::vector<std::int32_t> ids;
+        for (std::string corner_text; s >> corner_text;) ids.push_back(std::stoi(corner_text.substr(0, corner_text.find('/'))) - 1);
+        ASSERT_EQ(ids.size(), 3u);
+        faces.push_back({ids[0], ids[1], ids[2]});
+      }
+    }
+  }
+  ASSERT_EQ(static_cast<std::int32_t>(v.size()), GetParam().vertices);
+  ImportStats stats;
+  SurfaceMesh m = importSurface(path, {}, &stats);
+  EXPECT_TRUE(stats.file_order);
+  ASSERT_EQ(m.vertexCount(), GetParam().vertices);
+  std::int32_t mismatched = 0;
+  for (std::int32_t i = 0; i < m.vertexCount(); ++i) {
+    if (m.vertices.row(i) != v[static_cast<std::size_t>(i)]) ++mismatched;
+  }
+  EXPECT_EQ(mismatched, 0);
+  Triangles t(static_cast<Eigen::Index>(faces.size()), 3);
+  for (std::size_t f = 0; f < faces.size(); ++f) t.row(static_cast<Eigen::Index>(f)) << faces[f][0], faces[f][1], faces[f][2];
+  EXPECT_TRUE(canonicalTriangles(m.triangles) == canonicalTriangles(t));
+  const SurfaceReport r = validateSurface(m);
+  ASSERT_EQ(m.vertexCount(), GetParam().vertices);
+  for (std::int32_t i = 0; i < m.vertexCount(); ++i) ASSERT_EQ(r.vertex_map[static_cast<std::size_t>(i)], i);
 }
 
 INSTANTIATE_TEST_SUITE_P(

@@ -17,7 +17,6 @@
 #include <cstdio>
 #include <fstream>
 #include <limits>
-#include <map>
 #include <sstream>
 #include <unordered_map>
 
@@ -36,48 +35,6 @@ std::string fmt(const char* f, double v) {
   char buf[64];
   std::snprintf(buf, sizeof buf, f, v);
   return buf;
-}
-
-// Vertex positions in file order for OBJ ("v x y z") and OFF files: importers reorder vertices
-// (assimp emits one vertex per face corner; welding keeps first appearance), but vertex-id
-// selections (and deformation-survey .sel files) count vertices in file order. Empty for other
-// formats (ids then refer to the imported order).
-std::vector<Eigen::Vector3d> fileVertexOrder(const std::filesystem::path& path) {
-  const std::string ext = lower(path.extension().string());
-  std::vector<Eigen::Vector3d> out;
-  std::ifstream in(path);
-  if (!in) return out;
-  std::string line;
-  if (ext == ".obj") {
-    while (std::getline(in, line)) {
-      if (line.size() > 2 && line[0] == 'v' && (line[1] == ' ' || line[1] == '\t')) {
-        std::istringstream s(line.substr(2));
-        Eigen::Vector3d v;
-        if (!(s >> v.x() >> v.y() >> v.z())) return {};
-        out.push_back(v);
-      }
-    }
-  } else if (ext == ".off") {
-    std::vector<std::string> tokens;
-    std::string tok;
-    while (std::getline(in, line)) {
-      const std::size_t hash = line.find('#');
-      if (hash != std::string::npos) line.resize(hash);
-      std::istringstream s(line);
-      while (s >> tok) tokens.push_back(tok);
-    }
-    if (tokens.size() < 4 || tokens[0] != "OFF") return {};
-    try {
-      const std::size_t nv = std::stoull(tokens[1]);
-      if (tokens.size() < 4 + 3 * nv) return {};
-      for (std::size_t i = 0; i < nv; ++i) {
-        out.emplace_back(std::stod(tokens[4 + 3 * i]), std::stod(tokens[5 + 3 * i]), std::stod(tokens[6 + 3 * i]));
-      }
-    } catch (const std::exception&) {
-      return {};
-    }
-  }
-  return out;
 }
 
 std::vector<std::int32_t> readSelFile(const std::filesystem::path& path) {
@@ -354,50 +311,32 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
   } else {
     auto t0 = Clock::now();
     prog.begin("importing " + inputs.mesh.filename().string());
-    fine = importSurface(inputs.mesh);
-    const std::int32_t imported = fine.vertexCount();
+    ImportStats import_stats;
+    fine = importSurface(inputs.mesh, {}, &import_stats);
     SurfaceReport surface_report = validateSurface(fine);
     requireUsableSurface(surface_report, inputs.mesh.string());
     report.import_seconds = since(t0);
     prog.end(surface_report.summary());
-    // File order of vertices, for vertex-id selections.
-    const std::vector<Eigen::Vector3d> order = fileVertexOrder(inputs.mesh);
-    if (!order.empty()) {
-      // Keys rounded to float: importers (assimp) keep single precision.
-      auto key = [](double x, double y, double z) {
-        return std::array<float, 3>{static_cast<float>(x), static_cast<float>(y), static_cast<float>(z)};
-      };
-      std::map<std::array<float, 3>, std::int32_t> index;
-      for (std::int32_t v = 0; v < fine.vertexCount(); ++v) index.emplace(key(fine.vertices(v, 0), fine.vertices(v, 1), fine.vertices(v, 2)), v);
-      ctx.file_to_fine.resize(order.size(), -1);
-      std::size_t unmatched = 0;
-      for (std::size_t i = 0; i < order.size(); ++i) {
-        const auto it = index.find(key(order[i].x(), order[i].y(), order[i].z()));
-        if (it != index.end()) {
-          ctx.file_to_fine[i] = it->second;
-          continue;
-        }
-        // Parsers round differently in the last bit: take the nearest vertex within 1e-6 of the diagonal.
-        std::int32_t best = -1;
-        double best_d = std::numeric_limits<double>::infinity();
-        for (std::int32_t v = 0; v < fine.vertexCount(); ++v) {
-          const double d = (fine.vertices.row(v).transpose() - order[i]).squaredNorm();
-          if (d < best_d) {
-            best_d = d;
-            best = v;
-          }
-        }
-        if (std::sqrt(best_d) <= 1e-6 * surface_report.bbox_diagonal) {
-          ctx.file_to_fine[i] = best;
-        } else {
-          ++unmatched;
-        }
+    // Vertex ids of selections: file order for OBJ, OFF and PLY (importSurface keeps it; welding and
+    // the repairs may merge or drop vertices, vertex_map says where each went), else the fine order.
+    if (import_stats.file_order) {
+      ctx.file_to_fine.resize(import_stats.file_to_vertex.size());
+      for (std::size_t i = 0; i < ctx.file_to_fine.size(); ++i) {
+        const std::int32_t v = import_stats.file_to_vertex[i];
+        ctx.file_to_fine[i] = v >= 0 ? surface_report.vertex_map[static_cast<std::size_t>(v)] : -1;
       }
-      if (unmatched > 0) report.notes.push_back(std::to_string(unmatched) + " file vertices have no imported vertex (vertex-id selections skip them)");
+      std::int32_t identical = 0;
+      while (identical < fine.vertexCount() && ctx.file_to_fine[static_cast<std::size_t>(identical)] == identical) ++identical;
+      if (identical < import_stats.file_vertices) {
+        report.notes.push_back("fine vertex i is file vertex i up to " + std::to_string(identical) + " only: " +
+                               std::to_string(import_stats.welded_vertices + surface_report.welded_vertices) + " duplicate and " +
+                               std::to_string(surface_report.removed_unused_vertices) +
+                               " unused file vertices were merged or removed (later ids shift down)");
+      }
     } else {
       ctx.file_to_fine.resize(static_cast<std::size_t>(fine.vertexCount()));
       for (std::int32_t v = 0; v < fine.vertexCount(); ++v) ctx.file_to_fine[static_cast<std::size_t>(v)] = v;
-      if (imported != fine.vertexCount()) report.notes.push_back("vertex ids refer to the repaired surface's order");
+      report.notes.push_back("vertex ids refer to the repaired surface's order (the format has no shared vertex list)");
     }
     t0 = Clock::now();
     prog.begin("decimating to " + std::to_string(target) + " vertices and tetrahedralizing (TetGen)");

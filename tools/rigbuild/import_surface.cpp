@@ -1,21 +1,109 @@
 // Surface import through the Open Asset Import Library (assimp): the scene's meshes are
 // triangulated, pre-transformed by their node transforms and concatenated; only positions and
-// triangles are kept, then duplicate positions are welded (weldVertices) because most importers
-// split vertices at normal/UV seams or per face (OBJ, STL).
+// triangles are kept. assimp emits one vertex per face corner for OBJ, OFF and PLY and loses the
+// file's vertex indices, so for those formats every corner is matched back to the file's own
+// vertex list (readFileVertexList) by position, and the file's list, in file order, becomes the
+// vertex array. Then positions closer than the weld tolerance are welded (weldVertices, the
+// earliest vertex wins), which also joins the per-corner vertices of formats without a shared
+// list (STL) and the seam splits of others (glTF, FBX).
 #include "tetrig/rigbuild/import_surface.hpp"
 
+#include "tetrig/rigbuild/file_vertex_list.hpp"
 #include "tetrig/rigbuild/weld_vertices.hpp"
 
 #include <assimp/Importer.hpp>
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
 
+#include <algorithm>
+#include <array>
+#include <bit>
+#include <cfloat>
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <string>
 #include <system_error>
+#include <unordered_map>
 
 namespace tetrig::rigbuild {
+namespace {
+
+struct Key3 {
+  std::array<std::int64_t, 3> k;
+  bool operator==(const Key3& o) const { return k == o.k; }
+};
+struct Key3Hash {
+  std::size_t operator()(const Key3& key) const {
+    std::uint64_t h = static_cast<std::uint64_t>(key.k[0]) * 0x9E3779B97F4A7C15ull;
+    h ^= static_cast<std::uint64_t>(key.k[1]) * 0xC2B2AE3D27D4EB4Full + (h << 6) + (h >> 2);
+    h ^= static_cast<std::uint64_t>(key.k[2]) * 0x165667B19E3779F9ull + (h << 6) + (h >> 2);
+    return static_cast<std::size_t>(h);
+  }
+};
+
+// assimp keeps single precision: a file vertex is found by its coordinates rounded to float
+// (-0 and +0 alike).
+Key3 floatKey(const Eigen::RowVector3d& p) {
+  Key3 key{};
+  for (int i = 0; i < 3; ++i) key.k[static_cast<std::size_t>(i)] = std::bit_cast<std::uint32_t>(static_cast<float>(p[i]) + 0.0f);
+  return key;
+}
+
+// For each imported (assimp) vertex, the file vertex at its position: the earliest file vertex with
+// the same float-rounded coordinates, else (importers may round the last bits differently) the
+// nearest file vertex within 1e-6 of the diagonal plus a few float ulps. nullopt when a vertex
+// has no file vertex there (then the file's order cannot be trusted: the caller keeps assimp's).
+std::optional<std::vector<std::int32_t>> matchFileVertices(const Vertices& imported, const Vertices& file) {
+  std::unordered_map<Key3, std::int32_t, Key3Hash> exact;
+  exact.reserve(static_cast<std::size_t>(file.rows()));
+  for (Eigen::Index i = 0; i < file.rows(); ++i) {
+    if (!file.row(i).allFinite()) return std::nullopt;
+    exact.emplace(floatKey(file.row(i)), static_cast<std::int32_t>(i));
+  }
+  const double tolerance = 1e-6 * boundingBoxDiagonal(file) + 8.0 * FLT_EPSILON * file.cwiseAbs().maxCoeff();
+  std::unordered_map<Key3, std::vector<std::int32_t>, Key3Hash> grid;  // built on the first miss
+  auto cellOf = [tolerance](const Eigen::RowVector3d& p) {
+    Key3 key{};
+    for (int i = 0; i < 3; ++i) key.k[static_cast<std::size_t>(i)] = static_cast<std::int64_t>(std::floor(p[i] / tolerance));
+    return key;
+  };
+  std::vector<std::int32_t> out(static_cast<std::size_t>(imported.rows()), -1);
+  for (Eigen::Index v = 0; v < imported.rows(); ++v) {
+    const Eigen::RowVector3d p = imported.row(v);
+    if (const auto it = exact.find(floatKey(p)); it != exact.end()) {
+      out[static_cast<std::size_t>(v)] = it->second;
+      continue;
+    }
+    if (!(tolerance > 0.0) || !p.allFinite()) return std::nullopt;
+    if (grid.empty()) {
+      for (Eigen::Index i = 0; i < file.rows(); ++i) grid[cellOf(file.row(i))].push_back(static_cast<std::int32_t>(i));
+    }
+    const Key3 home = cellOf(p);
+    std::int32_t best = -1;
+    double best_d = tolerance;
+    for (std::int64_t dx = -1; dx <= 1; ++dx) {
+      for (std::int64_t dy = -1; dy <= 1; ++dy) {
+        for (std::int64_t dz = -1; dz <= 1; ++dz) {
+          const auto it = grid.find(Key3{{home.k[0] + dx, home.k[1] + dy, home.k[2] + dz}});
+          if (it == grid.end()) continue;
+          for (const std::int32_t i : it->second) {  // ascending: ties go to the earliest
+            const double d = (file.row(i) - p).norm();
+            if (d < best_d || (d == best_d && best < 0)) {
+              best_d = d;
+              best = i;
+            }
+          }
+        }
+      }
+    }
+    if (best < 0) return std::nullopt;
+    out[static_cast<std::size_t>(v)] = best;
+  }
+  return out;
+}
+
+}  // namespace
 
 SurfaceMesh importSurface(const std::filesystem::path& path, const ImportOptions& options, ImportStats* stats) {
   std::error_code ec;
@@ -91,9 +179,27 @@ SurfaceMesh importSurface(const std::filesystem::path& path, const ImportOptions
   }
   local.file_vertices = static_cast<std::int32_t>(vertex_total);
   local.file_triangles = static_cast<std::int32_t>(triangle_total);
+  // The file's own vertex list and order, where the format has one.
+  if (std::optional<Vertices> file = readFileVertexList(path); file && file->rows() > 0 && file->rows() <= std::numeric_limits<std::int32_t>::max()) {
+    if (const auto to_file = matchFileVertices(out.vertices, *file)) {
+      for (Eigen::Index f = 0; f < out.triangles.rows(); ++f) {
+        for (int k = 0; k < 3; ++k) out.triangles(f, k) = (*to_file)[static_cast<std::size_t>(out.triangles(f, k))];
+      }
+      out.vertices = std::move(*file);
+      local.file_order = true;
+      local.file_vertices = out.vertexCount();
+    }
+  }
   const double diagonal = boundingBoxDiagonal(out.vertices);
-  weldVertices(out, std::isfinite(diagonal) ? options.weld_tolerance * diagonal : 0.0);
+  local.file_to_vertex = weldVertices(out, std::isfinite(diagonal) ? options.weld_tolerance * diagonal : 0.0);
   local.welded_vertices = local.file_vertices - out.vertexCount();
+  if (local.file_order) {
+    std::vector<char> used(static_cast<std::size_t>(out.vertexCount()), 0);
+    for (Eigen::Index f = 0; f < out.triangles.rows(); ++f) {
+      for (int k = 0; k < 3; ++k) used[static_cast<std::size_t>(out.triangles(f, k))] = 1;
+    }
+    local.unreferenced_vertices = static_cast<std::int32_t>(std::count(used.begin(), used.end(), 0));
+  }
   if (stats != nullptr) *stats = local;
   return out;
 }

@@ -64,8 +64,9 @@ std::vector<HalfEdge> sortedHalfEdges(const SurfaceMesh& mesh) {
   return h;
 }
 
-// Keeps the faces with keep[f] and the vertices they use (order preserved).
-void compact(SurfaceMesh& mesh, const std::vector<char>& keep_face) {
+// Keeps the faces with keep[f] and the vertices they use (order preserved); returns old vertex ->
+// new vertex (-1 when removed).
+std::vector<std::int32_t> compact(SurfaceMesh& mesh, const std::vector<char>& keep_face) {
   std::int32_t nf = 0;
   for (std::int32_t f = 0; f < mesh.triangleCount(); ++f) {
     if (keep_face[static_cast<size_t>(f)]) mesh.triangles.row(nf++) = mesh.triangles.row(f);
@@ -86,6 +87,12 @@ void compact(SurfaceMesh& mesh, const std::vector<char>& keep_face) {
   for (std::int32_t f = 0; f < nf; ++f) {
     for (int k = 0; k < 3; ++k) mesh.triangles(f, k) = index[static_cast<size_t>(mesh.triangles(f, k))];
   }
+  return index;
+}
+
+// map[i] = step[map[i]] (removed stays removed).
+void composeMap(std::vector<std::int32_t>& map, const std::vector<std::int32_t>& step) {
+  for (std::int32_t& m : map) m = m >= 0 ? step[static_cast<size_t>(m)] : -1;
 }
 
 void flipFace(SurfaceMesh& mesh, std::int32_t f) { std::swap(mesh.triangles(f, 1), mesh.triangles(f, 2)); }
@@ -115,6 +122,8 @@ SurfaceReport validateSurface(SurfaceMesh& mesh, const ValidateOptions& options)
   SurfaceReport r;
   r.input_vertices = mesh.vertexCount();
   r.input_triangles = mesh.triangleCount();
+  r.vertex_map.resize(static_cast<size_t>(mesh.vertexCount()));
+  std::iota(r.vertex_map.begin(), r.vertex_map.end(), 0);
   auto finish = [&r, &mesh]() {
     r.vertices = mesh.vertexCount();
     r.triangles = mesh.triangleCount();
@@ -143,7 +152,7 @@ SurfaceReport validateSurface(SurfaceMesh& mesh, const ValidateOptions& options)
 
   // 1. Weld duplicate vertices.
   const std::int32_t before_weld = mesh.vertexCount();
-  weldVertices(mesh, options.weld_tolerance * r.bbox_diagonal);
+  composeMap(r.vertex_map, weldVertices(mesh, options.weld_tolerance * r.bbox_diagonal));
   r.welded_vertices = before_weld - mesh.vertexCount();
 
   // 2. Faces with a repeated corner, then duplicate faces (same corner set).
@@ -174,7 +183,7 @@ SurfaceReport validateSurface(SurfaceMesh& mesh, const ValidateOptions& options)
   }
   // 3. Unused vertices go with the compaction.
   const std::int32_t before_compact = mesh.vertexCount();
-  compact(mesh, keep);
+  composeMap(r.vertex_map, compact(mesh, keep));
   r.removed_unused_vertices = before_compact - mesh.vertexCount();
 
   // 4. Connected components (faces sharing a vertex are connected).
@@ -205,7 +214,7 @@ SurfaceReport validateSurface(SurfaceMesh& mesh, const ValidateOptions& options)
         }
         r.dropped_components = r.components - 1;
         r.components = 1;
-        compact(mesh, keep_largest);
+        composeMap(r.vertex_map, compact(mesh, keep_largest));
       } else {
         std::ostringstream s;
         s << "the surface has " << comps.size() << " separate components (faces per component: ";

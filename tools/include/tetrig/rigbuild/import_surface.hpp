@@ -1,6 +1,17 @@
 // Surface mesh import through assimp (OBJ, PLY, OFF, STL, glTF/GLB, FBX, ... whatever the
 // installed assimp reads), reduced to positions and triangles with duplicate vertices welded.
 //
+// Vertex order. Formats with a shared vertex list (OBJ "v" lines, OFF, PLY) keep the FILE's
+// order: imported vertex i is file vertex i, at the file's own (double) coordinates, so a rig's
+// fine mesh maps back to the asset vertex by vertex. The exceptions, all reported in ImportStats
+// and by validateSurface:
+//   - a file vertex at exactly (or within weld_tolerance of) the position of an EARLIER one is
+//     merged into the earlier one (faces are re-pointed, it disappears, later ids shift down by one);
+//   - vertices no face uses stay in the import but validateSurface removes them (later ids shift);
+//   - validateSurface's other repairs (keep_largest_component) may remove more.
+// ImportStats::file_to_vertex and SurfaceReport::vertex_map give the exact mapping in every case.
+// Other formats (STL, glTF, FBX, ...) get assimp's order with seams welded (first use wins).
+//
 // Offline, any thread, allocates, throws RigBuildError (file missing, unreadable, no triangles).
 #pragma once
 
@@ -8,6 +19,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <vector>
 
 namespace tetrig::rigbuild {
 
@@ -18,11 +30,16 @@ struct ImportOptions {
 };
 
 struct ImportStats {
-  std::int32_t file_vertices = 0;      // vertices as assimp delivered them (all meshes, unwelded)
+  bool file_order = false;             // true: vertex i (before welding) is the file's vertex i (see above)
+  std::int32_t file_vertices = 0;      // the file's vertex list when file_order, else assimp's vertices (unwelded)
   std::int32_t file_triangles = 0;     // triangles after assimp's triangulation
   std::int32_t skipped_primitives = 0; // points and lines, ignored
   std::int32_t meshes = 0;             // meshes in the scene (all are concatenated, node transforms applied)
   std::int32_t welded_vertices = 0;    // file_vertices - vertices after welding
+  std::int32_t unreferenced_vertices = 0;  // file_order only: vertices no face uses after welding (kept; validateSurface removes them)
+  // file_vertices entries: the imported vertex each file vertex (file_order) or each assimp vertex
+  // became after welding.
+  std::vector<std::int32_t> file_to_vertex;
 };
 
 // Reads `path`; every mesh of the scene is transformed by its node's transform and concatenated.

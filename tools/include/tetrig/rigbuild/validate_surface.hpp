@@ -60,6 +60,9 @@ struct SurfaceReport {
   std::int32_t genus = -1;                    // from the Euler characteristic when closed
   double volume = 0.0;                        // signed, after repair
   double bbox_diagonal = 0.0;
+  // input_vertices entries: the output vertex each input vertex became (welding, removal of unused
+  // vertices and dropped components; survivors keep their relative order), -1 when removed.
+  std::vector<std::int32_t> vertex_map;
   // One line per reason the surface is refused; empty when it is usable.
   std::vector<std::string> refusals;
 
