@@ -225,11 +225,10 @@ TETRIG_INLINE void scatterBlocks(const TetBlock* blocks, const Matrix<N>& r, dou
 }
 
 template <int N>
-TETRIG_INLINE void passBlocks(TetBlock* blocks, const double* xyz, double* delta, int steps,
-                       Pack<N>& energy, std::uint8_t* exact_lanes, std::int64_t& flagged) {
+TETRIG_INLINE void passBlocks(TetBlock* blocks, const double* xyz, double* delta, int steps, Pack<N>& energy,
+                              std::uint8_t* exact_lanes, std::int64_t& flagged) {
   using V = Pack<N>;
   using M = PackMask<N>;
-  
   // Edges x_ck - x_c3 (k = 0..2): corner positions (x, y, z, pad: one 4-wide load each)
   // transposed into lanes.
   V e[9];
