@@ -185,14 +185,17 @@ void SplitLdlt::solveInPlace(double* xyzw) const {
     const std::int32_t* r = rows + node.row_begin;
     double* x = xyzw + S * node.first_column;
     const double* dk = d_inv + node.first_column;
+    // Sums run from the last row (or column) down: the lowest one was solved last, just before
+    // this node (it is often the parent in the elimination tree), so its term comes in at the end
+    // of the chain instead of at its start (measured 5 % on the large bar).
     if (k == 1) {  // two sums, alternating rows
       Vec4 s0 = load4(x) * dk[0], s1{};
-      std::int32_t i = 0;
-      for (; i + 2 <= n; i += 2) {
-        s0 -= block[i] * load4(xyzw + S * r[i]);
-        s1 -= block[i + 1] * load4(xyzw + S * r[i + 1]);
+      std::int32_t i = n - 1;
+      for (; i >= 1; i -= 2) {
+        s1 -= block[i] * load4(xyzw + S * r[i]);
+        s0 -= block[i - 1] * load4(xyzw + S * r[i - 1]);
       }
-      if (i < n) s0 -= block[i] * load4(xyzw + S * r[i]);
+      if (i == 0) s0 -= block[0] * load4(xyzw + S * r[0]);
       store4(x, s0 + s1);
       continue;
     }
@@ -223,7 +226,7 @@ void SplitLdlt::solveInPlace(double* xyzw) const {
     }
     for (c = k - 2; c >= 0; --c) {
       Vec4 sum = load4(x + S * c);
-      for (std::int32_t i = c + 1; i < k; ++i) sum -= triangle[static_cast<std::int64_t>(i) * k + c] * load4(x + S * i);
+      for (std::int32_t i = k - 1; i > c; --i) sum -= triangle[static_cast<std::int64_t>(i) * k + c] * load4(x + S * i);
       store4(x + S * c, sum);
     }
   }

@@ -6,6 +6,7 @@
 #include <Eigen/SparseCholesky>
 #include <gtest/gtest.h>
 
+#include <array>
 #include <random>
 
 namespace tetrig {
@@ -19,8 +20,14 @@ Eigen::SparseMatrix<double> spdFromBar(int nx, int ny, int nz) {
   return l;
 }
 
-TEST(SplitLdlt, MatchesEigenSolveForThreeInterleavedColumns) {
-  const Eigen::SparseMatrix<double> a = spdFromBar(3, 3, 12);
+// Two bars: the small one's factor has narrow supernodes only; the larger one's has supernodes of
+// 16+ columns and many rows, so every path of the solve runs (single columns, the four-row and
+// four-column loops and their remainders).
+class SplitLdltBars : public ::testing::TestWithParam<std::array<int, 3>> {};
+
+TEST_P(SplitLdltBars, MatchesEigenSolveForThreeInterleavedColumns) {
+  const auto [nx, ny, nz] = GetParam();
+  const Eigen::SparseMatrix<double> a = spdFromBar(nx, ny, nz);
   SplitLdlt factor;
   factor.factorize(a);
   ASSERT_EQ(factor.size(), a.rows());
@@ -45,6 +52,9 @@ TEST(SplitLdlt, MatchesEigenSolveForThreeInterleavedColumns) {
   EXPECT_LT((x - expected).cwiseAbs().maxCoeff(), 1e-10 * expected.cwiseAbs().maxCoeff());
   EXPECT_LT((a * x - b).norm(), 1e-9 * b.norm());
 }
+
+INSTANTIATE_TEST_SUITE_P(Bars, SplitLdltBars,
+                         ::testing::Values(std::array<int, 3>{3, 3, 12}, std::array<int, 3>{6, 6, 24}));
 
 TEST(SplitLdlt, PositionsArePermutation) {
   const Eigen::SparseMatrix<double> a = spdFromBar(2, 2, 8);
