@@ -303,6 +303,14 @@ TEST(ImportSurface, KeepsTheFileVertexOrder) {
   EXPECT_FALSE(readFileVertexList(dir.write("huge.ply", "ply\nformat binary_little_endian 1.0\nelement vertex 2000000000\n"
                                                          "property double x\nproperty double y\nproperty double z\nend_header\n"))
                    .has_value());
+  // An element without properties holds no data whatever its count: skipped at once (this one
+  // made the reader loop 4e18 times before the vertices).
+  const std::optional<Vertices> empty_element = readFileVertexList(
+      dir.write("empty_element.ply", "ply\nformat ascii 1.0\nelement nothing 4000000000000000000\nelement vertex 1\n"
+                                     "property float x\nproperty float y\nproperty float z\nend_header\n1 2 3\n"));
+  ASSERT_TRUE(empty_element.has_value());
+  EXPECT_EQ(empty_element->rows(), 1);
+  EXPECT_EQ((*empty_element)(0, 2), 3.0);
   EXPECT_FALSE(readFileVertexList(dir.write("mesh.stl", "solid x\nendsolid x\n")).has_value());  // no shared list
 }
 

@@ -230,6 +230,7 @@ std::optional<Vertices> readPly(std::ifstream& in, std::uintmax_t file_bytes) {
   };
   for (const PlyElement& e : elements) {
     if (e.name != "vertex") {
+      if (e.properties.empty()) continue;  // no data, whatever the count
       for (long long i = 0; i < e.count; ++i) {
         for (const PlyProperty& p : e.properties) {
           double n = 1;
