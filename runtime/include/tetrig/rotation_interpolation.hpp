@@ -29,7 +29,8 @@ std::vector<double> harmonicTetWeights(const TetMesh& mesh, std::span<const std:
 
 // q_s <- normalize(sum_h w_hs inc_h + (1 - sum_h w_hs) * identity) * q_s for every tet slot s of
 // `blocks` (weights in slot order, handle-major, `slot_count` per handle). Increments must be in
-// the hemisphere of the identity (w >= 0). No allocation.
+// the hemisphere of the identity (w >= 0). `slot_count` is a multiple of kTetBlockWidth (whole
+// blocks). No allocation.
 void applyRotationIncrements(std::span<const double> weights, std::span<const Eigen::Quaterniond> increments,
                              TetBlock* blocks, std::int32_t slot_count);
 
