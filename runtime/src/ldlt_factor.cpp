@@ -3,6 +3,7 @@
 #include "tetrig/ldlt_factor.hpp"
 
 #include "multiversion.hpp"
+#include "vector_lanes.hpp"
 
 #include <Eigen/SparseCholesky>
 
@@ -96,20 +97,9 @@ void SplitLdlt::factorize(const Eigen::SparseMatrix<double>& a) {
   for (size_t i = 0; i < n; ++i) position_[i] = perm[static_cast<Eigen::Index>(i)];
 }
 
-namespace {
-
-// x, y, z, pad of one vertex: one 256-bit register where available (GCC/Clang vector extension).
-using Vec4 = double __attribute__((vector_size(4 * sizeof(double))));
-static_assert(kVectorStride == 4);
-
-inline Vec4 load4(const double* p) {
-  Vec4 v;
-  std::memcpy(&v, p, sizeof v);
-  return v;
-}
-inline void store4(double* p, Vec4 v) { std::memcpy(p, &v, sizeof v); }
-
-}  // namespace
+using lanes::load4;
+using lanes::store4;
+using lanes::Vec4;
 
 // Both triangular solves are chains of 4-cycle FMAs if written as one running sum per row; the
 // dense parts of a supernode are instead processed four rows (forward) or four columns

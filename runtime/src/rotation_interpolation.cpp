@@ -4,11 +4,11 @@
 #include <Eigen/SparseCholesky>
 
 #include "multiversion.hpp"
+#include "vector_lanes.hpp"
 
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <cstring>
 #include <stdexcept>
 #include <utility>
 
@@ -91,26 +91,19 @@ std::vector<double> harmonicTetWeights(const TetMesh& mesh, std::span<const std:
   return weights;
 }
 
-namespace {
-using Lanes = double __attribute__((vector_size(kTetBlockWidth * sizeof(double))));
-inline Lanes loadLanes(const double* p) {
-  Lanes v;
-  std::memcpy(&v, p, sizeof v);
-  return v;
-}
-inline void storeLanes(double* p, Lanes v) { std::memcpy(p, &v, sizeof v); }
-}  // namespace
-
 // A block's 8 slots at a time (vector extensions; was scalar and 19 % of a demo frame).
 TETRIG_MULTIVERSION
 void applyRotationIncrements(std::span<const double> weights, std::span<const Eigen::Quaterniond> increments,
                              TetBlock* blocks, std::int32_t slot_count) {
+  using lanes::Lanes;
+  using lanes::load;
+  using lanes::store;
   const auto handles = static_cast<std::int32_t>(increments.size());
   const std::int32_t block_count = slot_count / kTetBlockWidth;
   for (std::int32_t b = 0; b < block_count; ++b) {
     Lanes iw{}, ix{}, iy{}, iz{}, total{};
     for (std::int32_t h = 0; h < handles; ++h) {
-      const Lanes w = loadLanes(&weights[static_cast<size_t>(h) * static_cast<size_t>(slot_count) +
+      const Lanes w = load(&weights[static_cast<size_t>(h) * static_cast<size_t>(slot_count) +
                                          static_cast<size_t>(b) * kTetBlockWidth]);
       const Eigen::Quaterniond& q = increments[static_cast<size_t>(h)];
       iw += w * q.w();
@@ -125,18 +118,18 @@ void applyRotationIncrements(std::span<const double> weights, std::span<const Ei
     Lanes inv{};
     for (int l = 0; l < kTetBlockWidth; ++l) inv[l] = norm2[l] > 1e-24 ? 1.0 / std::sqrt(norm2[l]) : 0.0;
     TetBlock& block = blocks[b];
-    const Lanes w0 = loadLanes(block.rotation[0]), x0 = loadLanes(block.rotation[1]), y0 = loadLanes(block.rotation[2]),
-                z0 = loadLanes(block.rotation[3]);
+    const Lanes w0 = load(block.rotation[0]), x0 = load(block.rotation[1]), y0 = load(block.rotation[2]),
+                z0 = load(block.rotation[3]);
     iw *= inv;
     ix *= inv;
     iy *= inv;
     iz *= inv;
     // Hamilton product inc * q; a slot whose blend vanished (norm <= 1e-12) keeps its rotation.
     const auto keep = inv == 0.0;
-    storeLanes(block.rotation[0], keep ? w0 : iw * w0 - ix * x0 - iy * y0 - iz * z0);
-    storeLanes(block.rotation[1], keep ? x0 : iw * x0 + ix * w0 + iy * z0 - iz * y0);
-    storeLanes(block.rotation[2], keep ? y0 : iw * y0 - ix * z0 + iy * w0 + iz * x0);
-    storeLanes(block.rotation[3], keep ? z0 : iw * z0 + ix * y0 - iy * x0 + iz * w0);
+    store(block.rotation[0], keep ? w0 : iw * w0 - ix * x0 - iy * y0 - iz * z0);
+    store(block.rotation[1], keep ? x0 : iw * x0 + ix * w0 + iy * z0 - iz * y0);
+    store(block.rotation[2], keep ? y0 : iw * y0 - ix * z0 + iy * w0 + iz * x0);
+    store(block.rotation[3], keep ? z0 : iw * z0 + ix * y0 - iy * x0 + iz * w0);
   }
 }
 

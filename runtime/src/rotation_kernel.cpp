@@ -19,26 +19,16 @@
 #include <cstring>
 
 #include "multiversion.hpp"
+#include "vector_lanes.hpp"
 
 namespace tetrig {
 
 namespace {
 
-// Every helper of the pass is forced inline: a call would cross the target_clones boundary
-// (the helper compiled for the baseline) and would spill every vector register.
-#define TETRIG_INLINE __attribute__((always_inline)) inline
-
+using namespace lanes;
 constexpr int W = kTetBlockWidth;
-using Lanes = double __attribute__((vector_size(W * sizeof(double))));
-using Mask = long long __attribute__((vector_size(W * sizeof(double))));
 static_assert(sizeof(Lanes) == sizeof(double) * W);
 
-TETRIG_INLINE Lanes load(const double* p) {
-  Lanes v;
-  std::memcpy(&v, p, sizeof v);
-  return v;
-}
-TETRIG_INLINE void store(double* p, Lanes v) { std::memcpy(p, &v, sizeof v); }
 TETRIG_INLINE Lanes splat(double x) { return Lanes{} + x; }
 TETRIG_INLINE Lanes select(Mask m, Lanes a, Lanes b) { return m ? a : b; }
 TETRIG_INLINE Lanes absolute(Lanes x) { return select(x < 0.0, -x, x); }
@@ -49,16 +39,9 @@ TETRIG_INLINE Lanes squareRoot(Lanes x) {
   return load(lanes);
 }
 
-// One vertex's x, y, z, pad (stride kVectorStride), and the 8-lane <-> 8 x 4 transposes between
-// per-vertex vectors and per-coordinate lanes (shuffles instead of scalar loads and inserts).
-using Vec4 = double __attribute__((vector_size(4 * sizeof(double))));
+// The 8-lane <-> 8 x 4 transposes between per-vertex vectors (x, y, z, pad) and per-coordinate
+// lanes (shuffles instead of scalar loads and inserts).
 static_assert(W == 8 && kVectorStride == 4, "the transposes below are written for 8 lanes of 4");
-TETRIG_INLINE Vec4 load4(const double* p) {
-  Vec4 v;
-  std::memcpy(&v, p, sizeof v);
-  return v;
-}
-TETRIG_INLINE void store4(double* p, Vec4 v) { std::memcpy(p, &v, sizeof v); }
 TETRIG_INLINE Lanes concat(Vec4 a, Vec4 b) { return __builtin_shufflevector(a, b, 0, 1, 2, 3, 4, 5, 6, 7); }
 
 // v[l] = (x, y, z, pad) of lane l  ->  x, y, z as lanes.
