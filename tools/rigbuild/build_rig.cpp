@@ -26,11 +26,6 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
 
-std::string lower(std::string s) {
-  for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return s;
-}
-
 std::string fmt(const char* f, double v) {
   char buf[64];
   std::snprintf(buf, sizeof buf, f, v);
@@ -215,7 +210,7 @@ std::vector<std::int32_t> resolveTets(const Context& ctx, const Selection& s, co
 }  // namespace
 
 bool isTetMeshPath(const std::filesystem::path& path) {
-  const std::string ext = lower(path.extension().string());
+  const std::string ext = lowercaseExtension(path);
   return ext == ".node" || ext == ".ele" || ext == ".mesh";
 }
 

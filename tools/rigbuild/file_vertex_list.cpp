@@ -4,6 +4,7 @@
 // Stanford PLY (header, elements in order; ascii or binary little/big endian; list properties of
 // elements before "vertex" skipped). Only positions are read; faces stay with assimp.
 #include "tetrig/rigbuild/file_vertex_list.hpp"
+#include "tetrig/rigbuild/surface_mesh.hpp"
 
 #include <array>
 #include <bit>
@@ -17,12 +18,6 @@
 
 namespace tetrig::rigbuild {
 namespace {
-
-std::string lowerExtension(const std::filesystem::path& path) {
-  std::string e = path.extension().string();
-  for (char& c : e) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return e;
-}
 
 // Parses up to `n` doubles separated by blanks from `s`; returns how many were read.
 int parseDoubles(std::string_view s, double* out, int n) {
@@ -282,7 +277,7 @@ std::optional<Vertices> readPly(std::ifstream& in, std::uintmax_t file_bytes) {
 }  // namespace
 
 std::optional<Vertices> readFileVertexList(const std::filesystem::path& path) {
-  const std::string ext = lowerExtension(path);
+  const std::string ext = lowercaseExtension(path);
   if (ext != ".obj" && ext != ".off" && ext != ".ply") return std::nullopt;
   std::error_code ec;
   const std::uintmax_t bytes = std::filesystem::file_size(path, ec);

@@ -2,6 +2,8 @@
 
 #include <Eigen/Geometry>
 
+#include <cctype>
+
 namespace tetrig::rigbuild {
 
 double signedVolume(const SurfaceMesh& mesh) {
@@ -13,6 +15,12 @@ double signedVolume(const SurfaceMesh& mesh) {
     six_volume += a.dot(b.cross(c));
   }
   return six_volume / 6.0;
+}
+
+std::string lowercaseExtension(const std::filesystem::path& path) {
+  std::string e = path.extension().string();
+  for (char& c : e) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return e;
 }
 
 }  // namespace tetrig::rigbuild

@@ -9,6 +9,7 @@
 #include "tetrig/tet_mesh.hpp"
 
 #include <cstdint>
+#include <filesystem>
 #include <stdexcept>
 #include <string>
 
@@ -32,5 +33,9 @@ class RigBuildError : public std::runtime_error {
 // Signed volume enclosed by a closed surface (divergence theorem); negative when the faces point
 // inward. Meaningless for open surfaces.
 double signedVolume(const SurfaceMesh& mesh);
+
+// The file extension in lower case, with its dot (".obj"), which is how the builder picks a
+// reader; "" when the path has none.
+std::string lowercaseExtension(const std::filesystem::path& path);
 
 }  // namespace tetrig::rigbuild
