@@ -6,6 +6,7 @@
 #include <cstring>
 #include <vector>
 
+#include "fake_clock.hpp"
 #include "tetrig/drivers/synthetic_source.hpp"
 
 namespace tetrig::drivers {
@@ -196,15 +197,7 @@ TEST(SyntheticSource, DropoutAndNoiseStatistics) {
 }
 
 TEST(SyntheticSource, PacingScheduleAndValidation) {
-  struct FakeClock {
-    std::int64_t* now;
-    std::vector<std::int64_t>* sleeps;
-    std::int64_t nowNs() const { return *now; }
-    void sleepUntilNs(std::int64_t t) const {
-      sleeps->push_back(t);
-      if (t > *now) *now = t;
-    }
-  };
+  using test::FakeClock;
   SyntheticOptions o;
   o.rate_hz = 200.0;
   o.max_frames = 4;
