@@ -242,40 +242,34 @@ struct UsbTransport::Impl {
     detail::AtomicTransportStats::bump(owner.stats_.opens);
     report(TransportEvent::kOpened, "opened and claimed", 0);
 
+    // One write of the open sequence: counted and reported; false when the device is gone.
+    auto openWrite = [&](const char* what, int r, bool complete, int bytes) {
+      if (r >= 0 && complete) {
+        detail::AtomicTransportStats::bump(owner.stats_.reports_sent);
+        report(TransportEvent::kReportSent, what, bytes);
+        return true;
+      }
+      detail::AtomicTransportStats::bump(owner.stats_.write_errors);
+      scratch = std::string(what) + " failed: " + (r < 0 ? libusb_error_name(r) : "short transfer");
+      report(TransportEvent::kWriteError, scratch, r);
+      if (r != LIBUSB_ERROR_NO_DEVICE) return true;
+      markLost(scratch, r);
+      return false;
+    };
     for (const UsbControlRequest& c : cfg.open_control_requests) {
       std::vector<std::uint8_t> data = c.data;  // libusb wants a mutable buffer
       const int r = libusb_control_transfer(handle, static_cast<std::uint8_t>(c.request_type & 0x7f), c.request,
                                             c.value, c.index, data.empty() ? nullptr : data.data(),
                                             static_cast<std::uint16_t>(data.size()), cfg.out_timeout_ms);
-      if (r < 0 || r != static_cast<int>(data.size())) {
-        detail::AtomicTransportStats::bump(owner.stats_.write_errors);
-        scratch = std::string("control request failed: ") + (r < 0 ? libusb_error_name(r) : "short transfer");
-        report(TransportEvent::kWriteError, scratch, r);
-        if (r == LIBUSB_ERROR_NO_DEVICE) {
-          markLost(scratch, r);
-          return false;
-        }
-      } else {
-        detail::AtomicTransportStats::bump(owner.stats_.reports_sent);
-        report(TransportEvent::kReportSent, "control request", r);
-      }
+      if (!openWrite("control request", r, r == static_cast<int>(data.size()), r)) return false;
     }
     if (!cfg.open_out_data.empty()) {
       std::vector<std::uint8_t> out = cfg.open_out_data;  // libusb wants a mutable buffer
       int transferred = 0;
       const int r = libusb_bulk_transfer(handle, cfg.endpoint_out, out.data(), static_cast<int>(out.size()),
                                          &transferred, cfg.out_timeout_ms);
-      if (r != 0 || transferred != static_cast<int>(out.size())) {
-        detail::AtomicTransportStats::bump(owner.stats_.write_errors);
-        scratch = std::string("start OUT transfer failed: ") + libusb_error_name(r);
-        report(TransportEvent::kWriteError, scratch, r);
-        if (r == LIBUSB_ERROR_NO_DEVICE) {
-          markLost(scratch, r);
-          return false;
-        }
-      } else {
-        detail::AtomicTransportStats::bump(owner.stats_.reports_sent);
-        report(TransportEvent::kReportSent, "start OUT transfer", transferred);
+      if (!openWrite("start OUT transfer", r, r == 0 && transferred == static_cast<int>(out.size()), transferred)) {
+        return false;
       }
     }
     for (Slot& s : slots) {
