@@ -20,9 +20,10 @@ Eigen::SparseMatrix<double> spdFromBar(int nx, int ny, int nz) {
   return l;
 }
 
-// Two bars: the small one's factor has narrow supernodes only; the larger one's has supernodes of
-// 16+ columns and many rows, so every path of the solve runs (single columns, the four-row and
-// four-column loops and their remainders).
+// Two bars, so every path of the solve runs: single columns, merged and cut supernodes, the
+// 16-row forward products and (only the larger bar has it) the 8-row remainder, the four-column
+// backward products and the column remainder, the triangles' four-sum loops and their remainders,
+// rows padded to a multiple of 8. Each path was broken on purpose once and this test failed.
 class SplitLdltBars : public ::testing::TestWithParam<std::array<int, 3>> {};
 
 TEST_P(SplitLdltBars, MatchesEigenSolveForThreeInterleavedColumns) {

@@ -5,14 +5,20 @@
 // for A = P^T L D L^T P, solving A x = b is y = P b, L z = y, w = D^-1 z, L^T v = w, x = P^T v.
 // SplitLdlt keeps vectors in the factor's (permuted) order, so the frame path never permutes:
 // callers store vertex i at position position(i). Three right-hand sides (x, y, z) are
-// interleaved (stride kVectorStride), so each factor entry is read once, as one vector FMA.
+// interleaved (stride kVectorStride), so each factor entry is read once for all three.
 //
-// Storage (built once at load from SimplicialLDLT's own CSC factor): supernodes. Consecutive
-// columns c0..c0+k whose below-diagonal structure is nested (column j+1's rows are column j's
-// minus row j+1) form a supernode with a dense unit-lower k x k triangle and a dense r x k block
-// below it sharing one list of r row indices. Both triangular solves then stream contiguous
-// memory and read one index per block row instead of one per entry. D^-1 is cached.
+// Storage (built once at load from SimplicialLDLT's own CSC factor): supernodes. A supernode is a
+// run of consecutive columns c0..c0+k-1 sharing one list of r rows below them: a dense k x k unit
+// lower triangle and a dense r x k block (zeros stored where L has none). The partition into
+// supernodes is chosen at load by dynamic programming over a cost model of this solve
+// (ldlt_factor.cpp): it cuts wide supernodes into panels and merges runs of short leaf columns
+// where the stored zeros cost less than the scattered updates they save. One-column nodes keep one
+// (x, y, z, pad) vector FMA per entry; wider ones store their block column-major with the rows
+// padded to a multiple of 8, so the block products run with the vector lanes over rows (3 FMAs per
+// 8 entries) and each row is scattered or gathered once per node. D^-1 is cached.
 #pragma once
+
+#include "tetrig/aligned_vector.hpp"
 
 #include <Eigen/SparseCore>
 
@@ -42,20 +48,27 @@ class SplitLdlt {
 
   // Solves A x = b in place for 3 interleaved right-hand sides held in factor order:
   // xyzw[kVectorStride * position(i) + c] is component c (0..2) of row i; lane 3 is carried along
-  // (keep it 0). No allocation, no exceptions.
-  void solveInPlace(double* xyzw) const;
+  // (keep it 0). No allocation, no exceptions; uses the factor's own scratch, so one SplitLdlt
+  // solves on one thread at a time.
+  void solveInPlace(double* xyzw);
 
  private:
+  void buildSupernodes(const std::vector<std::int32_t>& col_start, const std::vector<std::int32_t>& row,
+                       const std::vector<double>& value);
+
   struct Supernode {
     std::int32_t first_column;  // c0
     std::int32_t width;         // k
-    std::int32_t row_begin;     // rows_[row_begin .. row_begin + row_count): rows below the triangle
-    std::int32_t row_count;     // r
-    std::int64_t value_begin;   // values_: k x k triangle (row-major, strict lower used), then r x k block
+    std::int32_t row_begin;     // rows_[row_begin .. row_begin + padded_rows): rows below the triangle
+    std::int32_t row_count;     // r (padding rows repeat the last row with zero values)
+    std::int32_t padded_rows;   // k = 1: r; k > 1: r rounded up to a multiple of 8
+    std::int64_t value_begin;   // values_: k x k triangle (row-major, strict lower used), then the block
+    std::int64_t block_begin;   // k = 1: r values; k > 1: k columns of padded_rows values (64-byte aligned)
   };
   std::vector<Supernode> supernodes_;
   std::vector<std::int32_t> rows_;
-  std::vector<double> values_;
+  AlignedVector<double> values_;
+  AlignedVector<double> gathered_;       // backward solve: x, y, z of one node's rows (3 x max padded_rows)
   std::vector<double> d_inv_;            // 1 / D
   std::vector<std::int32_t> position_;   // original index -> factor position
   std::int64_t factor_non_zeros_ = 0;    // strictly lower non-zeros of L
