@@ -96,7 +96,7 @@ void SplitLdlt::buildSupernodes(const std::vector<std::int32_t>& col_start, cons
   // kMaxWidth columns minimising the sum of nodeCost (any partition is valid: a range's rows are
   // the union of its columns' rows past it, with zeros stored where a column has none).
   // best[j]: the cheapest partition of columns 0..j-1; its last range starts at start[j].
-  constexpr std::int32_t kMaxWidth = 48;
+  constexpr std::int32_t kMaxWidth = 32;
   std::vector<double> best(static_cast<size_t>(n) + 1, 0.0);
   std::vector<std::int32_t> start(static_cast<size_t>(n) + 1, 0), mark(static_cast<size_t>(n), -1);
   for (std::int32_t j = 1; j <= n; ++j) {
@@ -104,7 +104,11 @@ void SplitLdlt::buildSupernodes(const std::vector<std::int32_t>& col_start, cons
     std::int32_t count = 0;
     for (std::int32_t w = 1; w <= std::min(kMaxWidth, j); ++w) {
       const std::int32_t i = j - w;
-      for (std::int32_t p = col_start[static_cast<size_t>(i)]; p < col_start[static_cast<size_t>(i) + 1]; ++p) {
+      // Column i's first row is its parent p in the elimination tree, and rows(i) - {p} is a subset
+      // of rows(p): with p inside the range (already added), column i adds nothing new.
+      const std::int32_t begin = col_start[static_cast<size_t>(i)], end = col_start[static_cast<size_t>(i) + 1];
+      const std::int32_t scan_begin = (begin < end && row[static_cast<size_t>(begin)] < j) ? end : begin;
+      for (std::int32_t p = scan_begin; p < end; ++p) {
         const std::int32_t r = row[static_cast<size_t>(p)];
         if (r >= j && mark[static_cast<size_t>(r)] != j) {
           mark[static_cast<size_t>(r)] = j;
