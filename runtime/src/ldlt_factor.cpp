@@ -65,7 +65,7 @@ void SplitLdlt::factorize(const Eigen::SparseMatrix<double>& a) {
 
 namespace {
 
-constexpr std::int32_t kRowPad = 8;  // = the lanes of lanes::Lanes
+constexpr std::int32_t kRowPad = kTetBlockWidth;  // = the lanes of lanes::Lanes
 
 std::int32_t paddedRows(std::int32_t width, std::int32_t rows) {
   return width == 1 ? rows : (rows + kRowPad - 1) / kRowPad * kRowPad;
@@ -177,8 +177,11 @@ void SplitLdlt::buildSupernodes(const std::vector<std::int32_t>& col_start, cons
 
 using lanes::Lanes;
 using lanes::load;
+using lanes::store;
 using lanes::load4;
 using lanes::store4;
+using lanes::transposeIn;
+using lanes::transposeOut;
 using lanes::Vec4;
 
 namespace {
@@ -188,42 +191,30 @@ constexpr std::int64_t kS = kVectorStride;
 TETRIG_INLINE Vec4 low4(Lanes v) { return __builtin_shufflevector(v, v, 0, 1, 2, 3); }
 TETRIG_INLINE Vec4 high4(Lanes v) { return __builtin_shufflevector(v, v, 4, 5, 6, 7); }
 
-// Rows (x_l, y_l, z_l, 0), l = 0..3, from x, y, z held one coordinate per vector.
-TETRIG_INLINE void transposeToRows(Vec4 x, Vec4 y, Vec4 z, Vec4* out) {
-  const Vec4 zero{};
-  const Vec4 xy02 = __builtin_shufflevector(x, y, 0, 4, 2, 6);
-  const Vec4 xy13 = __builtin_shufflevector(x, y, 1, 5, 3, 7);
-  const Vec4 z02 = __builtin_shufflevector(z, zero, 0, 4, 2, 6);
-  const Vec4 z13 = __builtin_shufflevector(z, zero, 1, 5, 3, 7);
-  out[0] = __builtin_shufflevector(xy02, z02, 0, 1, 4, 5);
-  out[1] = __builtin_shufflevector(xy13, z13, 0, 1, 4, 5);
-  out[2] = __builtin_shufflevector(xy02, z02, 2, 3, 6, 7);
-  out[3] = __builtin_shufflevector(xy13, z13, 2, 3, 6, 7);
-}
-
-// xyzw[rows[l]] -= (x_l, y_l, z_l, 0) for the 8 lanes. A padding row repeats the row before it
-// with zero values; each read-modify-write completes before the next, so that is harmless.
-TETRIG_INLINE void subtractFromRows(double* xyzw, const std::int32_t* rows, Lanes x, Lanes y, Lanes z) {
-  Vec4 v[8];
-  transposeToRows(low4(x), low4(y), low4(z), v);
-  transposeToRows(high4(x), high4(y), high4(z), v + 4);
-  for (int l = 0; l < 8; ++l) {
-    double* target = xyzw + kS * rows[l];
-    store4(target, load4(target) - v[l]);
+// Forward block product of C consecutive 8-row chunks: xyzw[rows[l]] -= (B z_block)_l. A padding
+// row repeats the row before it with zero values; each read-modify-write completes before the
+// next, so that is harmless.
+template <int C>
+TETRIG_INLINE void subtractBlockProduct(double* xyzw, const std::int32_t* rows, const double* block, std::int32_t np,
+                                        std::int32_t k, const double* z) {
+  Lanes x[C]{}, y[C]{}, zz[C]{};
+  for (std::int32_t c = 0; c < k; ++c, block += np, z += kS) {
+#pragma GCC unroll 2
+    for (int q = 0; q < C; ++q) {
+      const Lanes b = load(block + kRowPad * q);
+      x[q] += b * z[0];
+      y[q] += b * z[1];
+      zz[q] += b * z[2];
+    }
   }
-}
-
-// x, y, z of four rows into three coordinate arrays.
-TETRIG_INLINE void gatherRows(const double* xyzw, const std::int32_t* rows, double* x, double* y, double* z) {
-  const Vec4 v0 = load4(xyzw + kS * rows[0]), v1 = load4(xyzw + kS * rows[1]);
-  const Vec4 v2 = load4(xyzw + kS * rows[2]), v3 = load4(xyzw + kS * rows[3]);
-  const Vec4 xz01 = __builtin_shufflevector(v0, v1, 0, 4, 2, 6);
-  const Vec4 y01 = __builtin_shufflevector(v0, v1, 1, 5, 3, 7);
-  const Vec4 xz23 = __builtin_shufflevector(v2, v3, 0, 4, 2, 6);
-  const Vec4 y23 = __builtin_shufflevector(v2, v3, 1, 5, 3, 7);
-  store4(x, __builtin_shufflevector(xz01, xz23, 0, 1, 4, 5));
-  store4(z, __builtin_shufflevector(xz01, xz23, 2, 3, 6, 7));
-  store4(y, __builtin_shufflevector(y01, y23, 0, 1, 4, 5));
+  for (int q = 0; q < C; ++q) {
+    Vec4 v[kTetBlockWidth];
+    transposeOut(x[q], y[q], zz[q], v);
+    for (int l = 0; l < kTetBlockWidth; ++l) {
+      double* target = xyzw + kS * rows[kRowPad * q + l];
+      store4(target, load4(target) - v[l]);
+    }
+  }
 }
 
 // (sum of x's lanes, sum of y's, sum of z's, 0).
@@ -233,6 +224,26 @@ TETRIG_INLINE Vec4 sumLanes(Lanes x, Lanes y, Lanes z) {
   const Vec4 xy = __builtin_shufflevector(x4, y4, 0, 4, 2, 6) + __builtin_shufflevector(x4, y4, 1, 5, 3, 7);
   const Vec4 zz = __builtin_shufflevector(z4, zero, 0, 4, 2, 6) + __builtin_shufflevector(z4, zero, 1, 5, 3, 7);
   return __builtin_shufflevector(xy, zz, 0, 1, 4, 5) + __builtin_shufflevector(xy, zz, 2, 3, 6, 7);
+}
+
+// Backward block product for Q consecutive columns c: x_c = D^-1_c x_c - (B^T x_R)_c, with x_R
+// gathered into gx, gy, gz.
+template <int Q>
+TETRIG_INLINE void columnsMinusBlockProduct(double* x, const double* dk, const double* block, std::int32_t np,
+                                            const double* gx, const double* gy, const double* gz) {
+  Lanes sx[Q]{}, sy[Q]{}, sz[Q]{};
+  for (std::int32_t i = 0; i < np; i += kRowPad) {
+    const Lanes vx = load(gx + i), vy = load(gy + i), vz = load(gz + i);
+#pragma GCC unroll 4
+    for (int q = 0; q < Q; ++q) {
+      const Lanes b = load(block + static_cast<std::int64_t>(q) * np + i);
+      sx[q] += b * vx;
+      sy[q] += b * vy;
+      sz[q] += b * vz;
+    }
+  }
+#pragma GCC unroll 4
+  for (int q = 0; q < Q; ++q) store4(x + kS * q, load4(x + kS * q) * dk[q] - sumLanes(sx[q], sy[q], sz[q]));
 }
 
 }  // namespace
@@ -276,34 +287,8 @@ void SplitLdlt::solveInPlace(double* xyzw) {
       store4(z + kS * i, (s0 + s1) + (s2 + s3));
     }
     std::int32_t i = 0;
-    for (; i + 2 * kRowPad <= np; i += 2 * kRowPad) {
-      Lanes x0{}, y0{}, z0{}, x1{}, y1{}, z1{};
-      const double* b = block + i;
-      const double* zc = z;
-      for (std::int32_t c = 0; c < k; ++c, b += np, zc += kS) {
-        const Lanes b0 = load(b), b1 = load(b + kRowPad);
-        x0 += b0 * zc[0];
-        y0 += b0 * zc[1];
-        z0 += b0 * zc[2];
-        x1 += b1 * zc[0];
-        y1 += b1 * zc[1];
-        z1 += b1 * zc[2];
-      }
-      subtractFromRows(xyzw, r + i, x0, y0, z0);
-      subtractFromRows(xyzw, r + i + kRowPad, x1, y1, z1);
-    }
-    if (i < np) {
-      Lanes x0{}, y0{}, z0{};
-      const double* b = block + i;
-      const double* zc = z;
-      for (std::int32_t c = 0; c < k; ++c, b += np, zc += kS) {
-        const Lanes b0 = load(b);
-        x0 += b0 * zc[0];
-        y0 += b0 * zc[1];
-        z0 += b0 * zc[2];
-      }
-      subtractFromRows(xyzw, r + i, x0, y0, z0);
-    }
+    for (; i + 2 * kRowPad <= np; i += 2 * kRowPad) subtractBlockProduct<2>(xyzw, r + i, block + i, np, k, z);
+    if (i < np) subtractBlockProduct<1>(xyzw, r + i, block + i, np, k, z);
   }
 
   double* gx = gathered_.data();
@@ -331,34 +316,18 @@ void SplitLdlt::solveInPlace(double* xyzw) {
       store4(x, s0 + s1);
       continue;
     }
-    for (std::int32_t i = 0; i < np; i += 4) gatherRows(xyzw, r + i, gx + i, gy + i, gz + i);
+    for (std::int32_t i = 0; i < np; i += kRowPad) {
+      Vec4 v[kTetBlockWidth];
+      for (int l = 0; l < kTetBlockWidth; ++l) v[l] = load4(xyzw + kS * r[i + l]);
+      Lanes vx, vy, vz;
+      transposeIn(v, vx, vy, vz);
+      store(gx + i, vx);
+      store(gy + i, vy);
+      store(gz + i, vz);
+    }
     std::int32_t c = 0;
-    for (; c + 4 <= k; c += 4) {
-      Lanes sx[4]{}, sy[4]{}, sz[4]{};
-      for (std::int32_t i = 0; i < np; i += kRowPad) {
-        const Lanes vx = load(gx + i), vy = load(gy + i), vz = load(gz + i);
-#pragma GCC unroll 4
-        for (int q = 0; q < 4; ++q) {
-          const Lanes b = load(block + static_cast<std::int64_t>(c + q) * np + i);
-          sx[q] += b * vx;
-          sy[q] += b * vy;
-          sz[q] += b * vz;
-        }
-      }
-#pragma GCC unroll 4
-      for (int q = 0; q < 4; ++q) store4(x + kS * (c + q), load4(x + kS * (c + q)) * dk[c + q] - sumLanes(sx[q], sy[q], sz[q]));
-    }
-    for (; c < k; ++c) {
-      Lanes sx{}, sy{}, sz{};
-      const double* b = block + static_cast<std::int64_t>(c) * np;
-      for (std::int32_t i = 0; i < np; i += kRowPad) {
-        const Lanes bc = load(b + i);
-        sx += bc * load(gx + i);
-        sy += bc * load(gy + i);
-        sz += bc * load(gz + i);
-      }
-      store4(x + kS * c, load4(x + kS * c) * dk[c] - sumLanes(sx, sy, sz));
-    }
+    for (; c + 4 <= k; c += 4) columnsMinusBlockProduct<4>(x + kS * c, dk + c, block + static_cast<std::int64_t>(c) * np, np, gx, gy, gz);
+    for (; c < k; ++c) columnsMinusBlockProduct<1>(x + kS * c, dk + c, block + static_cast<std::int64_t>(c) * np, np, gx, gy, gz);
     const double* triangle = values + node.value_begin;
     for (c = k - 2; c >= 0; --c) {  // four sums, from the last row down (the latest solved enters last)
       Vec4 s0 = load4(x + kS * c), s1{}, s2{}, s3{};
