@@ -149,7 +149,7 @@ void SplitLdlt::buildSupernodes(const std::vector<std::int32_t>& col_start, cons
     const auto r = static_cast<std::int32_t>(below.size());
     const std::int32_t padded = paddedRows(k, r);
     max_padded = std::max(max_padded, padded);
-    Supernode node{c0, k, static_cast<std::int32_t>(rows_.size()), r, padded, static_cast<std::int64_t>(values_.size()), 0};
+    Supernode node{c0, k, static_cast<std::int32_t>(rows_.size()), padded, static_cast<std::int64_t>(values_.size()), 0};
     rows_.insert(rows_.end(), below.begin(), below.end());
     rows_.resize(rows_.size() + static_cast<size_t>(padded - r), r > 0 ? below.back() : 0);
     // Triangle, then the block; a column-major block starts on a cache line.

@@ -60,8 +60,8 @@ class SplitLdlt {
     std::int32_t first_column;  // c0
     std::int32_t width;         // k
     std::int32_t row_begin;     // rows_[row_begin .. row_begin + padded_rows): rows below the triangle
-    std::int32_t row_count;     // r (padding rows repeat the last row with zero values)
-    std::int32_t padded_rows;   // k = 1: r; k > 1: r rounded up to a multiple of 8
+    std::int32_t padded_rows;   // k = 1: r; k > 1: r rounded up to a multiple of 8 (padding rows
+                                // repeat the last row, with zero values)
     std::int64_t value_begin;   // values_: k x k triangle (row-major, strict lower used), then the block
     std::int64_t block_begin;   // k = 1: r values; k > 1: k columns of padded_rows values (64-byte aligned)
   };
