@@ -8,6 +8,7 @@
 // list (STL) and the seam splits of others (glTF, FBX).
 #include "tetrig/rigbuild/import_surface.hpp"
 
+#include "tetrig/rigbuild/cell_key.hpp"
 #include "tetrig/rigbuild/file_vertex_list.hpp"
 #include "tetrig/rigbuild/weld_vertices.hpp"
 
@@ -16,7 +17,6 @@
 #include <assimp/scene.h>
 
 #include <algorithm>
-#include <array>
 #include <bit>
 #include <cfloat>
 #include <cmath>
@@ -29,25 +29,11 @@
 namespace tetrig::rigbuild {
 namespace {
 
-struct Key3 {
-  std::array<std::int64_t, 3> k;
-  bool operator==(const Key3& o) const { return k == o.k; }
-};
-struct Key3Hash {
-  std::size_t operator()(const Key3& key) const {
-    std::uint64_t h = static_cast<std::uint64_t>(key.k[0]) * 0x9E3779B97F4A7C15ull;
-    h ^= static_cast<std::uint64_t>(key.k[1]) * 0xC2B2AE3D27D4EB4Full + (h << 6) + (h >> 2);
-    h ^= static_cast<std::uint64_t>(key.k[2]) * 0x165667B19E3779F9ull + (h << 6) + (h >> 2);
-    return static_cast<std::size_t>(h);
-  }
-};
-
 // assimp keeps single precision: a file vertex is found by its coordinates rounded to float
 // (-0 and +0 alike).
-Key3 floatKey(const Eigen::RowVector3d& p) {
-  Key3 key{};
-  for (int i = 0; i < 3; ++i) key.k[static_cast<std::size_t>(i)] = std::bit_cast<std::uint32_t>(static_cast<float>(p[i]) + 0.0f);
-  return key;
+CellKey floatKey(const Eigen::RowVector3d& p) {
+  auto bits = [](double x) -> std::int64_t { return std::bit_cast<std::uint32_t>(static_cast<float>(x) + 0.0f); };
+  return CellKey{bits(p[0]), bits(p[1]), bits(p[2])};
 }
 
 // For each imported (assimp) vertex, the file vertex at its position: the earliest file vertex with
@@ -55,18 +41,17 @@ Key3 floatKey(const Eigen::RowVector3d& p) {
 // nearest file vertex within 1e-6 of the diagonal plus a few float ulps. nullopt when a vertex
 // has no file vertex there (then the file's order cannot be trusted: the caller keeps assimp's).
 std::optional<std::vector<std::int32_t>> matchFileVertices(const Vertices& imported, const Vertices& file) {
-  std::unordered_map<Key3, std::int32_t, Key3Hash> exact;
+  std::unordered_map<CellKey, std::int32_t, CellHash> exact;
   exact.reserve(static_cast<std::size_t>(file.rows()));
   for (Eigen::Index i = 0; i < file.rows(); ++i) {
     if (!file.row(i).allFinite()) return std::nullopt;
     exact.emplace(floatKey(file.row(i)), static_cast<std::int32_t>(i));
   }
   const double tolerance = 1e-6 * boundingBoxDiagonal(file) + 8.0 * FLT_EPSILON * file.cwiseAbs().maxCoeff();
-  std::unordered_map<Key3, std::vector<std::int32_t>, Key3Hash> grid;  // built on the first miss
+  std::unordered_map<CellKey, std::vector<std::int32_t>, CellHash> grid;  // built on the first miss
   auto cellOf = [tolerance](const Eigen::RowVector3d& p) {
-    Key3 key{};
-    for (int i = 0; i < 3; ++i) key.k[static_cast<std::size_t>(i)] = static_cast<std::int64_t>(std::floor(p[i] / tolerance));
-    return key;
+    auto cell = [tolerance](double x) { return static_cast<std::int64_t>(std::floor(x / tolerance)); };
+    return CellKey{cell(p[0]), cell(p[1]), cell(p[2])};
   };
   std::vector<std::int32_t> out(static_cast<std::size_t>(imported.rows()), -1);
   for (Eigen::Index v = 0; v < imported.rows(); ++v) {
@@ -79,13 +64,13 @@ std::optional<std::vector<std::int32_t>> matchFileVertices(const Vertices& impor
     if (grid.empty()) {
       for (Eigen::Index i = 0; i < file.rows(); ++i) grid[cellOf(file.row(i))].push_back(static_cast<std::int32_t>(i));
     }
-    const Key3 home = cellOf(p);
+    const CellKey home = cellOf(p);
     std::int32_t best = -1;
     double best_d = tolerance;
     for (std::int64_t dx = -1; dx <= 1; ++dx) {
       for (std::int64_t dy = -1; dy <= 1; ++dy) {
         for (std::int64_t dz = -1; dz <= 1; ++dz) {
-          const auto it = grid.find(Key3{{home.k[0] + dx, home.k[1] + dy, home.k[2] + dz}});
+          const auto it = grid.find(CellKey{home.x + dx, home.y + dy, home.z + dz});
           if (it == grid.end()) continue;
           for (const std::int32_t i : it->second) {  // ascending: ties go to the earliest
             const double d = (file.row(i) - p).norm();

@@ -2,29 +2,14 @@
 // the tolerance found in its own or the 26 neighbouring cells (cell size = tolerance).
 #include "tetrig/rigbuild/weld_vertices.hpp"
 
+#include "tetrig/rigbuild/cell_key.hpp"
+
 #include <array>
 #include <cmath>
 #include <cstring>
 #include <unordered_map>
 
 namespace tetrig::rigbuild {
-namespace {
-
-struct CellKey {
-  std::int64_t x, y, z;
-  bool operator==(const CellKey& o) const { return x == o.x && y == o.y && z == o.z; }
-};
-struct CellHash {
-  size_t operator()(const CellKey& k) const {
-    std::uint64_t h = static_cast<std::uint64_t>(k.x) * 0x9E3779B97F4A7C15ull;
-    h ^= static_cast<std::uint64_t>(k.y) * 0xC2B2AE3D27D4EB4Full + (h << 6) + (h >> 2);
-    h ^= static_cast<std::uint64_t>(k.z) * 0x165667B19E3779F9ull + (h << 6) + (h >> 2);
-    return static_cast<size_t>(h);
-  }
-};
-
-}  // namespace
-
 std::vector<std::int32_t> weldVertices(SurfaceMesh& mesh, double tolerance) {
   const std::int32_t n = mesh.vertexCount();
   std::vector<std::int32_t> representative(static_cast<size_t>(n));
