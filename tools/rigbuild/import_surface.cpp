@@ -2,14 +2,14 @@
 // triangulated, pre-transformed by their node transforms and concatenated; only positions and
 // triangles are kept. assimp emits one vertex per face corner for OBJ, OFF and PLY and loses the
 // file's vertex indices, so for those formats every corner is matched back to the file's own
-// vertex list (readFileVertexList) by position, and the file's list, in file order, becomes the
-// vertex array. Then positions closer than the weld tolerance are welded (weldVertices, the
-// earliest vertex wins), which also joins the per-corner vertices of formats without a shared
-// list (STL) and the seam splits of others (glTF, FBX).
+// vertex list (readFileVertexList) by position (matchFileVertices), and the file's list, in file
+// order, becomes the vertex array. Then positions closer than the weld tolerance are welded
+// (weldVertices, the earliest vertex wins), which also joins the per-corner vertices of formats
+// without a shared list (STL) and the seam splits of others (glTF, FBX).
 #include "tetrig/rigbuild/import_surface.hpp"
 
-#include "tetrig/rigbuild/cell_key.hpp"
 #include "tetrig/rigbuild/file_vertex_list.hpp"
+#include "tetrig/rigbuild/match_file_vertices.hpp"
 #include "tetrig/rigbuild/weld_vertices.hpp"
 
 #include <assimp/Importer.hpp>
@@ -17,78 +17,13 @@
 #include <assimp/scene.h>
 
 #include <algorithm>
-#include <bit>
-#include <cfloat>
 #include <cmath>
 #include <limits>
 #include <optional>
 #include <string>
 #include <system_error>
-#include <unordered_map>
 
 namespace tetrig::rigbuild {
-namespace {
-
-// assimp keeps single precision: a file vertex is found by its coordinates rounded to float
-// (-0 and +0 alike).
-CellKey floatKey(const Eigen::RowVector3d& p) {
-  auto bits = [](double x) -> std::int64_t { return std::bit_cast<std::uint32_t>(static_cast<float>(x) + 0.0f); };
-  return CellKey{bits(p[0]), bits(p[1]), bits(p[2])};
-}
-
-// For each imported (assimp) vertex, the file vertex at its position: the earliest file vertex with
-// the same float-rounded coordinates, else (importers may round the last bits differently) the
-// nearest file vertex within 1e-6 of the diagonal plus a few float ulps. nullopt when a vertex
-// has no file vertex there (then the file's order cannot be trusted: the caller keeps assimp's).
-std::optional<std::vector<std::int32_t>> matchFileVertices(const Vertices& imported, const Vertices& file) {
-  std::unordered_map<CellKey, std::int32_t, CellHash> exact;
-  exact.reserve(static_cast<std::size_t>(file.rows()));
-  for (Eigen::Index i = 0; i < file.rows(); ++i) {
-    if (!file.row(i).allFinite()) return std::nullopt;
-    exact.emplace(floatKey(file.row(i)), static_cast<std::int32_t>(i));
-  }
-  const double tolerance = 1e-6 * boundingBoxDiagonal(file) + 8.0 * FLT_EPSILON * file.cwiseAbs().maxCoeff();
-  std::unordered_map<CellKey, std::vector<std::int32_t>, CellHash> grid;  // built on the first miss
-  auto cellOf = [tolerance](const Eigen::RowVector3d& p) {
-    auto cell = [tolerance](double x) { return static_cast<std::int64_t>(std::floor(x / tolerance)); };
-    return CellKey{cell(p[0]), cell(p[1]), cell(p[2])};
-  };
-  std::vector<std::int32_t> out(static_cast<std::size_t>(imported.rows()), -1);
-  for (Eigen::Index v = 0; v < imported.rows(); ++v) {
-    const Eigen::RowVector3d p = imported.row(v);
-    if (const auto it = exact.find(floatKey(p)); it != exact.end()) {
-      out[static_cast<std::size_t>(v)] = it->second;
-      continue;
-    }
-    if (!(tolerance > 0.0) || !p.allFinite()) return std::nullopt;
-    if (grid.empty()) {
-      for (Eigen::Index i = 0; i < file.rows(); ++i) grid[cellOf(file.row(i))].push_back(static_cast<std::int32_t>(i));
-    }
-    const CellKey home = cellOf(p);
-    std::int32_t best = -1;
-    double best_d = tolerance;
-    for (std::int64_t dx = -1; dx <= 1; ++dx) {
-      for (std::int64_t dy = -1; dy <= 1; ++dy) {
-        for (std::int64_t dz = -1; dz <= 1; ++dz) {
-          const auto it = grid.find(CellKey{home.x + dx, home.y + dy, home.z + dz});
-          if (it == grid.end()) continue;
-          for (const std::int32_t i : it->second) {  // ascending: ties go to the earliest
-            const double d = (file.row(i) - p).norm();
-            if (d < best_d || (d == best_d && best < 0)) {
-              best_d = d;
-              best = i;
-            }
-          }
-        }
-      }
-    }
-    if (best < 0) return std::nullopt;
-    out[static_cast<std::size_t>(v)] = best;
-  }
-  return out;
-}
-
-}  // namespace
 
 SurfaceMesh importSurface(const std::filesystem::path& path, const ImportOptions& options, ImportStats* stats) {
   std::error_code ec;

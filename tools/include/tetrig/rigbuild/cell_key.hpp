@@ -1,5 +1,5 @@
 // A key of three 64-bit integers (a cell of a uniform grid, or bit patterns of coordinates) and
-// its hash, for the rig builder's hash maps over 3D positions (weldVertices, importSurface).
+// its hash, for the rig builder's hash maps over 3D positions (weldVertices, matchFileVertices).
 #pragma once
 
 #include <cstddef>
