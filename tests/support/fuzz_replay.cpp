@@ -1,7 +1,7 @@
-// Replays a libFuzzer target's seed corpus (drivers/fuzz/corpus/<name>/) through the target's
-// LLVMFuzzerTestOneInput in the ordinary test run, with every prefix of every file too. The
-// targets trap on a broken invariant, so a failure here is a crash with the file name printed
-// first. Built once per target (test_fuzz_replay_marker_stream, test_fuzz_replay_hydra).
+// Replays a libFuzzer target's seed corpus (drivers/fuzz/corpus/<name>/, runtime/fuzz/corpus/<name>/)
+// through the target's LLVMFuzzerTestOneInput in the ordinary test run, with every prefix of every
+// file too. The targets trap on a broken invariant, so a failure here is a crash with the file name
+// printed first. Built once per target (test_fuzz_replay_<name>, with TETRIG_FUZZ_CORPUS set).
 #include <gtest/gtest.h>
 
 #include <cstdint>
