@@ -1,0 +1,127 @@
+// One frame of the product on real data: the SMPL male (../shared/data, human_man.obj) rigged to the
+// 41 labelled markers of the HDM05 clip (as in tests/tools/test_rig_markers_real.cpp: 1500 tet
+// vertices, markers up to 15 cm from the skin), driven by the clip itself.
+//   BM_RigFrame/smpl_hdm05: per benchmark iteration, the next clip frame (120 Hz, wrapping around):
+//   each valid marker -> rig units through rig.alignment -> its vertex handle's target (a marker
+//   in a gap keeps its last target); step() with 3 iterations; x_fine = B x_tet with the rig's
+//   pose-transfer matrix as loaded (double weights). Counters split the frame into the step and
+//   the pose transfer. Until a frame scheduler exists, this is the frame path's cost on a real rig.
+#include "bench_data.hpp"
+
+#include "tetrig/deformer.hpp"
+#include "tetrig/drivers/c3d_reader.hpp"
+#include "tetrig/pose_transfer.hpp"
+#include "tetrig/rig_file.hpp"
+#include "tetrig/rigbuild/build_rig.hpp"
+
+#include <benchmark/benchmark.h>
+
+#include <chrono>
+#include <memory>
+#include <stdexcept>
+#include <string>
+
+namespace {
+
+constexpr const char* kMan = "meshes/odedstein-meshes/human_man.obj";
+constexpr const char* kClip = "mocap/hdm05/HDM_mm_01-02_03_120.c3d";
+
+struct RigScene {
+  tetrig::Rig rig;
+  tetrig::drivers::C3DClip clip;
+  std::vector<int> clip_point;  // per rig marker: its point in the clip
+};
+
+// Built once (the rig build takes seconds); null with `error` set when the data is absent.
+const RigScene* rigScene(std::string& error) {
+  static std::unique_ptr<RigScene> scene;
+  static std::string build_error;
+  static bool tried = false;
+  if (!tried) {
+    tried = true;
+    const auto man = tetrig::bench::benchDataPath(kMan), clip = tetrig::bench::benchDataPath(kClip);
+    if (!std::filesystem::exists(man)) {
+      build_error = tetrig::bench::benchDataMissing(man);
+    } else if (!std::filesystem::exists(clip)) {
+      build_error = tetrig::bench::benchDataMissing(clip);
+    } else {
+      try {
+        tetrig::rigbuild::BuildRigInputs in;
+        in.mesh = man;
+        in.clip = clip;
+        in.tet_vertices = 1500;
+        in.max_marker_distance = 0.15;  // the subject's wider stance: see test_rig_markers_real.cpp
+        in.check_deformer = false;
+        auto s = std::make_unique<RigScene>(RigScene{tetrig::rigbuild::buildRig(in), tetrig::drivers::C3DClip::load(clip), {}});
+        for (const tetrig::RigMarker& m : s->rig.markers) {
+          int found = -1;
+          for (int p = 0; p < s->clip.pointCount(); ++p) {
+            const std::string& label = s->clip.labels()[static_cast<std::size_t>(p)];
+            const std::size_t colon = label.rfind(':');
+            if ((colon == std::string::npos ? label : label.substr(colon + 1)) == m.label) found = p;
+          }
+          if (found < 0) throw std::runtime_error("marker " + m.label + " is not in the clip");
+          s->clip_point.push_back(found);
+        }
+        scene = std::move(s);
+      } catch (const std::exception& e) {
+        build_error = e.what();
+      }
+    }
+  }
+  error = build_error;
+  return scene.get();
+}
+
+void BM_RigFrame(benchmark::State& state) {
+  std::string error;
+  const RigScene* scene = rigScene(error);
+  if (scene == nullptr) {
+    state.SkipWithError(error.c_str());
+    return;
+  }
+  const tetrig::Rig& rig = scene->rig;
+  tetrig::Deformer deformer(rig.tet_mesh, rig.setup);
+  std::vector<Eigen::Vector3d> targets;
+  for (const std::int32_t v : rig.setup.vertex_handles) targets.push_back(rig.tet_mesh.vertices.row(v).transpose());
+  tetrig::HandleTargets handle_targets;
+  handle_targets.vertex_positions = targets;
+  const auto b = rig.pose_transfer.view();
+  std::vector<double> fine(static_cast<std::size_t>(rig.pose_transfer.rows) * 3);
+  const double to_mm = scene->clip.unitsToMm();
+  const std::size_t frames = scene->clip.frameCount();
+  std::size_t frame = 0;
+  std::int64_t step_ns = 0, pose_ns = 0, iterations = 0, solve_ns = 0, exact = 0;
+  for (auto _ : state) {
+    const float* p = scene->clip.positions(frame);
+    for (std::size_t m = 0; m < rig.markers.size(); ++m) {
+      const int point = scene->clip_point[m];
+      if (!scene->clip.isValid(frame, point)) continue;
+      const Eigen::Vector3d mm(to_mm * p[3 * point], to_mm * p[3 * point + 1], to_mm * p[3 * point + 2]);
+      targets[static_cast<std::size_t>(rig.markers[m].vertex_handle)] = rig.alignment.apply(mm);
+    }
+    const tetrig::StepStats stats = deformer.step(handle_targets, tetrig::StepBudget{3});
+    const auto t1 = std::chrono::steady_clock::now();
+    tetrig::applyPoseTransfer(b, deformer.positions().data(), fine.data());
+    benchmark::DoNotOptimize(fine.data());
+    benchmark::ClobberMemory();
+    pose_ns += std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - t1).count();
+    step_ns += stats.total_ns;
+    iterations += stats.iterations;
+    solve_ns += stats.solve_ns;
+    exact += stats.exact_rotations;
+    frame = (frame + 1) % frames;
+  }
+  const auto n = static_cast<double>(state.iterations());
+  state.counters["step_us"] = static_cast<double>(step_ns) / n * 1e-3;
+  state.counters["pose_transfer_us"] = static_cast<double>(pose_ns) / n * 1e-3;
+  state.counters["solve_us"] = static_cast<double>(solve_ns) / n * 1e-3;
+  state.counters["exact_rotations"] = static_cast<double>(exact) / n;
+  state.counters["iterations"] = static_cast<double>(iterations) / n;
+  state.counters["tets"] = rig.tet_mesh.tetCount();
+  state.counters["fine_vertices"] = rig.pose_transfer.rows;
+  state.counters["B_nnz_per_row"] = static_cast<double>(rig.pose_transfer.weights.size()) / rig.pose_transfer.rows;
+}
+BENCHMARK(BM_RigFrame)->Name("BM_RigFrame/smpl_hdm05")->Unit(benchmark::kMicrosecond);
+
+}  // namespace
