@@ -4,8 +4,9 @@
 //   BM_RigFrame/smpl_hdm05: per benchmark iteration, the next clip frame (120 Hz, wrapping around):
 //   each valid marker -> rig units through rig.alignment -> its vertex handle's target (a marker
 //   in a gap keeps its last target); step() with 3 iterations; x_fine = B x_tet with the rig's
-//   pose-transfer matrix as loaded (double weights). Counters split the frame into the step and
-//   the pose transfer. Until a frame scheduler exists, this is the frame path's cost on a real rig.
+//   pose-transfer matrix as loaded (double weights), from the deformer's padded positions
+//   (applyPoseTransferPadded). Counters split the frame into the step and the pose transfer.
+//   Until a frame scheduler exists, this is the frame path's cost on a real rig.
 #include "bench_data.hpp"
 
 #include "tetrig/deformer.hpp"
@@ -102,7 +103,7 @@ void BM_RigFrame(benchmark::State& state) {
     }
     const tetrig::StepStats stats = deformer.step(handle_targets, tetrig::StepBudget{3});
     const auto t1 = std::chrono::steady_clock::now();
-    tetrig::applyPoseTransfer(b, deformer.positions().data(), fine.data());
+    tetrig::applyPoseTransferPadded(b, deformer.paddedPositions().data(), fine.data());
     benchmark::DoNotOptimize(fine.data());
     benchmark::ClobberMemory();
     pose_ns += std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - t1).count();

@@ -140,6 +140,7 @@ Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(s
   delta_.assign(n4, 0.0);
   rhs_constant_.assign(static_cast<size_t>(free_count_) * kVectorStride, 0.0);
   positions_.assign(n3, 0.0);
+  padded_positions_.assign(n4, 0.0);
 
   // --- Coupling -L_fh as CSR over free rows in solver order. ---
   {
@@ -410,6 +411,10 @@ void Deformer::writePositions() {
     out[0] = p[0];
     out[1] = p[1];
     out[2] = p[2];
+    double* padded = &padded_positions_[kVectorStride * static_cast<size_t>(v)];
+    padded[0] = p[0];
+    padded[1] = p[1];
+    padded[2] = p[2];
   }
 }
 

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <limits>
 #include <random>
@@ -50,6 +51,25 @@ Vertices bendBar(const scenes::BarScene& bar, DeformerOptions options, int frame
     deformer.step(vertexTargets(targets), StepBudget{f == frames ? final_iterations : iterations_per_frame});
   }
   return test::deformedVertices(deformer);
+}
+
+TEST(Deformer, PaddedPositionsMirrorPositionsAfterEveryStep) {
+  const auto bar = scenes::makeBarScene(3, 3, 12);
+  Deformer deformer(bar.mesh, test::endVertexHandles(bar));
+  for (int f = 1; f <= 3; ++f) {
+    const auto targets = test::endTargets(bar, scenes::barBendTransform(bar, 0.3 * f));
+    deformer.step(vertexTargets(targets), StepBudget{2});
+    const auto x = deformer.positions();
+    const auto x4 = deformer.paddedPositions();
+    ASSERT_EQ(x4.size(), x.size() / 3 * 4);
+    EXPECT_EQ(reinterpret_cast<std::uintptr_t>(x4.data()) % 64, 0u);
+    for (size_t v = 0; v < x.size() / 3; ++v) {
+      for (size_t c = 0; c < 3; ++c) ASSERT_EQ(x4[4 * v + c], x[3 * v + c]) << "frame " << f << " vertex " << v;
+      ASSERT_EQ(x4[4 * v + 3], 0.0);
+    }
+    // The frame actually moved the bar (so the equality above is not rest against rest).
+    EXPECT_GT(std::abs(x[x.size() - 1] - bar.mesh.vertices(bar.mesh.vertexCount() - 1, 2)), 1e-3);
+  }
 }
 
 TEST(Deformer, BarBendStaysRigidAndKeepsVolumeWhereLinearLaplacianFails) {

@@ -73,14 +73,57 @@ TEST(PoseTransfer, RowRangeWritesOnlyThoseRows) {
   }
 }
 
+// The padded-input kernel: same product from (x, y, z, pad) positions; the pad (set to garbage
+// here) must not leak into the result; rows with an odd number of entries take the remainder path.
+TEST(PoseTransfer, PaddedInputMatchesEigenProduct) {
+  const int rows = 500;
+  const int cols = 80;
+  const auto b = randomB(rows, cols, 13);
+  Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> x = Eigen::MatrixXd::Random(cols, 3);
+  const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> expected = b * x;
+  std::vector<double> x4(static_cast<size_t>(cols) * 4);
+  for (int v = 0; v < cols; ++v) {
+    for (int c = 0; c < 3; ++c) x4[4 * static_cast<size_t>(v) + static_cast<size_t>(c)] = x(v, c);
+    x4[4 * static_cast<size_t>(v) + 3] = 1e30;  // the pad lane is summed but never written out
+  }
+  int odd_rows = 0;
+  for (int i = 0; i < rows; ++i) odd_rows += b.outerIndexPtr()[i + 1] % 2 != b.outerIndexPtr()[i] % 2;
+  ASSERT_GT(odd_rows, 50);
+
+  const PoseTransferCsr<double> bd = makePoseTransferCsr<double>(b);
+  Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> out(rows, 3);
+  applyPoseTransferPadded(bd.view(), x4.data(), out.data());
+  EXPECT_LT((out - expected).cwiseAbs().maxCoeff(), 1e-12);
+
+  const PoseTransferCsr<float> bf = makePoseTransferCsr<float>(b);
+  Eigen::Matrix<float, Eigen::Dynamic, 3, Eigen::RowMajor> outf(rows, 3);
+  applyPoseTransferPadded(bf.view(), x4.data(), outf.data());
+  EXPECT_LT((outf.cast<double>() - expected).cwiseAbs().maxCoeff(), 1e-4);
+
+  // Row ranges write only their rows.
+  out.setConstant(42.0);
+  applyPoseTransferPaddedRows(bd.view(), x4.data(), out.data(), 100, 201);
+  for (int i = 0; i < rows; ++i) {
+    if (i >= 100 && i < 201) {
+      EXPECT_LT((out.row(i) - expected.row(i)).norm(), 1e-12) << i;
+    } else {
+      EXPECT_EQ(out.row(i), Eigen::RowVector3d::Constant(42.0)) << i;
+    }
+  }
+}
+
 TEST(PoseTransfer, ApplyDoesNotAllocate) {
   const auto b = randomB(300, 50, 11);
   const PoseTransferCsr<float> bf = makePoseTransferCsr<float>(b);
   std::vector<double> x(150, 1.0);
   std::vector<float> out(900);
   const auto view = bf.view();
+  std::vector<double> x4(200, 1.0);
   const std::uint64_t before = ::tetrig::test::allocationCount();
-  for (int frame = 0; frame < 10; ++frame) applyPoseTransfer(view, x.data(), out.data());
+  for (int frame = 0; frame < 10; ++frame) {
+    applyPoseTransfer(view, x.data(), out.data());
+    applyPoseTransferPadded(view, x4.data(), out.data());
+  }
   EXPECT_EQ(::tetrig::test::allocationCount(), before);
 }
 

@@ -3,6 +3,7 @@
 //   Deformer deformer(mesh, setup);            // load: all allocation and the factorization
 //   StepStats s = deformer.step(targets, budget);  // per frame: no allocation, lock, throw or I/O
 //   deformer.positions();                      // #V*3 doubles, mesh order, valid after step()
+//   deformer.paddedPositions();                // the same as #V*4 (x, y, z, 0), for applyPoseTransferPadded
 //
 // Handles (section 2.3.1):
 // - vertex handles: a vertex whose position is prescribed; eliminated from L.
@@ -123,6 +124,9 @@ class Deformer {
 
   // Deformed positions, #V*3 doubles in mesh vertex order (x0 y0 z0 x1 ...).
   std::span<const double> positions() const { return positions_; }
+  // The same, #V*4 doubles (x0 y0 z0 0 x1 ...), 64-byte aligned: the input of
+  // applyPoseTransferPadded (one vector load per entry of B).
+  std::span<const double> paddedPositions() const { return padded_positions_; }
   Eigen::Vector3d position(std::int32_t v) const;
 
   // Current rotation of tet t.
@@ -161,6 +165,7 @@ class Deformer {
   AlignedVector<double> delta_;                 // differential coordinates, solver order
   AlignedVector<double> rhs_constant_;          // -L_fh x_h + point terms, free part
   std::vector<double> positions_;             // mesh order output
+  AlignedVector<double> padded_positions_;      // mesh order output, kVectorStride per vertex
 
   // -L_fh as CSR over the free rows next to a handle (coupling_row_: their solver index),
   // columns = handle slots.

@@ -1,0 +1,47 @@
+// Pose transfer x_fine = B x_tet (Stoll et al. 2007, eq. 2.12) from padded tet positions: each tet
+// vertex is (x, y, z, pad), so an entry of B costs one vector load and one 4-wide FMA,
+//   (x, y, z, pad)_fine_i = sum_k B(i, c_k) (x, y, z, pad)_tet_c_k,
+// instead of three scalar loads and three FMAs chained on one running sum per coordinate (the
+// stride-3 kernel in pose_transfer.cpp). Two partial sums per row (even and odd entries).
+#include "tetrig/pose_transfer.hpp"
+
+#include "multiversion.hpp"
+#include "vector_lanes.hpp"
+
+namespace tetrig {
+
+template <typename W, typename Out>
+TETRIG_MULTIVERSION void applyPoseTransferPaddedRows(const PoseTransferView<W>& b, const double* x_tet4, Out* x_fine,
+                                                     std::int32_t row_begin, std::int32_t row_end) noexcept {
+  using lanes::load4;
+  using lanes::Vec4;
+  const std::int32_t* offsets = b.row_offsets;
+  const std::int32_t* cols = b.columns;
+  const W* w = b.weights;
+  for (std::int32_t i = row_begin; i < row_end; ++i) {
+    Vec4 s0{}, s1{};
+    const std::int32_t end = offsets[i + 1];
+    std::int32_t k = offsets[i];
+    for (; k + 2 <= end; k += 2) {
+      s0 += static_cast<double>(w[k]) * load4(x_tet4 + 4 * static_cast<std::ptrdiff_t>(cols[k]));
+      s1 += static_cast<double>(w[k + 1]) * load4(x_tet4 + 4 * static_cast<std::ptrdiff_t>(cols[k + 1]));
+    }
+    if (k < end) s0 += static_cast<double>(w[k]) * load4(x_tet4 + 4 * static_cast<std::ptrdiff_t>(cols[k]));
+    const Vec4 s = s0 + s1;
+    Out* out = x_fine + static_cast<std::ptrdiff_t>(i) * 3;
+    out[0] = static_cast<Out>(s[0]);
+    out[1] = static_cast<Out>(s[1]);
+    out[2] = static_cast<Out>(s[2]);
+  }
+}
+
+template void applyPoseTransferPaddedRows<float, float>(const PoseTransferView<float>&, const double*, float*,
+                                                        std::int32_t, std::int32_t) noexcept;
+template void applyPoseTransferPaddedRows<float, double>(const PoseTransferView<float>&, const double*, double*,
+                                                         std::int32_t, std::int32_t) noexcept;
+template void applyPoseTransferPaddedRows<double, float>(const PoseTransferView<double>&, const double*, float*,
+                                                         std::int32_t, std::int32_t) noexcept;
+template void applyPoseTransferPaddedRows<double, double>(const PoseTransferView<double>&, const double*, double*,
+                                                          std::int32_t, std::int32_t) noexcept;
+
+}  // namespace tetrig
