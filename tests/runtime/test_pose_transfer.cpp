@@ -32,12 +32,24 @@ Eigen::SparseMatrix<double, Eigen::RowMajor> randomB(int rows, int cols, unsigne
   return b;
 }
 
+using Positions = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>;
+
+// A random B (rows x cols), random tet positions x and the reference product B x (Eigen).
+struct RandomProduct {
+  Eigen::SparseMatrix<double, Eigen::RowMajor> b;
+  Positions x;
+  Positions expected;
+};
+RandomProduct randomProduct(int rows, int cols, unsigned seed) {
+  RandomProduct p{randomB(rows, cols, seed), Eigen::MatrixXd::Random(cols, 3), {}};
+  p.expected = p.b * p.x;
+  return p;
+}
+
 TEST(PoseTransfer, MatchesEigenProductInDoubleAndFloat) {
   const int rows = 500;
   const int cols = 80;
-  const auto b = randomB(rows, cols, 7);
-  Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> x = Eigen::MatrixXd::Random(cols, 3);
-  const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> expected = b * x;
+  const auto [b, x, expected] = randomProduct(rows, cols, 7);
 
   const PoseTransferCsr<double> bd = makePoseTransferCsr<double>(b);
   EXPECT_EQ(validatePoseTransfer(bd.view()), "");
@@ -78,9 +90,7 @@ TEST(PoseTransfer, RowRangeWritesOnlyThoseRows) {
 TEST(PoseTransfer, PaddedInputMatchesEigenProduct) {
   const int rows = 500;
   const int cols = 80;
-  const auto b = randomB(rows, cols, 13);
-  Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> x = Eigen::MatrixXd::Random(cols, 3);
-  const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> expected = b * x;
+  const auto [b, x, expected] = randomProduct(rows, cols, 13);
   std::vector<double> x4(static_cast<size_t>(cols) * 4);
   for (int v = 0; v < cols; ++v) {
     for (int c = 0; c < 3; ++c) x4[4 * static_cast<size_t>(v) + static_cast<size_t>(c)] = x(v, c);
