@@ -35,18 +35,9 @@ struct RigScene {
 
 // Built once (the rig build takes seconds); null with `error` set when the data is absent.
 const RigScene* rigScene(std::string& error) {
-  static std::unique_ptr<RigScene> scene;
-  static std::string build_error;
-  static bool tried = false;
-  if (!tried) {
-    tried = true;
-    const auto man = tetrig::bench::benchDataPath(kMan), clip = tetrig::bench::benchDataPath(kClip);
-    if (!std::filesystem::exists(man)) {
-      build_error = tetrig::bench::benchDataMissing(man);
-    } else if (!std::filesystem::exists(clip)) {
-      build_error = tetrig::bench::benchDataMissing(clip);
-    } else {
-      try {
+  return tetrig::bench::buildOnce<RigScene>(
+      [] {
+        const auto man = tetrig::bench::requireBenchData(kMan), clip = tetrig::bench::requireBenchData(kClip);
         tetrig::rigbuild::BuildRigInputs in;
         in.mesh = man;
         in.clip = clip;
@@ -55,23 +46,13 @@ const RigScene* rigScene(std::string& error) {
         in.check_deformer = false;
         auto s = std::make_unique<RigScene>(RigScene{tetrig::rigbuild::buildRig(in), tetrig::drivers::C3DClip::load(clip), {}});
         for (const tetrig::RigMarker& m : s->rig.markers) {
-          int found = -1;
-          for (int p = 0; p < s->clip.pointCount(); ++p) {
-            const std::string& label = s->clip.labels()[static_cast<std::size_t>(p)];
-            const std::size_t colon = label.rfind(':');
-            if ((colon == std::string::npos ? label : label.substr(colon + 1)) == m.label) found = p;
-          }
-          if (found < 0) throw std::runtime_error("marker " + m.label + " is not in the clip");
-          s->clip_point.push_back(found);
+          const int point = s->clip.findPoint(m.label);  // subject prefixes ("meinard:LFHD") allowed
+          if (point < 0) throw std::runtime_error("marker " + m.label + " is not in the clip");
+          s->clip_point.push_back(point);
         }
-        scene = std::move(s);
-      } catch (const std::exception& e) {
-        build_error = e.what();
-      }
-    }
-  }
-  error = build_error;
-  return scene.get();
+        return s;
+      },
+      error);
 }
 
 void BM_RigFrame(benchmark::State& state) {

@@ -36,16 +36,9 @@ struct ArmadilloRig {
 
 // Built once, shared by the benchmarks that only time one step. Null when the data is absent.
 const ArmadilloRig* armadilloRig(const std::string& relative, std::string& error) {
-  static std::unique_ptr<ArmadilloRig> rig;
-  static std::string build_error;
-  static bool tried = false;
-  if (!tried) {
-    tried = true;
-    const auto path = tetrig::bench::benchDataPath(relative);
-    if (!std::filesystem::exists(path)) {
-      build_error = tetrig::bench::benchDataMissing(path);
-    } else {
-      try {
+  return tetrig::bench::buildOnce<ArmadilloRig>(
+      [&] {
+        const auto path = tetrig::bench::requireBenchData(relative);
         auto r = std::make_unique<ArmadilloRig>();
         r->fine = importSurface(path);
         requireUsableSurface(validateSurface(r->fine), path.string());
@@ -57,14 +50,9 @@ const ArmadilloRig* armadilloRig(const std::string& relative, std::string& error
         cap.max_nonzeros_per_row = 16;
         cap.cap_mode = WeightCap::kDropFarTets;
         r->b_cap16 = poseTransferWeights(r->fine.vertices, r->coarse.tets.mesh, cap);
-        rig = std::move(r);
-      } catch (const std::exception& e) {
-        build_error = e.what();
-      }
-    }
-  }
-  error = build_error;
-  return rig.get();
+        return r;
+      },
+      error);
 }
 
 void BM_BuildRig(benchmark::State& state, const char* relative) {
