@@ -1,7 +1,7 @@
 // libFuzzer target for the deformation core's load step and frame step (tetrig::Deformer).
 //
-// The input bytes build a small bar of cubes (each split into 6 tets around its main diagonal, a
-// conforming mesh), jitter its vertices (slivers and inverted tets included, sometimes a raw
+// The input bytes build a small bar of cubes (scenes::makeBarScene, tests/support: 5 tets per
+// cube), jitter its vertices (slivers and inverted tets included, sometimes a raw
 // double: NaN, infinity, huge), choose vertex, region and point handles, rigid groups, stiffness
 // and options, then drive step() with targets read from the rest of the input (again sometimes
 // raw doubles: rejected targets, and absurd but finite moves).
@@ -12,6 +12,7 @@
 // other exception, a crash, a trap or a sanitizer report is a bug.
 // Build: cmake --preset fuzz && cmake --build --preset fuzz;
 // run:   build/fuzz/runtime/fuzz_deformer -max_total_time=300 [corpus dir].
+#include "scenes.hpp"
 #include "tetrig/deformer.hpp"
 
 #include <cmath>
@@ -51,35 +52,6 @@ class Bytes {
   std::size_t pos_ = 0;
 };
 
-tetrig::TetMesh makeBar(int nx, int ny, int nz) {
-  tetrig::TetMesh mesh;
-  auto index = [&](int i, int j, int k) { return static_cast<std::int32_t>((k * (ny + 1) + j) * (nx + 1) + i); };
-  mesh.vertices.resize((nx + 1) * (ny + 1) * (nz + 1), 3);
-  for (int k = 0; k <= nz; ++k)
-    for (int j = 0; j <= ny; ++j)
-      for (int i = 0; i <= nx; ++i) mesh.vertices.row(index(i, j, k)) << i, j, k;
-  // Kuhn split: the 6 paths from corner 0 to corner 7 of a cube, one tet each.
-  static constexpr int kPaths[6][3] = {{1, 3, 7}, {1, 5, 7}, {2, 3, 7}, {2, 6, 7}, {4, 5, 7}, {4, 6, 7}};
-  std::vector<std::int32_t> tets;
-  for (int k = 0; k < nz; ++k)
-    for (int j = 0; j < ny; ++j)
-      for (int i = 0; i < nx; ++i) {
-        auto corner = [&](int c) { return index(i + (c & 1), j + ((c >> 1) & 1), k + ((c >> 2) & 1)); };
-        for (const auto& path : kPaths) {
-          std::int32_t t[4] = {corner(0), corner(path[0]), corner(path[1]), corner(path[2])};
-          const Eigen::RowVector3d a = mesh.vertices.row(t[0]);
-          const Eigen::Matrix3d e = (Eigen::Matrix3d() << mesh.vertices.row(t[1]) - a, mesh.vertices.row(t[2]) - a,
-                                     mesh.vertices.row(t[3]) - a)
-                                        .finished();
-          if (e.determinant() < 0) std::swap(t[2], t[3]);  // positively oriented at rest
-          tets.insert(tets.end(), t, t + 4);
-        }
-      }
-  mesh.tets.resize(static_cast<Eigen::Index>(tets.size() / 4), 4);
-  for (size_t i = 0; i < tets.size(); ++i) mesh.tets(static_cast<Eigen::Index>(i / 4), static_cast<Eigen::Index>(i % 4)) = tets[i];
-  return mesh;
-}
-
 void requireFinitePositions(const tetrig::Deformer& deformer) {
   for (const double p : deformer.positions())
     if (!std::isfinite(p)) __builtin_trap();
@@ -90,7 +62,7 @@ void requireFinitePositions(const tetrig::Deformer& deformer) {
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   Bytes in(data, size);
   const int nx = 1 + in.byte() % 3, ny = 1 + in.byte() % 2, nz = 1 + in.byte() % 4;
-  tetrig::TetMesh mesh = makeBar(nx, ny, nz);
+  tetrig::TetMesh mesh = tetrig::scenes::makeBarScene(nx, ny, nz).mesh;
   const std::int32_t vertex_count = mesh.vertexCount(), tet_count = mesh.tetCount();
 
   // Jitter: 0, a little, up to half a cube (slivers, inversions), or far.
