@@ -136,7 +136,7 @@ Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(s
     for (int c = 0; c < 3; ++c)
       rest_solver_[kVectorStride * static_cast<size_t>(solver_index_[static_cast<size_t>(v)]) + static_cast<size_t>(c)] =
           mesh.vertices(v, c);
-  x_ = rest_solver_;
+  u_.assign(n4, 0.0);
   delta_.assign(n4, 0.0);
   rhs_constant_.assign(static_cast<size_t>(free_count_) * kVectorStride, 0.0);
   positions_.assign(n3, 0.0);
@@ -191,12 +191,12 @@ Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(s
     TetBlock& block = blocks_[static_cast<size_t>(b)];
     for (int l = 0; l < kTetBlockWidth; ++l) {
       const std::int32_t s = b * kTetBlockWidth + l;
-      block.rotation[0][l] = 1.0;
-      block.rotation[1][l] = block.rotation[2][l] = block.rotation[3][l] = 0.0;
+      block.rotation[0][l] = 1.0f;
+      block.rotation[1][l] = block.rotation[2][l] = block.rotation[3][l] = 0.0f;
       if (s >= tet_count_) {  // padding lane: weight 0, identity frame, corners at vertex 0
         for (int c = 0; c < 4; ++c) block.corner_offset[c][l] = 0;
-        for (int i = 0; i < 9; ++i) block.edge_inverse[i][l] = (i % 4 == 0) ? 1.0 : 0.0;
-        block.weight[l] = 0.0;
+        for (int i = 0; i < 9; ++i) block.edge_inverse[i][l] = (i % 4 == 0) ? 1.0f : 0.0f;
+        block.weight[l] = 0.0f;
         continue;
       }
       const std::int32_t t = order[static_cast<size_t>(s)];
@@ -204,8 +204,8 @@ Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(s
       for (int c = 0; c < 4; ++c)
         block.corner_offset[c][l] = kVectorStride * solver_index_[static_cast<size_t>(mesh.tets(t, c))];
       const Eigen::Matrix3d& e = frames.edge_inverse[static_cast<size_t>(t)];
-      for (int i = 0; i < 9; ++i) block.edge_inverse[i][l] = e(i / 3, i % 3);
-      block.weight[l] = weights[static_cast<size_t>(t)];
+      for (int i = 0; i < 9; ++i) block.edge_inverse[i][l] = static_cast<float>(e(i / 3, i % 3));
+      block.weight[l] = static_cast<float>(weights[static_cast<size_t>(t)]);
     }
   }
 
@@ -263,11 +263,11 @@ Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(s
 void Deformer::reset() {
   for (auto& block : blocks_) {
     for (int l = 0; l < kTetBlockWidth; ++l) {
-      block.rotation[0][l] = 1.0;
-      block.rotation[1][l] = block.rotation[2][l] = block.rotation[3][l] = 0.0;
+      block.rotation[0][l] = 1.0f;
+      block.rotation[1][l] = block.rotation[2][l] = block.rotation[3][l] = 0.0f;
     }
   }
-  x_ = rest_solver_;
+  std::fill(u_.begin(), u_.end(), 0.0);
   for (std::int32_t h = 0; h < vertex_handle_count_; ++h) {
     const double* p = &rest_solver_[kVectorStride * static_cast<size_t>(free_count_ + h)];
     vertex_targets_[static_cast<size_t>(h)] = Eigen::Vector3d(p[0], p[1], p[2]);
@@ -326,28 +326,29 @@ bool Deformer::acceptTargets(const HandleTargets& targets, std::uint32_t& flags)
 }
 
 void Deformer::updateConstantRhs() {
-  // Handle positions into the handle slots of x.
+  // Handle displacements (target - rest) into the handle slots of u.
   for (std::int32_t h = 0; h < handle_count_; ++h) {
-    double* out = &x_[kVectorStride * static_cast<size_t>(free_count_ + h)];
+    double* out = &u_[kVectorStride * static_cast<size_t>(free_count_ + h)];
+    const double* rest = &rest_solver_[kVectorStride * static_cast<size_t>(free_count_ + h)];
+    const Eigen::Vector3d r(rest[0], rest[1], rest[2]);
     const std::int32_t region = handle_region_[static_cast<size_t>(h)];
     Eigen::Vector3d p;
     if (region < 0) {
       p = vertex_targets_[static_cast<size_t>(h)];
     } else {
-      const double* rest = &rest_solver_[kVectorStride * static_cast<size_t>(free_count_ + h)];
       const RigidTransform& t = region_targets_[static_cast<size_t>(region)];
-      p = t.rotation * Eigen::Vector3d(rest[0], rest[1], rest[2]) + t.translation;
+      p = t.rotation * r + t.translation;
     }
-    out[0] = p[0];
-    out[1] = p[1];
-    out[2] = p[2];
+    out[0] = p[0] - r[0];
+    out[1] = p[1] - r[1];
+    out[2] = p[2] - r[2];
   }
   // Rows that take point terms start again from 0 (the coupling loop below overwrites its rows).
   for (const std::int32_t s : point_corner_) {
     if (s < free_count_) std::fill_n(&rhs_constant_[kVectorStride * static_cast<size_t>(s)], 3, 0.0);
   }
-  // -L_fh x_h, on the rows next to a handle (0 elsewhere, and never changes there).
-  const double* handles = x_.data() + kVectorStride * static_cast<size_t>(free_count_);
+  // -L_fh u_h, on the rows next to a handle (0 elsewhere, and never changes there).
+  const double* handles = u_.data() + kVectorStride * static_cast<size_t>(free_count_);
   for (size_t r = 0; r < coupling_row_.size(); ++r) {
     const auto i = static_cast<size_t>(coupling_row_[r]);
     double s0 = 0.0, s1 = 0.0, s2 = 0.0;
@@ -362,14 +363,18 @@ void Deformer::updateConstantRhs() {
     rhs_constant_[kVectorStride * i + 1] = s1;
     rhs_constant_[kVectorStride * i + 2] = s2;
   }
-  // Point handles: lambda b_a (p - sum_{handle corners h} b_h x_h) for each free corner a.
+  // Point handles: lambda b_a (p - p_rest - sum_{handle corners h} b_h u_h) for each free corner a,
+  // with p_rest = sum_c b_c x_rest_c (the point's rest position).
   for (size_t p = 0; p < point_targets_.size(); ++p) {
     Eigen::Vector3d target = point_targets_[p];
     for (int c = 0; c < 4; ++c) {
       const std::int32_t s = point_corner_[4 * p + static_cast<size_t>(c)];
+      const double b = point_weight_[4 * p + static_cast<size_t>(c)];
+      const double* rest = &rest_solver_[kVectorStride * static_cast<size_t>(s)];
+      target -= b * Eigen::Vector3d(rest[0], rest[1], rest[2]);
       if (s >= free_count_) {
-        const double* xh = &x_[kVectorStride * static_cast<size_t>(s)];
-        target -= point_weight_[4 * p + static_cast<size_t>(c)] * Eigen::Vector3d(xh[0], xh[1], xh[2]);
+        const double* uh = &u_[kVectorStride * static_cast<size_t>(s)];
+        target -= b * Eigen::Vector3d(uh[0], uh[1], uh[2]);
       }
     }
     for (int c = 0; c < 4; ++c) {
@@ -406,15 +411,12 @@ void Deformer::rebuildDelta() {
 
 void Deformer::writePositions() {
   for (std::int32_t v = 0; v < vertex_count_; ++v) {
-    const double* p = &x_[kVectorStride * static_cast<size_t>(solver_index_[static_cast<size_t>(v)])];
+    const auto s = kVectorStride * static_cast<size_t>(solver_index_[static_cast<size_t>(v)]);
+    const double* d = &u_[s];
+    const double* rest = &rest_solver_[s];
     double* out = &positions_[3 * static_cast<size_t>(v)];
-    out[0] = p[0];
-    out[1] = p[1];
-    out[2] = p[2];
     double* padded = &padded_positions_[kVectorStride * static_cast<size_t>(v)];
-    padded[0] = p[0];
-    padded[1] = p[1];
-    padded[2] = p[2];
+    for (int c = 0; c < 3; ++c) out[c] = padded[c] = rest[c] + d[c];
   }
 }
 
@@ -432,10 +434,10 @@ StepStats Deformer::step(const HandleTargets& targets, const StepBudget& budget)
   const bool has_groups = !group_slot_.empty();
   const size_t free4 = static_cast<size_t>(free_count_) * kVectorStride;
   for (int iteration = 0; iteration < budget.max_iterations; ++iteration) {
-    // 1. Linear solve: L_ff x_f = delta_f - L_fh x_h (+ point terms).
+    // 1. Linear solve: L_ff u_f = delta_f - L_fh u_h (+ point terms).
     const auto t0 = Clock::now();
-    for (size_t i = 0; i < free4; ++i) x_[i] = delta_[i] + rhs_constant_[i];
-    if (free_count_ > 0) factor_.solveInPlace(x_.data());
+    for (size_t i = 0; i < free4; ++i) u_[i] = delta_[i] + rhs_constant_[i];
+    if (free_count_ > 0) factor_.solveInPlace(u_.data());
     const auto t1 = Clock::now();
     stats.solve_ns += nanosecondsBetween(t0, t1);
     ++stats.iterations;
@@ -443,7 +445,7 @@ StepStats Deformer::step(const HandleTargets& targets, const StepBudget& budget)
       // 2.-4. Rotations, rigid groups, differential coordinates.
       std::fill(delta_.begin(), delta_.end(), 0.0);
       const RotationPassStats pass =
-          rotationPass(blocks_.data(), block_count, x_.data(), has_groups ? nullptr : delta_.data(),
+          rotationPass(blocks_.data(), block_count, u_.data(), has_groups ? nullptr : delta_.data(),
                        options_.rotation_steps, exact_lanes_.data());
       stats.energy = pass.energy;
       stats.exact_rotations += pass.exact_fallbacks;
@@ -487,10 +489,10 @@ void Deformer::setRotations(std::span<const Eigen::Quaterniond> rotations) {
     TetBlock& block = blocks_[static_cast<size_t>(s / kTetBlockWidth)];
     const int l = s % kTetBlockWidth;
     const Eigen::Quaterniond q = rotations[static_cast<size_t>(t)].normalized();
-    block.rotation[0][l] = q.w();
-    block.rotation[1][l] = q.x();
-    block.rotation[2][l] = q.y();
-    block.rotation[3][l] = q.z();
+    block.rotation[0][l] = static_cast<float>(q.w());
+    block.rotation[1][l] = static_cast<float>(q.x());
+    block.rotation[2][l] = static_cast<float>(q.y());
+    block.rotation[3][l] = static_cast<float>(q.z());
   }
   rebuildDelta();
 }

@@ -65,7 +65,7 @@ void SplitLdlt::factorize(const Eigen::SparseMatrix<double>& a) {
 
 namespace {
 
-constexpr std::int32_t kRowPad = kTetBlockWidth;  // = the lanes of lanes::Lanes
+constexpr std::int32_t kRowPad = lanes::kLanes;  // = the lanes of lanes::Lanes
 
 std::int32_t paddedRows(std::int32_t width, std::int32_t rows) {
   return width == 1 ? rows : (rows + kRowPad - 1) / kRowPad * kRowPad;
@@ -208,9 +208,9 @@ TETRIG_INLINE void subtractBlockProduct(double* xyzw, const std::int32_t* rows, 
     }
   }
   for (int q = 0; q < C; ++q) {
-    Vec4 v[kTetBlockWidth];
+    Vec4 v[lanes::kLanes];
     transposeOut(x[q], y[q], zz[q], v);
-    for (int l = 0; l < kTetBlockWidth; ++l) {
+    for (int l = 0; l < lanes::kLanes; ++l) {
       double* target = xyzw + kS * rows[kRowPad * q + l];
       store4(target, load4(target) - v[l]);
     }
@@ -317,8 +317,8 @@ void SplitLdlt::solveInPlace(double* xyzw) {
       continue;
     }
     for (std::int32_t i = 0; i < np; i += kRowPad) {
-      Vec4 v[kTetBlockWidth];
-      for (int l = 0; l < kTetBlockWidth; ++l) v[l] = load4(xyzw + kS * r[i + l]);
+      Vec4 v[lanes::kLanes];
+      for (int l = 0; l < lanes::kLanes; ++l) v[l] = load4(xyzw + kS * r[i + l]);
       Lanes vx, vy, vz;
       transposeIn(v, vx, vy, vz);
       store(gx + i, vx);

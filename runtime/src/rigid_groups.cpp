@@ -22,10 +22,10 @@ void applyRigidGroups(std::span<const std::int32_t> group_start, std::span<const
       const std::int32_t s = group_slot[static_cast<size_t>(i)];
       TetBlock& block = blocks[s / W];
       const int l = s % W;
-      block.rotation[0][l] = average.w();
-      block.rotation[1][l] = average.x();
-      block.rotation[2][l] = average.y();
-      block.rotation[3][l] = average.z();
+      block.rotation[0][l] = static_cast<float>(average.w());
+      block.rotation[1][l] = static_cast<float>(average.x());
+      block.rotation[2][l] = static_cast<float>(average.y());
+      block.rotation[3][l] = static_cast<float>(average.z());
     }
   }
 }

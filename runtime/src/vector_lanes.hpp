@@ -2,9 +2,12 @@
 // build (AVX-512, AVX2, SSE2, NEON) vectorises the same source, and their unaligned loads and
 // stores (memcpy: one vector move). Private to runtime/src; a file including it is compiled with
 // -Wno-psabi (runtime/CMakeLists.txt).
-//   Lanes: one quantity of the kTetBlockWidth (8) tets of a block; Mask: a comparison of Lanes.
-//   Vec4:  one vertex's x, y, z, pad (kVectorStride doubles), as the per-vertex vectors hold it.
-// transposeIn / transposeOut move 8 vertices between the two layouts.
+//   Lanes:  kLanes (8) doubles, one AVX-512 register; Mask: a comparison of Lanes.
+//   Vec4:   one vertex's x, y, z, pad (kVectorStride doubles), as the per-vertex vectors hold it.
+//   FLanes: one quantity of the kTetBlockWidth (16) tets of a TetBlock, in float (one AVX-512
+//           register); FMask: a comparison of FLanes. A block's lanes 0-7 and 8-15 are its two
+//           halves in double (toDouble / toFloat).
+// transposeIn / transposeOut move 8 vertices between the per-vertex and the lane layouts.
 #pragma once
 
 #include "tetrig/ldlt_factor.hpp"
@@ -18,9 +21,14 @@
 
 namespace tetrig::lanes {
 
-using Lanes = double __attribute__((vector_size(kTetBlockWidth * sizeof(double))));
-using Mask = long long __attribute__((vector_size(kTetBlockWidth * sizeof(double))));
+inline constexpr int kLanes = 8;
+using Lanes = double __attribute__((vector_size(kLanes * sizeof(double))));
+using Mask = long long __attribute__((vector_size(kLanes * sizeof(double))));
 using Vec4 = double __attribute__((vector_size(kVectorStride * sizeof(double))));
+using FLanes = float __attribute__((vector_size(kTetBlockWidth * sizeof(float))));
+using FMask = int __attribute__((vector_size(kTetBlockWidth * sizeof(float))));
+using Float8 = float __attribute__((vector_size(kLanes * sizeof(float))));
+static_assert(kTetBlockWidth == 2 * kLanes, "a TetBlock is two halves of kLanes doubles");
 
 TETRIG_INLINE Lanes load(const double* p) {
   Lanes v;
@@ -34,14 +42,42 @@ TETRIG_INLINE Vec4 load4(const double* p) {
   return v;
 }
 TETRIG_INLINE void store4(double* p, Vec4 v) { std::memcpy(p, &v, sizeof v); }
+TETRIG_INLINE FLanes loadF(const float* p) {
+  FLanes v;
+  std::memcpy(&v, p, sizeof v);
+  return v;
+}
+TETRIG_INLINE void storeF(float* p, FLanes v) { std::memcpy(p, &v, sizeof v); }
+
+// Two halves of a block (lanes 0-7, 8-15) in double <-> its 16 lanes in float.
+TETRIG_INLINE FLanes toFloat(Lanes low, Lanes high) {
+  const Float8 a = __builtin_convertvector(low, Float8), b = __builtin_convertvector(high, Float8);
+  return __builtin_shufflevector(a, b, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+}
+TETRIG_INLINE Lanes lowHalf(FLanes v) {
+  return __builtin_convertvector(__builtin_shufflevector(v, v, 0, 1, 2, 3, 4, 5, 6, 7), Lanes);
+}
+TETRIG_INLINE Lanes highHalf(FLanes v) {
+  return __builtin_convertvector(__builtin_shufflevector(v, v, 8, 9, 10, 11, 12, 13, 14, 15), Lanes);
+}
+// Eight floats of a TetBlock field (one half) as doubles, and back.
+TETRIG_INLINE Lanes loadHalf(const float* p) {
+  Float8 v;
+  std::memcpy(&v, p, sizeof v);
+  return __builtin_convertvector(v, Lanes);
+}
+TETRIG_INLINE void storeHalf(float* p, Lanes v) {
+  const Float8 f = __builtin_convertvector(v, Float8);
+  std::memcpy(p, &f, sizeof f);
+}
 
 // The 8-lane <-> 8 x 4 transposes between per-vertex vectors (x, y, z, pad) and per-coordinate
 // lanes (shuffles instead of scalar loads and inserts).
-static_assert(kTetBlockWidth == 8 && kVectorStride == 4, "the transposes below are written for 8 lanes of 4");
+static_assert(kLanes == 8 && kVectorStride == 4, "the transposes below are written for 8 lanes of 4");
 TETRIG_INLINE Lanes concat(Vec4 a, Vec4 b) { return __builtin_shufflevector(a, b, 0, 1, 2, 3, 4, 5, 6, 7); }
 
 // v[l] = (x, y, z, pad) of lane l  ->  x, y, z as lanes.
-TETRIG_INLINE void transposeIn(const Vec4 (&v)[kTetBlockWidth], Lanes& x, Lanes& y, Lanes& z) {
+TETRIG_INLINE void transposeIn(const Vec4 (&v)[kLanes], Lanes& x, Lanes& y, Lanes& z) {
   const Lanes a = concat(v[0], v[1]), b = concat(v[2], v[3]), c = concat(v[4], v[5]), d = concat(v[6], v[7]);
   const Lanes ab_xy = __builtin_shufflevector(a, b, 0, 4, 8, 12, 1, 5, 9, 13);  // x0..x3 y0..y3
   const Lanes ab_z = __builtin_shufflevector(a, b, 2, 6, 10, 14, 3, 7, 11, 15);  // z0..z3 pad
@@ -53,7 +89,7 @@ TETRIG_INLINE void transposeIn(const Vec4 (&v)[kTetBlockWidth], Lanes& x, Lanes&
 }
 
 // x, y, z lanes  ->  v[l] = (x_l, y_l, z_l, 0).
-TETRIG_INLINE void transposeOut(Lanes x, Lanes y, Lanes z, Vec4 (&v)[kTetBlockWidth]) {
+TETRIG_INLINE void transposeOut(Lanes x, Lanes y, Lanes z, Vec4 (&v)[kLanes]) {
   const Lanes zero{};
   const Lanes xy_lo = __builtin_shufflevector(x, y, 0, 8, 1, 9, 2, 10, 3, 11);   // x0 y0 x1 y1 x2 y2 x3 y3
   const Lanes xy_hi = __builtin_shufflevector(x, y, 4, 12, 5, 13, 6, 14, 7, 15);

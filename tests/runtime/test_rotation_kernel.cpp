@@ -1,5 +1,7 @@
-// The fused SIMD rotation pass against the scalar references: closestRotation (exact polar) and
-// differentialCoordinates (delta = G^T D g, eq. 2.5).
+// The fused SIMD rotation pass against the scalar double-precision references: closestRotation
+// (exact polar) and differentialCoordinates (delta = G^T D g, eq. 2.5). The pass works in float
+// on displacements (rotation_kernel.hpp), so its bounds are float ones: rounding of ~1e-7
+// relative; the bounds below sit 3-10x above what this code measures (printed by the tests).
 #include "scenes.hpp"
 #include "tetrig/laplacian.hpp"
 #include "tetrig/ldlt_factor.hpp"
@@ -8,6 +10,8 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cstdio>
 #include <random>
 
 namespace tetrig {
@@ -19,11 +23,15 @@ struct KernelScene {
   std::vector<double> weights;
   std::vector<TetBlock> blocks;
   std::vector<double> xyz;  // deformed positions, kVectorStride per vertex, mesh order (= solver order here)
-  std::vector<std::uint8_t> exact_lanes;  // rotationPass scratch
+  std::vector<double> u;    // the same as displacements from rest: the pass's input
+  std::vector<std::uint16_t> exact_lanes;  // rotationPass scratch
 };
 
 RotationPassStats runPass(KernelScene& s, double* delta, int steps) {
-  return rotationPass(s.blocks.data(), static_cast<std::int32_t>(s.blocks.size()), s.xyz.data(), delta, steps,
+  for (size_t i = 0; i < s.u.size(); ++i)
+    s.u[i] = s.xyz[i] - (i % kVectorStride == 3 ? 0.0 : s.mesh.vertices(static_cast<Eigen::Index>(i / kVectorStride),
+                                                                         static_cast<Eigen::Index>(i % kVectorStride)));
+  return rotationPass(s.blocks.data(), static_cast<std::int32_t>(s.blocks.size()), s.u.data(), delta, steps,
                       s.exact_lanes.data());
 }
 
@@ -43,6 +51,7 @@ KernelScene makeScene(std::uint32_t seed, double noise) {
   std::mt19937 rng(seed);
   std::normal_distribution<double> normal;
   s.xyz.assign(static_cast<size_t>(s.mesh.vertexCount()) * kVectorStride, 0.0);
+  s.u = s.xyz;
   for (std::int32_t v = 0; v < s.mesh.vertexCount(); ++v) {
     const Eigen::Vector3d p = s.mesh.vertices.row(v).transpose();
     // Bend about x by an angle growing along z, plus noise.
@@ -51,17 +60,18 @@ KernelScene makeScene(std::uint32_t seed, double noise) {
   }
   const std::int32_t m = s.mesh.tetCount();
   s.blocks.assign(static_cast<size_t>((m + kTetBlockWidth - 1) / kTetBlockWidth), TetBlock{});
-  s.exact_lanes.assign(s.blocks.size(), 0xff);
+  s.exact_lanes.assign(s.blocks.size(), 0xffff);
   for (std::int32_t t = 0; t < static_cast<std::int32_t>(s.blocks.size()) * kTetBlockWidth; ++t) {
     TetBlock& b = s.blocks[static_cast<size_t>(t / kTetBlockWidth)];
     const int l = t % kTetBlockWidth;
-    b.rotation[0][l] = 1.0;
-    b.rotation[1][l] = b.rotation[2][l] = b.rotation[3][l] = 0.0;
+    b.rotation[0][l] = 1.0f;
+    b.rotation[1][l] = b.rotation[2][l] = b.rotation[3][l] = 0.0f;
     const bool real = t < m;
     for (int c = 0; c < 4; ++c) b.corner_offset[c][l] = real ? kVectorStride * s.mesh.tets(t, c) : 0;
     for (int i = 0; i < 9; ++i)
-      b.edge_inverse[i][l] = real ? s.frames.edge_inverse[static_cast<size_t>(t)](i / 3, i % 3) : (i % 4 == 0);
-    b.weight[l] = real ? s.weights[static_cast<size_t>(t)] : 0.0;
+      b.edge_inverse[i][l] =
+          real ? static_cast<float>(s.frames.edge_inverse[static_cast<size_t>(t)](i / 3, i % 3)) : (i % 4 == 0);
+    b.weight[l] = real ? static_cast<float>(s.weights[static_cast<size_t>(t)]) : 0.0f;
   }
   return s;
 }
@@ -70,6 +80,13 @@ Eigen::Quaterniond laneRotation(const KernelScene& s, std::int32_t t) {
   const TetBlock& b = s.blocks[static_cast<size_t>(t / kTetBlockWidth)];
   const int l = t % kTetBlockWidth;
   return {b.rotation[0][l], b.rotation[1][l], b.rotation[2][l], b.rotation[3][l]};
+}
+
+// Reference delta of the displacement form: sum_j a_j (R_j - I) G_j = G^T D g(R) - G^T D g(I).
+Vertices referenceDelta(const KernelScene& s, const std::vector<Eigen::Matrix3d>& rotations) {
+  const std::vector<Eigen::Matrix3d> identity(rotations.size(), Eigen::Matrix3d::Identity());
+  return differentialCoordinates(s.mesh, s.frames, s.weights, rotations) -
+         differentialCoordinates(s.mesh, s.frames, s.weights, identity);
 }
 
 TEST(RotationKernel, ConvergesToTheExactRotationAndMatchesTheReferenceDelta) {
@@ -81,29 +98,51 @@ TEST(RotationKernel, ConvergesToTheExactRotationAndMatchesTheReferenceDelta) {
     stats = runPass(s, nullptr, 2);
   }
   std::vector<Eigen::Matrix3d> rotations;
-  double energy = 0.0;
+  double energy = 0.0, worst = 0.0;
   for (std::int32_t t = 0; t < s.mesh.tetCount(); ++t) {
     const Eigen::Matrix3d f = deformationGradient(s.mesh, s.frames, x, t);
     const Eigen::Quaterniond q = laneRotation(s, t);
-    EXPECT_NEAR(q.norm(), 1.0, 1e-12);
-    // The trace is flat at its maximum (an angle error d changes it by ~d^2), so steps that gain
-    // less than rounding are rejected: the iteration's floor is sqrt(machine eps) ~ 1e-8.
-    EXPECT_LT((q.toRotationMatrix() - closestRotation(f).toRotationMatrix()).norm(), 5e-8) << "tet " << t;
-    rotations.push_back(q.toRotationMatrix());
+    EXPECT_NEAR(q.norm(), 1.0, 1e-6);
+    // Float rounding of F (E^-1 stored in float, the product in float) and of the iteration
+    // moves the fixed point by ~1e-7; a double pass reaches 1e-8 here.
+    const double error = (q.toRotationMatrix() - closestRotation(f).toRotationMatrix()).norm();
+    EXPECT_LT(error, 1e-6) << "tet " << t;
+    worst = std::max(worst, error);
+    rotations.push_back(q.normalized().toRotationMatrix());
     energy += s.weights[static_cast<size_t>(t)] * (f - rotations.back()).squaredNorm();
   }
-  EXPECT_NEAR(stats.energy, energy, 1e-10 * (1.0 + energy));
-  // One more pass with the scatter: delta equals the reference G^T D g(R).
+  std::printf("rotation kernel (float): worst rotation error against the exact polar %.2g\n", worst);
+  EXPECT_NEAR(stats.energy, energy, 1e-6 * energy);
+  // One more pass with the scatter: delta equals the reference sum a (R - I) G.
   std::vector<double> delta(s.xyz.size(), 0.0);
   runPass(s, delta.data(), 2);
-  const Vertices reference = differentialCoordinates(s.mesh, s.frames, s.weights, rotations);
+  const Vertices reference = referenceDelta(s, rotations);
+  ASSERT_GT(reference.cwiseAbs().maxCoeff(), 1e-3) << "the bend must give a delta to compare";
   for (std::int32_t v = 0; v < s.mesh.vertexCount(); ++v)
     for (int c = 0; c < 3; ++c)
-      EXPECT_NEAR(delta[kVectorStride * static_cast<size_t>(v) + static_cast<size_t>(c)], reference(v, c), 1e-9);
-  // differentialPass gives the same delta from the stored rotations.
+      EXPECT_NEAR(delta[kVectorStride * static_cast<size_t>(v) + static_cast<size_t>(c)], reference(v, c), 1e-6);
+  // differentialPass gives the same delta from the stored rotations (same float arithmetic).
   std::vector<double> delta2(s.xyz.size(), 0.0);
   differentialPass(s.blocks.data(), static_cast<std::int32_t>(s.blocks.size()), delta2.data());
-  for (size_t i = 0; i < delta.size(); ++i) EXPECT_NEAR(delta2[i], delta[i], 1e-12);
+  for (size_t i = 0; i < delta.size(); ++i) EXPECT_NEAR(delta2[i], delta[i], 1e-9);
+}
+
+// At rest (u = 0) the pass returns exactly what it was given: identity rotations, zero delta,
+// zero energy. Float storage does not move the rest state (displacement form).
+TEST(RotationKernel, RestIsReproducedExactly) {
+  KernelScene s = makeScene(5, 0.0);
+  for (std::int32_t v = 0; v < s.mesh.vertexCount(); ++v)
+    for (int c = 0; c < 3; ++c) s.xyz[kVectorStride * static_cast<size_t>(v) + static_cast<size_t>(c)] = s.mesh.vertices(v, c);
+  std::vector<double> delta(s.xyz.size(), 0.0);
+  const RotationPassStats stats = runPass(s, delta.data(), 2);
+  EXPECT_EQ(stats.energy, 0.0);
+  EXPECT_EQ(stats.exact_fallbacks, 0);
+  for (std::int32_t t = 0; t < s.mesh.tetCount(); ++t) {
+    const Eigen::Quaterniond q = laneRotation(s, t);
+    EXPECT_EQ(q.w(), 1.0) << "tet " << t;
+    EXPECT_EQ(q.vec().norm(), 0.0) << "tet " << t;
+  }
+  for (double d : delta) EXPECT_EQ(d, 0.0);
 }
 
 TEST(RotationKernel, InvertedTetsTakeTheExactProperRotation) {
@@ -117,8 +156,8 @@ TEST(RotationKernel, InvertedTetsTakeTheExactProperRotation) {
     const Eigen::Matrix3d f = deformationGradient(s.mesh, s.frames, x, t);
     ASSERT_LT(f.determinant(), 0.0);
     const Eigen::Matrix3d r = laneRotation(s, t).toRotationMatrix();
-    EXPECT_NEAR(r.determinant(), 1.0, 1e-9);
-    EXPECT_NEAR((r.cwiseProduct(f)).sum(), (closestRotation(f).toRotationMatrix().cwiseProduct(f)).sum(), 1e-9);
+    EXPECT_NEAR(r.determinant(), 1.0, 1e-6);  // stored in float
+    EXPECT_NEAR((r.cwiseProduct(f)).sum(), (closestRotation(f).toRotationMatrix().cwiseProduct(f)).sum(), 1e-6);
   }
 }
 
@@ -131,7 +170,8 @@ TEST(RotationKernel, EachPassNeverLowersAnyTetsTrace) {
     for (std::int32_t t = 0; t < s.mesh.tetCount(); ++t) {
       const Eigen::Matrix3d f = deformationGradient(s.mesh, s.frames, x, t);
       const double trace = (laneRotation(s, t).toRotationMatrix().cwiseProduct(f)).sum();
-      EXPECT_GE(trace, before[static_cast<size_t>(t)] - 1e-12) << "tet " << t << " pass " << pass;
+      // Float: a step may lower the trace by the kernel's rounding allowance, 1e-6 (1 + ||F||^2).
+      EXPECT_GE(trace, before[static_cast<size_t>(t)] - 1e-6 * (1.0 + f.squaredNorm())) << "tet " << t << " pass " << pass;
       before[static_cast<size_t>(t)] = trace;
     }
   }
@@ -154,19 +194,19 @@ TEST(RotationKernel, MixedInvertedTetsGetTheExactRotationInDeltaAndEnergy) {
     const Eigen::Matrix3d r = laneRotation(s, t).toRotationMatrix();
     if (f.determinant() <= 1e-12) {
       ++inverted;
-      EXPECT_LT((r - closestRotation(f).toRotationMatrix()).norm(), 1e-9) << "tet " << t;
+      EXPECT_LT((r - closestRotation(f).toRotationMatrix()).norm(), 1e-6) << "tet " << t;
     }
-    rotations.push_back(r);
+    rotations.push_back(laneRotation(s, t).normalized().toRotationMatrix());
     energy += s.weights[static_cast<size_t>(t)] * (f - r).squaredNorm();
   }
   ASSERT_GT(inverted, 0) << "the scene must invert some tets";
   ASSERT_LT(inverted, s.mesh.tetCount() / 2) << "and keep most of them proper";
   EXPECT_EQ(stats.exact_fallbacks, inverted);
-  EXPECT_NEAR(stats.energy, energy, 1e-9 * (1.0 + energy));
-  const Vertices reference = differentialCoordinates(s.mesh, s.frames, s.weights, rotations);
+  EXPECT_NEAR(stats.energy, energy, 1e-6 * energy);
+  const Vertices reference = referenceDelta(s, rotations);
   for (std::int32_t v = 0; v < s.mesh.vertexCount(); ++v)
     for (int c = 0; c < 3; ++c)
-      EXPECT_NEAR(delta[kVectorStride * static_cast<size_t>(v) + static_cast<size_t>(c)], reference(v, c), 1e-9);
+      EXPECT_NEAR(delta[kVectorStride * static_cast<size_t>(v) + static_cast<size_t>(c)], reference(v, c), 1e-6);
   // The padding lanes of the last block (weight 0) are never flagged.
   const std::int32_t used = s.mesh.tetCount() % kTetBlockWidth;
   if (used != 0) {

@@ -17,11 +17,15 @@
 //   invisible tets (paper 3.2) are vertex handles instead, made by the rig builder.
 // Per frame only the right-hand side changes; the factor is computed once at load.
 //
-// Iteration, repeated k times per step() (k bounded by count and deadline, warm-started):
-//   1. linear solve L_ff x_f = delta_f - L_fh x_h (+ point-handle terms), split LDL^T, no alloc;
+// Iteration, repeated k times per step() (k bounded by count and deadline, warm-started), in
+// displacements u = x - x_rest (exact: G^T D g(I) = L x_rest, so L x = G^T D g(R) is
+// L u = G^T D g(R - I); the rest state is exactly u = 0, R = I, delta = 0):
+//   1. linear solve L_ff u_f = delta_f - L_fh u_h (+ point-handle terms), split LDL^T, no alloc;
 //   2. rotation extraction per tet (warm-started, exact fallback for inverted tets);
 //   3. rigid groups: every tet of a group takes the group's average rotation;
-//   4. differential coordinates delta = G^T D g(R).
+//   4. differential coordinates delta = G^T D g(R - I).
+// Precision: positions, displacements, delta and the factor are double; the per-tet pass (2, 4)
+// stores each tet's frame and rotation in float and computes in float (rotation_kernel.hpp).
 // Rotation interpolation runs once per change of an oriented handle's rotation, before that
 // frame's first solve: the handle's rotation increment since the last interpolation is spread
 // over the mesh with precomputed harmonic weights and composed onto every tet's rotation (the
@@ -161,9 +165,9 @@ class Deformer {
   // Vertex ordering: free vertex v lives at solver index factor position; handle slot h at free_count_ + h.
   std::vector<std::int32_t> solver_index_;    // mesh vertex -> solver index
   AlignedVector<double> rest_solver_;           // rest positions, solver order, kVectorStride per vertex
-  AlignedVector<double> x_;                     // current positions, solver order (free then handles)
-  AlignedVector<double> delta_;                 // differential coordinates, solver order
-  AlignedVector<double> rhs_constant_;          // -L_fh x_h + point terms, free part
+  AlignedVector<double> u_;                     // displacements x - x_rest, solver order (free then handles)
+  AlignedVector<double> delta_;                 // sum_j a_j (R_j - I) G_j, solver order
+  AlignedVector<double> rhs_constant_;          // -L_fh u_h + point terms, free part
   std::vector<double> positions_;             // mesh order output
   AlignedVector<double> padded_positions_;      // mesh order output, kVectorStride per vertex
 
@@ -187,7 +191,7 @@ class Deformer {
 
   // Tets in blocks.
   std::vector<TetBlock> blocks_;
-  std::vector<std::uint8_t> exact_lanes_;  // rotationPass scratch: one byte per block
+  std::vector<std::uint16_t> exact_lanes_;  // rotationPass scratch: one lane mask per block
   std::vector<std::int32_t> tet_slot_;  // mesh tet -> block * kTetBlockWidth + lane
 
   // Rotation interpolation: per oriented region, harmonic weights over tets and the rotation the
