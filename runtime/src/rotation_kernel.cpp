@@ -19,6 +19,7 @@
 #include "tetrig/polar.hpp"
 
 #include <cmath>
+#include <cstddef>
 #include <cstring>
 
 #include "multiversion.hpp"
@@ -32,102 +33,227 @@ using namespace lanes;
 constexpr int W = kTetBlockWidth;
 constexpr int kHalf = kLanes;  // lanes per half block (one Lanes of doubles)
 
-TETRIG_INLINE FLanes splat(float x) { return FLanes{} + x; }
-TETRIG_INLINE FLanes select(FMask m, FLanes a, FLanes b) { return m ? a : b; }
-TETRIG_INLINE FLanes absolute(FLanes x) {  // clears the sign bit (a compare-and-select compiles to scalar code)
-  return reinterpret_cast<FLanes>(reinterpret_cast<FMask>(x) & 0x7fffffff);
+// Two consecutive blocks go through the pass together (V = FLanes2, 32 lanes: two registers per
+// quantity on AVX-512): each long dependency chain (the divisions, the square root, the
+// refinement steps) then has an independent twin in the same instruction stream for the
+// out-of-order core to overlap. A last odd block goes alone (V = FLanes).
+// Pack<N>: N FLanes (N consecutive blocks' 16 lanes each) with element-wise operators, each
+// operator N vector instructions. (A 32-float vector type instead compiles to spills: GCC lowers
+// oversized generic vectors through memory.)
+template <int N>
+struct Pack {
+  FLanes v[N];
+};
+template <int N>
+struct PackMask {
+  FMask v[N];
+};
+#define TETRIG_PACK_OP(op)                                                                   \
+  template <int N>                                                                           \
+  TETRIG_INLINE Pack<N> operator op(const Pack<N>& a, const Pack<N>& b) {                     \
+    Pack<N> r;                                                                               \
+    for (int n = 0; n < N; ++n) r.v[n] = a.v[n] op b.v[n];                                   \
+    return r;                                                                                \
+  }                                                                                          \
+  template <int N>                                                                           \
+  TETRIG_INLINE Pack<N> operator op(float a, const Pack<N>& b) {                              \
+    Pack<N> r;                                                                               \
+    for (int n = 0; n < N; ++n) r.v[n] = a op b.v[n];                                        \
+    return r;                                                                                \
+  }                                                                                          \
+  template <int N>                                                                           \
+  TETRIG_INLINE Pack<N> operator op(const Pack<N>& a, float b) {                              \
+    Pack<N> r;                                                                               \
+    for (int n = 0; n < N; ++n) r.v[n] = a.v[n] op b;                                        \
+    return r;                                                                                \
+  }                                                                                          \
+  template <int N>                                                                           \
+  TETRIG_INLINE Pack<N>& operator op##=(Pack<N>& a, const Pack<N>& b) {                       \
+    for (int n = 0; n < N; ++n) a.v[n] = a.v[n] op b.v[n];                                   \
+    return a;                                                                                \
+  }
+TETRIG_PACK_OP(+)
+TETRIG_PACK_OP(-)
+TETRIG_PACK_OP(*)
+TETRIG_PACK_OP(/)
+#undef TETRIG_PACK_OP
+template <int N>
+TETRIG_INLINE Pack<N> operator-(const Pack<N>& a) {
+  Pack<N> r;
+  for (int n = 0; n < N; ++n) r.v[n] = -a.v[n];
+  return r;
 }
-TETRIG_INLINE FLanes squareRoot(FLanes x) {
-  float lanes[W];
-  storeF(lanes, x);
-  for (float& v : lanes) v = __builtin_sqrtf(v);  // -fno-math-errno: one vector sqrt
-  return loadF(lanes);
+template <int N>
+TETRIG_INLINE PackMask<N> operator>=(const Pack<N>& a, const Pack<N>& b) {
+  PackMask<N> r;
+  for (int n = 0; n < N; ++n) r.v[n] = a.v[n] >= b.v[n];
+  return r;
 }
+template <int N>
+TETRIG_INLINE PackMask<N> notAbove(const Pack<N>& a, float b) {  // !(a > b): true on NaN
+  PackMask<N> r;
+  for (int n = 0; n < N; ++n) r.v[n] = ~(a.v[n] > b);
+  return r;
+}
+template <int N>
+TETRIG_INLINE Pack<N> select(const PackMask<N>& m, const Pack<N>& a, const Pack<N>& b) {
+  Pack<N> r;
+  for (int n = 0; n < N; ++n) r.v[n] = m.v[n] ? a.v[n] : b.v[n];
+  return r;
+}
+template <int N>
+TETRIG_INLINE Pack<N> absolute(const Pack<N>& a) {  // clears the sign bit (compare-and-select compiles to scalar code)
+  Pack<N> r;
+  for (int n = 0; n < N; ++n) r.v[n] = reinterpret_cast<FLanes>(reinterpret_cast<FMask>(a.v[n]) & 0x7fffffff);
+  return r;
+}
+template <int N>
+TETRIG_INLINE Pack<N> squareRoot(const Pack<N>& a) {
+  Pack<N> r;
+  for (int n = 0; n < N; ++n) {
+    float lanes[W];
+    storeF(lanes, a.v[n]);
+    for (float& x : lanes) x = __builtin_sqrtf(x);  // -fno-math-errno: one vector sqrt
+    r.v[n] = loadF(lanes);
+  }
+  return r;
+}
+template <int N>
+TETRIG_INLINE Pack<N> splat(float x) {
+  Pack<N> r;
+  for (int n = 0; n < N; ++n) r.v[n] = FLanes{} + x;
+  return r;
+}
+// A float field of N consecutive blocks (`offset` bytes into a TetBlock), and its store.
+template <int N>
+TETRIG_INLINE Pack<N> loadField(const TetBlock* blocks, std::size_t offset) {
+  Pack<N> r;
+  for (int n = 0; n < N; ++n)
+    r.v[n] = loadF(reinterpret_cast<const float*>(reinterpret_cast<const char*>(blocks + n) + offset));
+  return r;
+}
+template <int N>
+TETRIG_INLINE void storeField(TetBlock* blocks, std::size_t offset, const Pack<N>& p) {
+  for (int n = 0; n < N; ++n) storeF(reinterpret_cast<float*>(reinterpret_cast<char*>(blocks + n) + offset), p.v[n]);
+}
+// Byte offset of row `row` of a TetBlock field (16 floats per row).
+#define TETRIG_FIELD(member, row) (offsetof(TetBlock, member) + static_cast<std::size_t>(row) * sizeof(float) * W)
 
 // R - I (row-major m[3 * row + col]) of unit quaternions (w, x, y, z). The diagonal is written
 // without its 1, so small rotations keep their relative precision in float.
+template <int N>
 struct Matrix {
-  FLanes m[9];
+  Pack<N> m[9];
 };
-TETRIG_INLINE Matrix rotationMinusIdentity(FLanes w, FLanes x, FLanes y, FLanes z) {
-  const FLanes xx = x * x, yy = y * y, zz = z * z;
-  const FLanes xy = x * y, xz = x * z, yz = y * z, wx = w * x, wy = w * y, wz = w * z;
+template <int N, class V = Pack<N>>
+TETRIG_INLINE Matrix<N> rotationMinusIdentity(V w, V x, V y, V z) {
+  const V xx = x * x, yy = y * y, zz = z * z;
+  const V xy = x * y, xz = x * z, yz = y * z, wx = w * x, wy = w * y, wz = w * z;
   return {{-2.0f * (yy + zz), 2.0f * (xy - wz), 2.0f * (xz + wy),  //
            2.0f * (xy + wz), -2.0f * (xx + zz), 2.0f * (yz - wx),  //
            2.0f * (xz - wy), 2.0f * (yz + wx), -2.0f * (xx + yy)}};
 }
 
 // delta_ck += a (R - I) grad phi_k (k = 0..2), delta_c3 -= their sum, with grad phi_k = row k of E^-1.
-TETRIG_INLINE void scatterBlock(const TetBlock& block, const Matrix& rm, double* delta) {
-  const FLanes a = loadF(block.weight);
-  FLanes m[4][3];  // m[k][row]: component `row` of a (R - I) grad phi_k; k = 3: minus their sum
+template <int N>
+TETRIG_INLINE void scatterBlocks(const TetBlock* blocks, const Matrix<N>& rm, double* delta) {
+  using V = Pack<N>;
+  const V a = loadField<N>(blocks, TETRIG_FIELD(weight, 0));
+  V m[4][3];  // m[k][row]: component `row` of a (R - I) grad phi_k; k = 3: minus their sum
   for (int k = 0; k < 3; ++k) {
-    const FLanes e0 = loadF(block.edge_inverse[3 * k]);
-    const FLanes e1 = loadF(block.edge_inverse[3 * k + 1]);
-    const FLanes e2 = loadF(block.edge_inverse[3 * k + 2]);
+    const V e0 = loadField<N>(blocks, TETRIG_FIELD(edge_inverse, 3 * k));
+    const V e1 = loadField<N>(blocks, TETRIG_FIELD(edge_inverse, 3 * k + 1));
+    const V e2 = loadField<N>(blocks, TETRIG_FIELD(edge_inverse, 3 * k + 2));
     for (int row = 0; row < 3; ++row)
       m[k][row] = a * (rm.m[3 * row] * e0 + rm.m[3 * row + 1] * e1 + rm.m[3 * row + 2] * e2);
   }
   for (int row = 0; row < 3; ++row) m[3][row] = -(m[0][row] + m[1][row] + m[2][row]);
-  for (int k = 0; k < 4; ++k) {
-    for (int half = 0; half < 2; ++half) {
-      Vec4 v[kHalf];
-      if (half == 0)
-        transposeOut(lowHalf(m[k][0]), lowHalf(m[k][1]), lowHalf(m[k][2]), v);
-      else
-        transposeOut(highHalf(m[k][0]), highHalf(m[k][1]), highHalf(m[k][2]), v);
-      // One read-modify-write per corner; lanes are applied in order, so two lanes naming the
-      // same vertex both land.
-      for (int l = 0; l < kHalf; ++l) {
-        double* d = delta + block.corner_offset[k][kHalf * half + l];
-        store4(d, load4(d) + v[l]);
+  for (int n = 0; n < N; ++n) {
+    const TetBlock& block = blocks[n];
+    for (int k = 0; k < 4; ++k) {
+      const FLanes mx = m[k][0].v[n], my = m[k][1].v[n], mz = m[k][2].v[n];
+      for (int half = 0; half < 2; ++half) {
+        Vec4 v[kHalf];
+        if (half == 0)
+          transposeOut(lowHalf(mx), lowHalf(my), lowHalf(mz), v);
+        else
+          transposeOut(highHalf(mx), highHalf(my), highHalf(mz), v);
+        // One read-modify-write per corner; lanes are applied in order, so two lanes naming the
+        // same vertex both land.
+        for (int l = 0; l < kHalf; ++l) {
+          double* d = delta + block.corner_offset[k][kHalf * half + l];
+          store4(d, load4(d) + v[l]);
+        }
       }
     }
   }
 }
 
-// The pass over one block. `energy` accumulates in double (two halves): a float sum over
-// thousands of tets would lose the small terms.
-TETRIG_INLINE void passBlock(TetBlock& block, const double* u, double* delta, int steps, Lanes (&energy)[2],
-                             std::uint16_t& exact_lanes, std::int64_t& flagged) {
-  // Edges u_ck - u_c3 (k = 0..2), in double per half: corner displacements (x, y, z, pad: one
-  // 4-wide load each) transposed into lanes; then the 16 lanes in float.
-  FLanes e[9];
+// Lane l of a block -> bit l, by a vector AND and a tree of ORs (a per-lane loop compiles to
+// scalar code).
+TETRIG_INLINE unsigned laneBits(FMask m) {
+  constexpr FMask kLaneBit = {1 << 0, 1 << 1, 1 << 2,  1 << 3,  1 << 4,  1 << 5,  1 << 6,  1 << 7,
+                              1 << 8, 1 << 9, 1 << 10, 1 << 11, 1 << 12, 1 << 13, 1 << 14, 1 << 15};
+  const FMask b16 = m & kLaneBit;
+  using I8 = int __attribute__((vector_size(8 * sizeof(int))));
+  using I4 = int __attribute__((vector_size(4 * sizeof(int))));
+  const I8 b8 = __builtin_shufflevector(b16, b16, 0, 1, 2, 3, 4, 5, 6, 7) |
+                __builtin_shufflevector(b16, b16, 8, 9, 10, 11, 12, 13, 14, 15);
+  const I4 b4 = __builtin_shufflevector(b8, b8, 0, 1, 2, 3) | __builtin_shufflevector(b8, b8, 4, 5, 6, 7);
+  return static_cast<unsigned>(b4[0] | b4[1] | b4[2] | b4[3]);
+}
+
+// The pass over N consecutive blocks. `energy` accumulates in double (two
+// halves): a float sum over thousands of tets would lose the small terms.
+template <int N>
+TETRIG_INLINE void passBlocks(TetBlock* blocks, const double* u, double* delta, int steps, Lanes (&energy)[2],
+                              std::uint16_t* exact_lanes, std::int64_t& flagged) {
+  using V = Pack<N>;
+  using M = PackMask<N>;
+  constexpr int kBlocks = N;
+  // Edges u_ck - u_c3 (k = 0..2), in double per half block: corner displacements (x, y, z, pad:
+  // one 4-wide load each) transposed into lanes; then the lanes in float.
+  V e[9];
   {
-    Lanes ex[2][9];
-    for (int half = 0; half < 2; ++half) {
-      Lanes px[4], py[4], pz[4];
-      for (int k = 0; k < 4; ++k) {
-        Vec4 v[kHalf];
-        for (int l = 0; l < kHalf; ++l) v[l] = load4(u + block.corner_offset[k][kHalf * half + l]);
-        transposeIn(v, px[k], py[k], pz[k]);
+    FLanes ef[9][kBlocks];
+    for (int n = 0; n < kBlocks; ++n) {
+      Lanes ex[2][9];
+      for (int half = 0; half < 2; ++half) {
+        Lanes px[4], py[4], pz[4];
+        for (int k = 0; k < 4; ++k) {
+          Vec4 v[kHalf];
+          for (int l = 0; l < kHalf; ++l) v[l] = load4(u + blocks[n].corner_offset[k][kHalf * half + l]);
+          transposeIn(v, px[k], py[k], pz[k]);
+        }
+        for (int k = 0; k < 3; ++k) {
+          ex[half][3 * k] = px[k] - px[3];
+          ex[half][3 * k + 1] = py[k] - py[3];
+          ex[half][3 * k + 2] = pz[k] - pz[3];
+        }
       }
-      for (int k = 0; k < 3; ++k) {
-        ex[half][3 * k] = px[k] - px[3];
-        ex[half][3 * k + 1] = py[k] - py[3];
-        ex[half][3 * k + 2] = pz[k] - pz[3];
-      }
+      for (int i = 0; i < 9; ++i) ef[i][n] = toFloat(ex[0][i], ex[1][i]);
     }
-    for (int i = 0; i < 9; ++i) e[i] = toFloat(ex[0][i], ex[1][i]);
+    for (int i = 0; i < 9; ++i)
+      for (int n = 0; n < N; ++n) e[i].v[n] = ef[i][n];
   }
   // H = E'_u E^-1: H(row, col) = sum_k edge_k[row] Einv(k, col); F = I + H   (eq. 2.6)
-  FLanes h[9];
+  V h[9];
   {
-    FLanes inv[9];
-    for (int i = 0; i < 9; ++i) inv[i] = loadF(block.edge_inverse[i]);
+    V inv[9];
+    for (int i = 0; i < 9; ++i) inv[i] = loadField<N>(blocks, TETRIG_FIELD(edge_inverse, i));
     for (int row = 0; row < 3; ++row)
       for (int col = 0; col < 3; ++col)
         h[3 * row + col] = e[row] * inv[col] + e[3 + row] * inv[3 + col] + e[6 + row] * inv[6 + col];
   }
-  FLanes f[9];
+  V f[9];
   for (int i = 0; i < 9; ++i) f[i] = (i % 4 == 0) ? h[i] + 1.0f : h[i];
-  const FLanes det = f[0] * (f[4] * f[8] - f[5] * f[7]) - f[1] * (f[3] * f[8] - f[5] * f[6]) +
-                     f[2] * (f[3] * f[7] - f[4] * f[6]);
+  const V det = f[0] * (f[4] * f[8] - f[5] * f[7]) - f[1] * (f[3] * f[8] - f[5] * f[6]) +
+                f[2] * (f[3] * f[7] - f[4] * f[6]);
   // Horn's symmetric N(F): q^T N q = |q|^2 tr(R(q)^T F) for any quaternion q (polar.hpp).
-  const FLanes n00 = f[0] + f[4] + f[8], n11 = f[0] - f[4] - f[8];
-  const FLanes n22 = f[4] - f[0] - f[8], n33 = f[8] - f[0] - f[4];
-  const FLanes n01 = f[7] - f[5], n02 = f[2] - f[6], n03 = f[3] - f[1];
-  const FLanes n12 = f[1] + f[3], n13 = f[2] + f[6], n23 = f[5] + f[7];
+  const V n00 = f[0] + f[4] + f[8], n11 = f[0] - f[4] - f[8];
+  const V n22 = f[4] - f[0] - f[8], n33 = f[8] - f[0] - f[4];
+  const V n01 = f[7] - f[5], n02 = f[2] - f[6], n03 = f[3] - f[1];
+  const V n12 = f[1] + f[3], n13 = f[2] + f[6], n23 = f[5] + f[7];
 
   // Warm-started refinement of q towards argmax tr(R^T F) (Mueller et al. 2016). With g = N q,
   // the gradient of tr(R^T F) over rotation vectors is omega = (q_w g_v - g_w q_v + q_v x g_v) / |q|^2
@@ -139,40 +265,40 @@ TETRIG_INLINE void passBlock(TetBlock& block, const double* u, double* delta, in
   // damping. The rounding allowance matters: the trace is flat at its maximum (an angle error d
   // changes it by ~d^2), so an exact comparison in float would reject the last steps as noise
   // and stall at d ~ sqrt(float eps) ~ 3e-4. The steps themselves (omega) are accurate to ~1e-7.
-  FLanes qw = loadF(block.rotation[0]);
-  FLanes qx = loadF(block.rotation[1]);
-  FLanes qy = loadF(block.rotation[2]);
-  FLanes qz = loadF(block.rotation[3]);
-  FLanes norm2 = qw * qw + qx * qx + qy * qy + qz * qz;  // 1 up to rounding
-  FLanes gw = n00 * qw + n01 * qx + n02 * qy + n03 * qz;
-  FLanes gx = n01 * qw + n11 * qx + n12 * qy + n13 * qz;
-  FLanes gy = n02 * qw + n12 * qx + n22 * qy + n23 * qz;
-  FLanes gz = n03 * qw + n13 * qx + n23 * qy + n33 * qz;
-  FLanes quad = qw * gw + qx * gx + qy * gy + qz * gz;  // |q|^2 tr(R^T F)
-  FLanes damping = splat(0.5f);  // 0.5: (1, omega / 2) is the half-angle form of a rotation by |omega|
+  V qw = loadField<N>(blocks, TETRIG_FIELD(rotation, 0));
+  V qx = loadField<N>(blocks, TETRIG_FIELD(rotation, 1));
+  V qy = loadField<N>(blocks, TETRIG_FIELD(rotation, 2));
+  V qz = loadField<N>(blocks, TETRIG_FIELD(rotation, 3));
+  V norm2 = qw * qw + qx * qx + qy * qy + qz * qz;  // 1 up to rounding
+  V gw = n00 * qw + n01 * qx + n02 * qy + n03 * qz;
+  V gx = n01 * qw + n11 * qx + n12 * qy + n13 * qz;
+  V gy = n02 * qw + n12 * qx + n22 * qy + n23 * qz;
+  V gz = n03 * qw + n13 * qx + n23 * qy + n33 * qz;
+  V quad = qw * gw + qx * gx + qy * gy + qz * gz;  // |q|^2 tr(R^T F)
+  V damping = splat<N>(0.5f);  // 0.5: (1, omega / 2) is the half-angle form of a rotation by |omega|
   // Rounding of |q|^2 tr(R^T F) is at most a few float eps times |N| |q|^2, |N| <= 2 ||F||
   // <= 1 + ||F||^2; 1e-6 is ~16 eps.
-  FLanes ff = f[0] * f[0];
+  V ff = f[0] * f[0];
   for (int i = 1; i < 9; ++i) ff += f[i] * f[i];
-  const FLanes allowance = 1e-6f * (1.0f + ff);
+  const V allowance = 1e-6f * (1.0f + ff);
   for (int s = 0; s < steps; ++s) {
-    const FLanes inv_norm2 = 1.0f / norm2;
-    const FLanes ox = damping * (qw * gx - gw * qx + qy * gz - qz * gy);
-    const FLanes oy = damping * (qw * gy - gw * qy + qz * gx - qx * gz);
-    const FLanes oz = damping * (qw * gz - gw * qz + qx * gy - qy * gx);
-    const FLanes dw = absolute(quad) + 1e-9f * norm2;
-    const FLanes w1 = (dw * qw - ox * qx - oy * qy - oz * qz) * inv_norm2;  // (dw, o) * q / |q|^2
-    const FLanes x1 = (dw * qx + ox * qw + oy * qz - oz * qy) * inv_norm2;
-    const FLanes y1 = (dw * qy + oy * qw + oz * qx - ox * qz) * inv_norm2;
-    const FLanes z1 = (dw * qz + oz * qw + ox * qy - oy * qx) * inv_norm2;
-    const FLanes gw1 = n00 * w1 + n01 * x1 + n02 * y1 + n03 * z1;
-    const FLanes gx1 = n01 * w1 + n11 * x1 + n12 * y1 + n13 * z1;
-    const FLanes gy1 = n02 * w1 + n12 * x1 + n22 * y1 + n23 * z1;
-    const FLanes gz1 = n03 * w1 + n13 * x1 + n23 * y1 + n33 * z1;
-    const FLanes quad1 = w1 * gw1 + x1 * gx1 + y1 * gy1 + z1 * gz1;
-    const FLanes norm21 = w1 * w1 + x1 * x1 + y1 * y1 + z1 * z1;
+    const V inv_norm2 = 1.0f / norm2;
+    const V ox = damping * (qw * gx - gw * qx + qy * gz - qz * gy);
+    const V oy = damping * (qw * gy - gw * qy + qz * gx - qx * gz);
+    const V oz = damping * (qw * gz - gw * qz + qx * gy - qy * gx);
+    const V dw = absolute(quad) + 1e-9f * norm2;
+    const V w1 = (dw * qw - ox * qx - oy * qy - oz * qz) * inv_norm2;  // (dw, o) * q / |q|^2
+    const V x1 = (dw * qx + ox * qw + oy * qz - oz * qy) * inv_norm2;
+    const V y1 = (dw * qy + oy * qw + oz * qx - ox * qz) * inv_norm2;
+    const V z1 = (dw * qz + oz * qw + ox * qy - oy * qx) * inv_norm2;
+    const V gw1 = n00 * w1 + n01 * x1 + n02 * y1 + n03 * z1;
+    const V gx1 = n01 * w1 + n11 * x1 + n12 * y1 + n13 * z1;
+    const V gy1 = n02 * w1 + n12 * x1 + n22 * y1 + n23 * z1;
+    const V gz1 = n03 * w1 + n13 * x1 + n23 * y1 + n33 * z1;
+    const V quad1 = w1 * gw1 + x1 * gx1 + y1 * gy1 + z1 * gz1;
+    const V norm21 = w1 * w1 + x1 * x1 + y1 * y1 + z1 * z1;
     // tr1 >= tr - allowance, without dividing; false on NaN.
-    const FMask accept = quad1 * norm2 >= (quad - allowance * norm2) * norm21;
+    const M accept = quad1 * norm2 >= (quad - allowance * norm2) * norm21;
     qw = select(accept, w1, qw);
     qx = select(accept, x1, qx);
     qy = select(accept, y1, qy);
@@ -185,42 +311,38 @@ TETRIG_INLINE void passBlock(TetBlock& block, const double* u, double* delta, in
     norm2 = select(accept, norm21, norm2);
     damping = select(accept, damping, 0.5f * damping);
   }
-  const FLanes inv_norm = 1.0f / squareRoot(norm2);
+  const V inv_norm = 1.0f / squareRoot(norm2);
   qw *= inv_norm;
   qx *= inv_norm;
   qy *= inv_norm;
   qz *= inv_norm;
-  storeF(block.rotation[0], qw);
-  storeF(block.rotation[1], qx);
-  storeF(block.rotation[2], qy);
-  storeF(block.rotation[3], qz);
-  const Matrix rm = rotationMinusIdentity(qw, qx, qy, qz);
+  storeField<N>(blocks, TETRIG_FIELD(rotation, 0), qw);
+  storeField<N>(blocks, TETRIG_FIELD(rotation, 1), qx);
+  storeField<N>(blocks, TETRIG_FIELD(rotation, 2), qy);
+  storeField<N>(blocks, TETRIG_FIELD(rotation, 3), qz);
+  const Matrix<N> rm = rotationMinusIdentity<N>(qw, qx, qy, qz);
 
   // Inverted and degenerate tets (det F <= 1e-12) need the exact rotation: the local iteration can
   // stall there. They are rare (after large handle moves): only counted here, and fixed after
   // the pass (fixExactRotations), so this loop holds no call and keeps its values in registers.
   // (Padding lanes have F = I, det 1: never flagged.)
-  const FMask needs_exact = ~(det > 1e-12f);  // NaN too
-  // Lane l -> bit l by a vector AND and a tree of ORs (a per-lane loop compiles to scalar code).
-  constexpr FMask kLaneBit = {1 << 0, 1 << 1, 1 << 2,  1 << 3,  1 << 4,  1 << 5,  1 << 6,  1 << 7,
-                              1 << 8, 1 << 9, 1 << 10, 1 << 11, 1 << 12, 1 << 13, 1 << 14, 1 << 15};
-  const FMask b16 = needs_exact & kLaneBit;
-  using I8 = int __attribute__((vector_size(8 * sizeof(int))));
-  using I4 = int __attribute__((vector_size(4 * sizeof(int))));
-  const I8 b8 = __builtin_shufflevector(b16, b16, 0, 1, 2, 3, 4, 5, 6, 7) |
-                __builtin_shufflevector(b16, b16, 8, 9, 10, 11, 12, 13, 14, 15);
-  const I4 b4 = __builtin_shufflevector(b8, b8, 0, 1, 2, 3) | __builtin_shufflevector(b8, b8, 4, 5, 6, 7);
-  const unsigned bits = static_cast<unsigned>(b4[0] | b4[1] | b4[2] | b4[3]);
-  exact_lanes = static_cast<std::uint16_t>(bits);
-  flagged |= bits;
+  const M needs_exact = notAbove(det, 1e-12f);  // NaN too
+  for (int n = 0; n < kBlocks; ++n) {
+    const unsigned bits = laneBits(needs_exact.v[n]);
+    exact_lanes[n] = static_cast<std::uint16_t>(bits);
+    flagged |= bits;
+  }
   // Energy a ||H - (R - I)||^2: no cancellation near rest, where both terms are small.
-  FLanes residual = (h[0] - rm.m[0]) * (h[0] - rm.m[0]);
+  V residual = (h[0] - rm.m[0]) * (h[0] - rm.m[0]);
   for (int i = 1; i < 9; ++i) residual += (h[i] - rm.m[i]) * (h[i] - rm.m[i]);
-  const FLanes tet_energy = loadF(block.weight) * residual;
-  energy[0] += lowHalf(tet_energy);
-  energy[1] += highHalf(tet_energy);
-  if (delta != nullptr) scatterBlock(block, rm, delta);
+  const V tet_energy = loadField<N>(blocks, TETRIG_FIELD(weight, 0)) * residual;
+  for (int n = 0; n < kBlocks; ++n) {
+    energy[0] += lowHalf(tet_energy.v[n]);
+    energy[1] += highHalf(tet_energy.v[n]);
+  }
+  if (delta != nullptr) scatterBlocks<N>(blocks, rm, delta);
 }
+
 
 // The exact rotation for every tet with det F <= 1e-12 after a pass that gave it the refined one:
 // rotation replaced, delta corrected by a (R_exact - R_refined) grad phi_k, energy recomputed for
@@ -284,14 +406,15 @@ RotationPassStats rotationPass(TetBlock* blocks, std::int32_t block_count, const
   // its lines arrive while this one computes (measured 8-15 % on 27k tets with the double
   // layout; on meshes that fit in L2 the prefetches only cost, ~3 % on 2.6k tets).
   if (static_cast<std::size_t>(block_count) * sizeof(TetBlock) > (512u << 10)) {
-    for (; b + 2 < block_count; ++b) {
+    for (; b + 4 <= block_count; b += 2) {
       const char* next = reinterpret_cast<const char*>(blocks + b + 2);
-#pragma GCC unroll 32
-      for (std::size_t line = 0; line < sizeof(TetBlock); line += 64) __builtin_prefetch(next + line);
-      passBlock(blocks[b], u, delta, steps, energy, exact_lanes[b], flagged);
+#pragma GCC unroll 64
+      for (std::size_t line = 0; line < 2 * sizeof(TetBlock); line += 64) __builtin_prefetch(next + line);
+      passBlocks<2>(blocks + b, u, delta, steps, energy, exact_lanes + b, flagged);
     }
   }
-  for (; b < block_count; ++b) passBlock(blocks[b], u, delta, steps, energy, exact_lanes[b], flagged);
+  for (; b + 2 <= block_count; b += 2) passBlocks<2>(blocks + b, u, delta, steps, energy, exact_lanes + b, flagged);
+  for (; b < block_count; ++b) passBlocks<1>(blocks + b, u, delta, steps, energy, exact_lanes + b, flagged);
   double total = 0.0;
   for (int l = 0; l < kHalf; ++l) total += energy[0][l] + energy[1][l];
   stats.energy = total;
@@ -316,9 +439,11 @@ TETRIG_MULTIVERSION
 void differentialPass(const TetBlock* blocks, std::int32_t block_count, double* delta) {
   for (std::int32_t b = 0; b < block_count; ++b) {
     const TetBlock& block = blocks[b];
-    const Matrix rm = rotationMinusIdentity(loadF(block.rotation[0]), loadF(block.rotation[1]),
-                                            loadF(block.rotation[2]), loadF(block.rotation[3]));
-    scatterBlock(block, rm, delta);
+    const Matrix<1> rm = rotationMinusIdentity<1>(loadField<1>(&block, TETRIG_FIELD(rotation, 0)),
+                                                  loadField<1>(&block, TETRIG_FIELD(rotation, 1)),
+                                                  loadField<1>(&block, TETRIG_FIELD(rotation, 2)),
+                                                  loadField<1>(&block, TETRIG_FIELD(rotation, 3)));
+    scatterBlocks<1>(&block, rm, delta);
   }
 }
 
