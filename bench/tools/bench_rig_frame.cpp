@@ -63,7 +63,9 @@ void BM_RigFrame(benchmark::State& state) {
     return;
   }
   const tetrig::Rig& rig = scene->rig;
-  tetrig::Deformer deformer(rig.tet_mesh, rig.setup);
+  tetrig::DeformerSetup setup = rig.setup;
+  setup.options.padded_positions = true;  // the input of applyPoseTransferPadded
+  tetrig::Deformer deformer(rig.tet_mesh, setup);
   std::vector<Eigen::Vector3d> targets;
   for (const std::int32_t v : rig.setup.vertex_handles) targets.push_back(rig.tet_mesh.vertices.row(v).transpose());
   tetrig::HandleTargets handle_targets;

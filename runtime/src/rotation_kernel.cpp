@@ -4,10 +4,12 @@
 //
 // Lanes: one `FLanes` value holds one quantity of the kTetBlockWidth (16) tets of a block, in
 // float, written with GCC/Clang vector extensions so every build (AVX-512, AVX2, SSE2, NEON)
-// vectorises the same source. Displacements and delta stay double: corner displacements are
-// gathered and their edge differences taken in double (two halves of 8 lanes), then converted;
-// the per-corner results go back to double before they are added into delta. Scalar code remains
-// only for the rare exact fallback, which runs after the pass.
+// vectorises the same source. Displacements stay double: corner displacements are gathered and
+// their edge differences taken in double (two halves of 8 lanes), then converted. The per-corner
+// results are added into a float delta (x, y, z, pad per vertex: one 16-byte read-modify-write
+// per corner; measured 0.86-0.89x the pass with a double delta, whose conversions and 8-lane
+// transposes cost more shuffles). Scalar code remains only for the rare exact fallback, which
+// runs after the pass.
 //
 // Why float: the pass streams 72 bytes per tet instead of 128, and each vector instruction
 // serves 16 tets instead of 8 (measured 0.64-0.72x the double pass on bar_8x8x85,
@@ -156,7 +158,7 @@ TETRIG_INLINE Matrix<N> rotationMinusIdentity(V w, V x, V y, V z) {
 
 // delta_ck += a (R - I) grad phi_k (k = 0..2), delta_c3 -= their sum, with grad phi_k = row k of E^-1.
 template <int N>
-TETRIG_INLINE void scatterBlocks(const TetBlock* blocks, const Matrix<N>& rm, double* delta) {
+TETRIG_INLINE void scatterBlocks(const TetBlock* blocks, const Matrix<N>& rm, float* delta) {
   using V = Pack<N>;
   const V a = loadField<N>(blocks, TETRIG_FIELD(weight, 0));
   V m[4][3];  // m[k][row]: component `row` of a (R - I) grad phi_k; k = 3: minus their sum
@@ -171,19 +173,13 @@ TETRIG_INLINE void scatterBlocks(const TetBlock* blocks, const Matrix<N>& rm, do
   for (int n = 0; n < N; ++n) {
     const TetBlock& block = blocks[n];
     for (int k = 0; k < 4; ++k) {
-      const FLanes mx = m[k][0].v[n], my = m[k][1].v[n], mz = m[k][2].v[n];
-      for (int half = 0; half < 2; ++half) {
-        Vec4 v[kHalf];
-        if (half == 0)
-          transposeOut(lowHalf(mx), lowHalf(my), lowHalf(mz), v);
-        else
-          transposeOut(highHalf(mx), highHalf(my), highHalf(mz), v);
-        // One read-modify-write per corner; lanes are applied in order, so two lanes naming the
-        // same vertex both land.
-        for (int l = 0; l < kHalf; ++l) {
-          double* d = delta + block.corner_offset[k][kHalf * half + l];
-          store4(d, load4(d) + v[l]);
-        }
+      Vec4f v[W];
+      transposeOut16(m[k][0].v[n], m[k][1].v[n], m[k][2].v[n], v);
+      // One read-modify-write per corner; lanes are applied in order, so two lanes naming the
+      // same vertex both land.
+      for (int l = 0; l < W; ++l) {
+        float* d = delta + block.corner_offset[k][l];
+        store4f(d, load4f(d) + v[l]);
       }
     }
   }
@@ -206,7 +202,7 @@ TETRIG_INLINE unsigned laneBits(FMask m) {
 // The pass over N consecutive blocks. `energy` accumulates in double (two
 // halves): a float sum over thousands of tets would lose the small terms.
 template <int N>
-TETRIG_INLINE void passBlocks(TetBlock* blocks, const double* u, double* delta, int steps, Lanes (&energy)[2],
+TETRIG_INLINE void passBlocks(TetBlock* blocks, const double* u, float* delta, int steps, Lanes (&energy)[2],
                               std::uint16_t* exact_lanes, std::int64_t& flagged) {
   using V = Pack<N>;
   using M = PackMask<N>;
@@ -348,7 +344,7 @@ TETRIG_INLINE void passBlocks(TetBlock* blocks, const double* u, double* delta, 
 // rotation replaced, delta corrected by a (R_exact - R_refined) grad phi_k, energy recomputed for
 // the tet. Scalar, in double; runs only when the pass flagged a tet.
 __attribute__((noinline, cold)) void fixExactRotations(TetBlock* blocks, std::int32_t block_count, const double* u,
-                                                        double* delta, const std::uint16_t* exact_lanes,
+                                                        float* delta, const std::uint16_t* exact_lanes,
                                                         RotationPassStats& stats) {
   for (std::int32_t b = 0; b < block_count; ++b) {
     if (exact_lanes[b] == 0) continue;
@@ -383,12 +379,12 @@ __attribute__((noinline, cold)) void fixExactRotations(TetBlock* blocks, std::in
       Eigen::Vector3d sum = Eigen::Vector3d::Zero();
       for (int k = 0; k < 3; ++k) {
         const Eigen::Vector3d d = a * change * inv.row(k).transpose();
-        double* out = delta + block.corner_offset[k][l];
-        for (int c = 0; c < 3; ++c) out[c] += d[c];
+        float* out = delta + block.corner_offset[k][l];
+        for (int c = 0; c < 3; ++c) out[c] += static_cast<float>(d[c]);
         sum += d;
       }
-      double* out = delta + block.corner_offset[3][l];
-      for (int c = 0; c < 3; ++c) out[c] -= sum[c];
+      float* out = delta + block.corner_offset[3][l];
+      for (int c = 0; c < 3; ++c) out[c] -= static_cast<float>(sum[c]);
     }
   }
 }
@@ -396,7 +392,7 @@ __attribute__((noinline, cold)) void fixExactRotations(TetBlock* blocks, std::in
 }  // namespace
 
 TETRIG_MULTIVERSION
-RotationPassStats rotationPass(TetBlock* blocks, std::int32_t block_count, const double* u, double* delta,
+RotationPassStats rotationPass(TetBlock* blocks, std::int32_t block_count, const double* u, float* delta,
                                int steps, std::uint16_t* exact_lanes) {
   RotationPassStats stats;
   Lanes energy[2] = {};
@@ -436,7 +432,7 @@ const char* rotationKernelInstructionSet() {
 }
 
 TETRIG_MULTIVERSION
-void differentialPass(const TetBlock* blocks, std::int32_t block_count, double* delta) {
+void differentialPass(const TetBlock* blocks, std::int32_t block_count, float* delta) {
   for (std::int32_t b = 0; b < block_count; ++b) {
     const TetBlock& block = blocks[b];
     const Matrix<1> rm = rotationMinusIdentity<1>(loadField<1>(&block, TETRIG_FIELD(rotation, 0)),

@@ -28,6 +28,7 @@ using Vec4 = double __attribute__((vector_size(kVectorStride * sizeof(double))))
 using FLanes = float __attribute__((vector_size(kTetBlockWidth * sizeof(float))));
 using FMask = int __attribute__((vector_size(kTetBlockWidth * sizeof(float))));
 using Float8 = float __attribute__((vector_size(kLanes * sizeof(float))));
+using Vec4f = float __attribute__((vector_size(kVectorStride * sizeof(float))));
 static_assert(kTetBlockWidth == 2 * kLanes, "a TetBlock is two halves of kLanes doubles");
 
 TETRIG_INLINE Lanes load(const double* p) {
@@ -48,6 +49,13 @@ TETRIG_INLINE FLanes loadF(const float* p) {
   return v;
 }
 TETRIG_INLINE void storeF(float* p, FLanes v) { std::memcpy(p, &v, sizeof v); }
+
+TETRIG_INLINE Vec4f load4f(const float* p) {
+  Vec4f v;
+  std::memcpy(&v, p, sizeof v);
+  return v;
+}
+TETRIG_INLINE void store4f(float* p, Vec4f v) { std::memcpy(p, &v, sizeof v); }
 
 // Two halves of a block (lanes 0-7, 8-15) in double <-> its 16 lanes in float.
 TETRIG_INLINE FLanes toFloat(Lanes low, Lanes high) {
@@ -107,6 +115,27 @@ TETRIG_INLINE void transposeOut(Lanes x, Lanes y, Lanes z, Vec4 (&v)[kLanes]) {
   v[5] = __builtin_shufflevector(l45, l45, 4, 5, 6, 7);
   v[6] = __builtin_shufflevector(l67, l67, 0, 1, 2, 3);
   v[7] = __builtin_shufflevector(l67, l67, 4, 5, 6, 7);
+}
+
+// x, y, z as 16 float lanes  ->  v[l] = (x_l, y_l, z_l, 0): 8 two-source shuffles, then the
+// 16 quarters.
+TETRIG_INLINE void transposeOut16(FLanes x, FLanes y, FLanes z, Vec4f (&v)[kTetBlockWidth]) {
+  const FLanes zero{};
+  const FLanes xy_lo = __builtin_shufflevector(x, y, 0, 16, 1, 17, 2, 18, 3, 19, 4, 20, 5, 21, 6, 22, 7, 23);
+  const FLanes xy_hi = __builtin_shufflevector(x, y, 8, 24, 9, 25, 10, 26, 11, 27, 12, 28, 13, 29, 14, 30, 15, 31);
+  const FLanes z0_lo = __builtin_shufflevector(z, zero, 0, 16, 1, 17, 2, 18, 3, 19, 4, 20, 5, 21, 6, 22, 7, 23);
+  const FLanes z0_hi = __builtin_shufflevector(z, zero, 8, 24, 9, 25, 10, 26, 11, 27, 12, 28, 13, 29, 14, 30, 15, 31);
+  FLanes q[4];  // lanes 4i .. 4i + 3 as (x, y, z, 0)
+  q[0] = __builtin_shufflevector(xy_lo, z0_lo, 0, 1, 16, 17, 2, 3, 18, 19, 4, 5, 20, 21, 6, 7, 22, 23);
+  q[1] = __builtin_shufflevector(xy_lo, z0_lo, 8, 9, 24, 25, 10, 11, 26, 27, 12, 13, 28, 29, 14, 15, 30, 31);
+  q[2] = __builtin_shufflevector(xy_hi, z0_hi, 0, 1, 16, 17, 2, 3, 18, 19, 4, 5, 20, 21, 6, 7, 22, 23);
+  q[3] = __builtin_shufflevector(xy_hi, z0_hi, 8, 9, 24, 25, 10, 11, 26, 27, 12, 13, 28, 29, 14, 15, 30, 31);
+  for (int i = 0; i < 4; ++i) {
+    v[4 * i] = __builtin_shufflevector(q[i], q[i], 0, 1, 2, 3);
+    v[4 * i + 1] = __builtin_shufflevector(q[i], q[i], 4, 5, 6, 7);
+    v[4 * i + 2] = __builtin_shufflevector(q[i], q[i], 8, 9, 10, 11);
+    v[4 * i + 3] = __builtin_shufflevector(q[i], q[i], 12, 13, 14, 15);
+  }
 }
 
 }  // namespace tetrig::lanes

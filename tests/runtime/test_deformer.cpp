@@ -55,7 +55,10 @@ Vertices bendBar(const scenes::BarScene& bar, DeformerOptions options, int frame
 
 TEST(Deformer, PaddedPositionsMirrorPositionsAfterEveryStep) {
   const auto bar = scenes::makeBarScene(3, 3, 12);
-  Deformer deformer(bar.mesh, test::endVertexHandles(bar));
+  EXPECT_TRUE(Deformer(bar.mesh, test::endVertexHandles(bar)).paddedPositions().empty()) << "off by default";
+  DeformerSetup setup = test::endVertexHandles(bar);
+  setup.options.padded_positions = true;
+  Deformer deformer(bar.mesh, setup);
   for (int f = 1; f <= 3; ++f) {
     const auto targets = test::endTargets(bar, scenes::barBendTransform(bar, 0.3 * f));
     deformer.step(vertexTargets(targets), StepBudget{2});

@@ -27,7 +27,7 @@ struct KernelScene {
   std::vector<std::uint16_t> exact_lanes;  // rotationPass scratch
 };
 
-RotationPassStats runPass(KernelScene& s, double* delta, int steps) {
+RotationPassStats runPass(KernelScene& s, float* delta, int steps) {
   for (size_t i = 0; i < s.u.size(); ++i)
     s.u[i] = s.xyz[i] - (i % kVectorStride == 3 ? 0.0 : s.mesh.vertices(static_cast<Eigen::Index>(i / kVectorStride),
                                                                          static_cast<Eigen::Index>(i % kVectorStride)));
@@ -114,7 +114,7 @@ TEST(RotationKernel, ConvergesToTheExactRotationAndMatchesTheReferenceDelta) {
   std::printf("rotation kernel (float): worst rotation error against the exact polar %.2g\n", worst);
   EXPECT_NEAR(stats.energy, energy, 1e-6 * energy);
   // One more pass with the scatter: delta equals the reference sum a (R - I) G.
-  std::vector<double> delta(s.xyz.size(), 0.0);
+  std::vector<float> delta(s.xyz.size(), 0.0f);
   runPass(s, delta.data(), 2);
   const Vertices reference = referenceDelta(s, rotations);
   ASSERT_GT(reference.cwiseAbs().maxCoeff(), 1e-3) << "the bend must give a delta to compare";
@@ -122,7 +122,7 @@ TEST(RotationKernel, ConvergesToTheExactRotationAndMatchesTheReferenceDelta) {
     for (int c = 0; c < 3; ++c)
       EXPECT_NEAR(delta[kVectorStride * static_cast<size_t>(v) + static_cast<size_t>(c)], reference(v, c), 1e-6);
   // differentialPass gives the same delta from the stored rotations (same float arithmetic).
-  std::vector<double> delta2(s.xyz.size(), 0.0);
+  std::vector<float> delta2(s.xyz.size(), 0.0f);
   differentialPass(s.blocks.data(), static_cast<std::int32_t>(s.blocks.size()), delta2.data());
   for (size_t i = 0; i < delta.size(); ++i) EXPECT_NEAR(delta2[i], delta[i], 1e-9);
 }
@@ -133,7 +133,7 @@ TEST(RotationKernel, RestIsReproducedExactly) {
   KernelScene s = makeScene(5, 0.0);
   for (std::int32_t v = 0; v < s.mesh.vertexCount(); ++v)
     for (int c = 0; c < 3; ++c) s.xyz[kVectorStride * static_cast<size_t>(v) + static_cast<size_t>(c)] = s.mesh.vertices(v, c);
-  std::vector<double> delta(s.xyz.size(), 0.0);
+  std::vector<float> delta(s.xyz.size(), 0.0f);
   const RotationPassStats stats = runPass(s, delta.data(), 2);
   EXPECT_EQ(stats.energy, 0.0);
   EXPECT_EQ(stats.exact_fallbacks, 0);
@@ -182,7 +182,7 @@ TEST(RotationKernel, EachPassNeverLowersAnyTetsTrace) {
 TEST(RotationKernel, MixedInvertedTetsGetTheExactRotationInDeltaAndEnergy) {
   KernelScene s = makeScene(4, 0.25);
   const Vertices x = positions(s);
-  std::vector<double> delta(s.xyz.size(), 0.0);
+  std::vector<float> delta(s.xyz.size(), 0.0f);
   const RotationPassStats stats = runPass(s, delta.data(), 2);
   std::int32_t inverted = 0;
   std::vector<Eigen::Matrix3d> rotations;

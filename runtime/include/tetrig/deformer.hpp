@@ -24,8 +24,9 @@
 //   2. rotation extraction per tet (warm-started, exact fallback for inverted tets);
 //   3. rigid groups: every tet of a group takes the group's average rotation;
 //   4. differential coordinates delta = G^T D g(R - I).
-// Precision: positions, displacements, delta and the factor are double; the per-tet pass (2, 4)
-// stores each tet's frame and rotation in float and computes in float (rotation_kernel.hpp).
+// Precision: positions, displacements and the factor are double; the per-tet pass (2, 4) stores
+// each tet's frame and rotation in float, computes in float and accumulates delta in float
+// (rotation_kernel.hpp).
 // Rotation interpolation runs once per change of an oriented handle's rotation, before that
 // frame's first solve: the handle's rotation increment since the last interpolation is spread
 // over the mesh with precomputed harmonic weights and composed onto every tet's rotation (the
@@ -71,6 +72,8 @@ struct DeformerOptions {
   int rotation_steps = 2;             // warm-started refinement steps per tet per iteration
   double point_handle_weight = 1e3;   // lambda / mean diagonal of L for point handles
   double max_abs_coordinate = 1e6;    // a target coordinate beyond this is rejected as absurd
+  bool padded_positions = false;      // also write paddedPositions() every step (~30 % more output
+                                      // traffic; for applyPoseTransferPadded)
 };
 
 struct DeformerSetup {
@@ -129,7 +132,8 @@ class Deformer {
   // Deformed positions, #V*3 doubles in mesh vertex order (x0 y0 z0 x1 ...).
   std::span<const double> positions() const { return positions_; }
   // The same, #V*4 doubles (x0 y0 z0 0 x1 ...), 64-byte aligned: the input of
-  // applyPoseTransferPadded (one vector load per entry of B).
+  // applyPoseTransferPadded (one vector load per entry of B). Empty unless
+  // DeformerOptions::padded_positions.
   std::span<const double> paddedPositions() const { return padded_positions_; }
   Eigen::Vector3d position(std::int32_t v) const;
 
@@ -164,9 +168,10 @@ class Deformer {
 
   // Vertex ordering: free vertex v lives at solver index factor position; handle slot h at free_count_ + h.
   std::vector<std::int32_t> solver_index_;    // mesh vertex -> solver index
+  std::vector<std::int32_t> mesh_vertex_;     // solver index -> mesh vertex
   AlignedVector<double> rest_solver_;           // rest positions, solver order, kVectorStride per vertex
   AlignedVector<double> u_;                     // displacements x - x_rest, solver order (free then handles)
-  AlignedVector<double> delta_;                 // sum_j a_j (R_j - I) G_j, solver order
+  AlignedVector<float> delta_;                  // sum_j a_j (R_j - I) G_j, solver order (float: rotation_kernel.hpp)
   AlignedVector<double> rhs_constant_;          // -L_fh u_h + point terms, free part
   std::vector<double> positions_;             // mesh order output
   AlignedVector<double> padded_positions_;      // mesh order output, kVectorStride per vertex

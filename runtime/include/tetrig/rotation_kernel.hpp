@@ -10,10 +10,11 @@
 // Subtracting I from both sides of eq. 2.5 is exact: sum_j a_j G_j^T I = L x_rest, so the system
 // L u = delta holds the same solutions as L x = G^T D R (deformer.cpp).
 //
-// Precision: positions, displacements and delta are double; a block's frame (E^-1, a_j) and its
-// rotation are float, and so is the per-tet arithmetic. Its rounding (~1e-7) is relative to the
-// deformation (H_j, R_j - I), not to the shape: the rest state is reproduced exactly, and a
-// converged state is within ~1e-7 of the double-precision one (docs/deformation.md).
+// Precision: displacements are double (edges are differences of them, taken in double); a block's
+// frame (E^-1, a_j), its rotations, the per-tet arithmetic and delta are float. The rounding
+// (~1e-7) is relative to the deformation (H_j, R_j - I), not to the shape: the rest state is
+// reproduced exactly, and a converged state is within ~1e-7 of the double-precision one
+// (docs/deformation.md).
 //
 // Inverted or degenerate tets (det F_j <= 1e-12) take the exact rotation (closestRotation, double).
 // Structure of arrays per block so the lane loops vectorise (16 floats = one AVX-512 register).
@@ -42,16 +43,16 @@ struct RotationPassStats {
 
 // Updates every rotation from displacements `u` (kVectorStride doubles per vertex: x, y, z, pad;
 // solver order) with `steps` refinement steps; if `delta` is not null, also adds each tet's
-// a (R - I) G into it (same layout; the caller zeroes it first). `exact_lanes` is the caller's
+// a (R - I) G into it (kVectorStride floats per vertex, same order; the caller zeroes it first). `exact_lanes` is the caller's
 // scratch of block_count entries: the pass writes there which lanes took the exact rotation
 // (bit l = lane l).
-RotationPassStats rotationPass(TetBlock* blocks, std::int32_t block_count, const double* u, double* delta,
+RotationPassStats rotationPass(TetBlock* blocks, std::int32_t block_count, const double* u, float* delta,
                                int steps, std::uint16_t* exact_lanes);
 
 // The instruction set the kernels run with on this machine ("avx512f", "avx2", "baseline").
 const char* rotationKernelInstructionSet();
 
 // Adds a_j (R_j - I) G_j of every tet into `delta` from the stored rotations (no extraction).
-void differentialPass(const TetBlock* blocks, std::int32_t block_count, double* delta);
+void differentialPass(const TetBlock* blocks, std::int32_t block_count, float* delta);
 
 }  // namespace tetrig
