@@ -7,6 +7,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <limits>
 #include <numeric>
 #include <stdexcept>
 #include <string>
@@ -208,6 +210,15 @@ Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(s
       const Eigen::Matrix3d& e = frames.edge_inverse[static_cast<size_t>(t)];
       for (int i = 0; i < 9; ++i) block.edge_inverse[i][l] = static_cast<float>(e(i / 3, i % 3));
       block.weight[l] = static_cast<float>(weights[static_cast<size_t>(t)]);
+      // The per-tet pass stores the rest frame in float (rotation_kernel.hpp).
+      bool in_range = std::isfinite(block.weight[l]) && block.weight[l] >= std::numeric_limits<float>::min();
+      for (int i = 0; i < 9; ++i) in_range = in_range && std::isfinite(block.edge_inverse[i][l]);
+      if (!in_range) {
+        char volume[32];
+        std::snprintf(volume, sizeof volume, "%.3g", frames.volume[static_cast<size_t>(t)]);
+        fail("tet " + std::to_string(t) + " (volume " + volume + ") is out of float range: its weight or inverse edge matrix does not fit in a float (about 1e-38 to "
+             "3e38); rescale the mesh to units where tets are between about 1e-9 and 1e9 across");
+      }
     }
   }
 

@@ -98,6 +98,18 @@ TETRIG_INLINE PackMask<N> notAbove(const Pack<N>& a, float b) {  // !(a > b): tr
   return r;
 }
 template <int N>
+TETRIG_INLINE PackMask<N> notBelow(const Pack<N>& a, float b) {  // !(a < b): true on NaN
+  PackMask<N> r;
+  for (int n = 0; n < N; ++n) r.v[n] = ~(a.v[n] < b);
+  return r;
+}
+template <int N>
+TETRIG_INLINE PackMask<N> operator|(const PackMask<N>& a, const PackMask<N>& b) {
+  PackMask<N> r;
+  for (int n = 0; n < N; ++n) r.v[n] = a.v[n] | b.v[n];
+  return r;
+}
+template <int N>
 TETRIG_INLINE Pack<N> select(const PackMask<N>& m, const Pack<N>& a, const Pack<N>& b) {
   Pack<N> r;
   for (int n = 0; n < N; ++n) r.v[n] = m.v[n] ? a.v[n] : b.v[n];
@@ -254,9 +266,11 @@ TETRIG_INLINE void passBlocks(TetBlock* blocks, const double* u, float* delta, i
   // Warm-started refinement of q towards argmax tr(R^T F) (Mueller et al. 2016). With g = N q,
   // the gradient of tr(R^T F) over rotation vectors is omega = (q_w g_v - g_w q_v + q_v x g_v) / |q|^2
   // (for unit q, sum_c r_c x f_c). The step rotates q by the half-angle vector
-  // damping * omega / (|tr| + eps), i.e. q <- (|tr| + eps, damping * omega) q; multiplied through by
-  // |q|^2 this is q <- (|q^T N q| + eps |q|^2, damping |q|^2 omega) q / |q|^2, whose division runs
-  // beside the step instead of before it. q is normalised once, at the end. A step is kept only
+  // damping * omega / (|tr| + eps), i.e. q <- (1, damping * omega / (|tr| + eps)) q; multiplied
+  // through by |q|^2 this is q <- (dw, damping |q|^2 omega) q / dw with dw = |q^T N q| + eps |q|^2,
+  // whose division runs beside the step instead of before it. |q| then grows only by
+  // sqrt(1 + |step|^2) per step (dividing by |q|^2 instead, it grew by |tr| ~ 3 ||F|| per step and
+  // float overflowed after ~40 steps even at rest). q is normalised once, at the end. A step is kept only
   // if tr(R^T F) does not drop by more than float rounding; a rejected step halves that lane's
   // damping. The rounding allowance matters: the trace is flat at its maximum (an angle error d
   // changes it by ~d^2), so an exact comparison in float would reject the last steps as noise
@@ -278,15 +292,15 @@ TETRIG_INLINE void passBlocks(TetBlock* blocks, const double* u, float* delta, i
   for (int i = 1; i < 9; ++i) ff += f[i] * f[i];
   const V allowance = 1e-6f * (1.0f + ff);
   for (int s = 0; s < steps; ++s) {
-    const V inv_norm2 = 1.0f / norm2;
     const V ox = damping * (qw * gx - gw * qx + qy * gz - qz * gy);
     const V oy = damping * (qw * gy - gw * qy + qz * gx - qx * gz);
     const V oz = damping * (qw * gz - gw * qz + qx * gy - qy * gx);
     const V dw = absolute(quad) + 1e-9f * norm2;
-    const V w1 = (dw * qw - ox * qx - oy * qy - oz * qz) * inv_norm2;  // (dw, o) * q / |q|^2
-    const V x1 = (dw * qx + ox * qw + oy * qz - oz * qy) * inv_norm2;
-    const V y1 = (dw * qy + oy * qw + oz * qx - ox * qz) * inv_norm2;
-    const V z1 = (dw * qz + oz * qw + ox * qy - oy * qx) * inv_norm2;
+    const V inv_dw = 1.0f / dw;
+    const V w1 = (dw * qw - ox * qx - oy * qy - oz * qz) * inv_dw;  // (dw, o) * q / dw
+    const V x1 = (dw * qx + ox * qw + oy * qz - oz * qy) * inv_dw;
+    const V y1 = (dw * qy + oy * qw + oz * qx - ox * qz) * inv_dw;
+    const V z1 = (dw * qz + oz * qw + ox * qy - oy * qx) * inv_dw;
     const V gw1 = n00 * w1 + n01 * x1 + n02 * y1 + n03 * z1;
     const V gx1 = n01 * w1 + n11 * x1 + n12 * y1 + n13 * z1;
     const V gy1 = n02 * w1 + n12 * x1 + n22 * y1 + n23 * z1;
@@ -312,26 +326,34 @@ TETRIG_INLINE void passBlocks(TetBlock* blocks, const double* u, float* delta, i
   qx *= inv_norm;
   qy *= inv_norm;
   qz *= inv_norm;
+  // Inverted and degenerate tets (det F <= 1e-12) need the exact rotation: the local iteration can
+  // stall there. So do lanes whose float arithmetic left the range (F beyond ~1e12, where the
+  // products of the step overflow): their q is not a unit quaternion (or NaN); it is reset to the
+  // identity here so nothing non-finite reaches delta. Both are rare: only flagged here, and fixed
+  // after the pass (fixExactRotations, in double), so this loop holds no call and keeps its values
+  // in registers. (Padding lanes have F = I, det 1: never flagged.)
+  const M out_of_range = notBelow(absolute(qw * qw + qx * qx + qy * qy + qz * qz - 1.0f), 1e-3f);
+  const M needs_exact = notAbove(det, 1e-12f) | out_of_range;  // NaN too
+  qw = select(out_of_range, splat<N>(1.0f), qw);
+  qx = select(out_of_range, splat<N>(0.0f), qx);
+  qy = select(out_of_range, splat<N>(0.0f), qy);
+  qz = select(out_of_range, splat<N>(0.0f), qz);
   storeField<N>(blocks, TETRIG_FIELD(rotation, 0), qw);
   storeField<N>(blocks, TETRIG_FIELD(rotation, 1), qx);
   storeField<N>(blocks, TETRIG_FIELD(rotation, 2), qy);
   storeField<N>(blocks, TETRIG_FIELD(rotation, 3), qz);
   const Matrix<N> rm = rotationMinusIdentity<N>(qw, qx, qy, qz);
 
-  // Inverted and degenerate tets (det F <= 1e-12) need the exact rotation: the local iteration can
-  // stall there. They are rare (after large handle moves): only counted here, and fixed after
-  // the pass (fixExactRotations), so this loop holds no call and keeps its values in registers.
-  // (Padding lanes have F = I, det 1: never flagged.)
-  const M needs_exact = notAbove(det, 1e-12f);  // NaN too
   for (int n = 0; n < kBlocks; ++n) {
     const unsigned bits = laneBits(needs_exact.v[n]);
     exact_lanes[n] = static_cast<std::uint16_t>(bits);
     flagged |= bits;
   }
-  // Energy a ||H - (R - I)||^2: no cancellation near rest, where both terms are small.
+  // Energy a ||H - (R - I)||^2: no cancellation near rest, where both terms are small. Flagged
+  // lanes add theirs in fixExactRotations.
   V residual = (h[0] - rm.m[0]) * (h[0] - rm.m[0]);
   for (int i = 1; i < 9; ++i) residual += (h[i] - rm.m[i]) * (h[i] - rm.m[i]);
-  const V tet_energy = loadField<N>(blocks, TETRIG_FIELD(weight, 0)) * residual;
+  const V tet_energy = select(needs_exact, splat<N>(0.0f), loadField<N>(blocks, TETRIG_FIELD(weight, 0)) * residual);
   for (int n = 0; n < kBlocks; ++n) {
     energy[0] += lowHalf(tet_energy.v[n]);
     energy[1] += highHalf(tet_energy.v[n]);
@@ -340,9 +362,10 @@ TETRIG_INLINE void passBlocks(TetBlock* blocks, const double* u, float* delta, i
 }
 
 
-// The exact rotation for every tet with det F <= 1e-12 after a pass that gave it the refined one:
-// rotation replaced, delta corrected by a (R_exact - R_refined) grad phi_k, energy recomputed for
-// the tet. Scalar, in double; runs only when the pass flagged a tet.
+// The exact rotation for every tet the pass flagged (det F <= 1e-12, or out of float range) after
+// the pass gave it the refined one: rotation replaced, delta corrected by
+// a (R_exact - R_refined) grad phi_k, the tet's energy added. Scalar, in double; runs only when
+// the pass flagged a tet.
 __attribute__((noinline, cold)) void fixExactRotations(TetBlock* blocks, std::int32_t block_count, const double* u,
                                                         float* delta, const std::uint16_t* exact_lanes,
                                                         RotationPassStats& stats) {
@@ -372,7 +395,7 @@ __attribute__((noinline, cold)) void fixExactRotations(TetBlock* blocks, std::in
       const Eigen::Matrix3d r_refined = refined.normalized().toRotationMatrix();
       const Eigen::Matrix3d r_stored = stored.normalized().toRotationMatrix();
       const double a = block.weight[l];
-      stats.energy += a * ((f - r_stored).squaredNorm() - (f - r_refined).squaredNorm());
+      stats.energy += a * (f - r_stored).squaredNorm();
       ++stats.exact_fallbacks;
       if (delta == nullptr) continue;
       const Eigen::Matrix3d change = r_stored - r_refined;

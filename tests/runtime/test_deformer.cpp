@@ -402,5 +402,28 @@ TEST(Deformer, SetupErrorsNameTheProblem) {
   EXPECT_NE(message(bad_group).find("two rigid groups"), std::string::npos);
 }
 
+// The per-tet pass keeps rest frames in float: a mesh whose tet volumes (the weights) or inverse
+// edge matrices leave float's range is refused with a message that says what to do, not run
+// into infinities. Both scales are fine in double (the mesh itself is valid).
+TEST(Deformer, MeshesBeyondFloatRangeAreRefusedWithAMessage) {
+  for (const double scale : {1e15, 1e-15}) {
+    auto bar = scenes::makeBarScene(1, 1, 6);
+    bar.mesh.vertices *= scale;
+    try {
+      Deformer d(bar.mesh, test::endVertexHandles(bar));
+      ADD_FAILURE() << "scale " << scale << " was accepted";
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find("out of float range"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("rescale"), std::string::npos) << e.what();
+    }
+  }
+  // Scales well inside the range are accepted.
+  for (const double scale : {1e-6, 1e6}) {
+    auto bar = scenes::makeBarScene(1, 1, 6);
+    bar.mesh.vertices *= scale;
+    EXPECT_NO_THROW(Deformer(bar.mesh, test::endVertexHandles(bar))) << "scale " << scale;
+  }
+}
+
 }  // namespace
 }  // namespace tetrig
