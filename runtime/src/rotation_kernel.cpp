@@ -35,10 +35,10 @@ using namespace lanes;
 constexpr int W = kTetBlockWidth;
 constexpr int kHalf = kLanes;  // lanes per half block (one Lanes of doubles)
 
-// Two consecutive blocks go through the pass together (V = FLanes2, 32 lanes: two registers per
-// quantity on AVX-512): each long dependency chain (the divisions, the square root, the
-// refinement steps) then has an independent twin in the same instruction stream for the
-// out-of-order core to overlap. A last odd block goes alone (V = FLanes).
+// Two consecutive blocks go through the pass together (Pack<2>: two registers per quantity on
+// AVX-512): each long dependency chain (the divisions, the square root, the refinement steps)
+// then has an independent twin in the same instruction stream for the out-of-order core to
+// overlap. A last odd block goes alone (Pack<1>).
 // Pack<N>: N FLanes (N consecutive blocks' 16 lanes each) with element-wise operators, each
 // operator N vector instructions. (A 32-float vector type instead compiles to spills: GCC lowers
 // oversized generic vectors through memory.)
@@ -211,20 +211,18 @@ TETRIG_INLINE unsigned laneBits(FMask m) {
   return static_cast<unsigned>(b4[0] | b4[1] | b4[2] | b4[3]);
 }
 
-// The pass over N consecutive blocks. `energy` accumulates in double (two
-// halves): a float sum over thousands of tets would lose the small terms.
+// The pass over N consecutive blocks. `energy` accumulates in double (two halves): a float sum
+// over thousands of tets would lose the small terms.
 template <int N>
 TETRIG_INLINE void passBlocks(TetBlock* blocks, const double* u, float* delta, int steps, Lanes (&energy)[2],
                               std::uint16_t* exact_lanes, std::int64_t& flagged) {
   using V = Pack<N>;
   using M = PackMask<N>;
-  constexpr int kBlocks = N;
   // Edges u_ck - u_c3 (k = 0..2), in double per half block: corner displacements (x, y, z, pad:
   // one 4-wide load each) transposed into lanes; then the lanes in float.
   V e[9];
   {
-    FLanes ef[9][kBlocks];
-    for (int n = 0; n < kBlocks; ++n) {
+    for (int n = 0; n < N; ++n) {
       Lanes ex[2][9];
       for (int half = 0; half < 2; ++half) {
         Lanes px[4], py[4], pz[4];
@@ -239,10 +237,8 @@ TETRIG_INLINE void passBlocks(TetBlock* blocks, const double* u, float* delta, i
           ex[half][3 * k + 2] = pz[k] - pz[3];
         }
       }
-      for (int i = 0; i < 9; ++i) ef[i][n] = toFloat(ex[0][i], ex[1][i]);
+      for (int i = 0; i < 9; ++i) e[i].v[n] = toFloat(ex[0][i], ex[1][i]);
     }
-    for (int i = 0; i < 9; ++i)
-      for (int n = 0; n < N; ++n) e[i].v[n] = ef[i][n];
   }
   // H = E'_u E^-1: H(row, col) = sum_k edge_k[row] Einv(k, col); F = I + H   (eq. 2.6)
   V h[9];
@@ -344,7 +340,7 @@ TETRIG_INLINE void passBlocks(TetBlock* blocks, const double* u, float* delta, i
   storeField<N>(blocks, TETRIG_FIELD(rotation, 3), qz);
   const Matrix<N> rm = rotationMinusIdentity<N>(qw, qx, qy, qz);
 
-  for (int n = 0; n < kBlocks; ++n) {
+  for (int n = 0; n < N; ++n) {
     const unsigned bits = laneBits(needs_exact.v[n]);
     exact_lanes[n] = static_cast<std::uint16_t>(bits);
     flagged |= bits;
@@ -354,7 +350,7 @@ TETRIG_INLINE void passBlocks(TetBlock* blocks, const double* u, float* delta, i
   V residual = (h[0] - rm.m[0]) * (h[0] - rm.m[0]);
   for (int i = 1; i < 9; ++i) residual += (h[i] - rm.m[i]) * (h[i] - rm.m[i]);
   const V tet_energy = select(needs_exact, splat<N>(0.0f), loadField<N>(blocks, TETRIG_FIELD(weight, 0)) * residual);
-  for (int n = 0; n < kBlocks; ++n) {
+  for (int n = 0; n < N; ++n) {
     energy[0] += lowHalf(tet_energy.v[n]);
     energy[1] += highHalf(tet_energy.v[n]);
   }
