@@ -31,31 +31,25 @@ using Float8 = float __attribute__((vector_size(kLanes * sizeof(float))));
 using Vec4f = float __attribute__((vector_size(kVectorStride * sizeof(float))));
 static_assert(kTetBlockWidth == 2 * kLanes, "a TetBlock is two halves of kLanes doubles");
 
-TETRIG_INLINE Lanes load(const double* p) {
-  Lanes v;
+// Unaligned loads and stores of each vector type (memcpy: one vector move).
+template <class V, class T>
+TETRIG_INLINE V loadAs(const T* p) {
+  V v;
   std::memcpy(&v, p, sizeof v);
   return v;
 }
-TETRIG_INLINE void store(double* p, Lanes v) { std::memcpy(p, &v, sizeof v); }
-TETRIG_INLINE Vec4 load4(const double* p) {
-  Vec4 v;
-  std::memcpy(&v, p, sizeof v);
-  return v;
+template <class V, class T>
+TETRIG_INLINE void storeAs(T* p, V v) {
+  std::memcpy(p, &v, sizeof v);
 }
-TETRIG_INLINE void store4(double* p, Vec4 v) { std::memcpy(p, &v, sizeof v); }
-TETRIG_INLINE FLanes loadF(const float* p) {
-  FLanes v;
-  std::memcpy(&v, p, sizeof v);
-  return v;
-}
-TETRIG_INLINE void storeF(float* p, FLanes v) { std::memcpy(p, &v, sizeof v); }
-
-TETRIG_INLINE Vec4f load4f(const float* p) {
-  Vec4f v;
-  std::memcpy(&v, p, sizeof v);
-  return v;
-}
-TETRIG_INLINE void store4f(float* p, Vec4f v) { std::memcpy(p, &v, sizeof v); }
+TETRIG_INLINE Lanes load(const double* p) { return loadAs<Lanes>(p); }
+TETRIG_INLINE void store(double* p, Lanes v) { storeAs(p, v); }
+TETRIG_INLINE Vec4 load4(const double* p) { return loadAs<Vec4>(p); }
+TETRIG_INLINE void store4(double* p, Vec4 v) { storeAs(p, v); }
+TETRIG_INLINE FLanes loadF(const float* p) { return loadAs<FLanes>(p); }
+TETRIG_INLINE void storeF(float* p, FLanes v) { storeAs(p, v); }
+TETRIG_INLINE Vec4f load4f(const float* p) { return loadAs<Vec4f>(p); }
+TETRIG_INLINE void store4f(float* p, Vec4f v) { storeAs(p, v); }
 
 // Two halves of a block (lanes 0-7, 8-15) in double <-> its 16 lanes in float.
 TETRIG_INLINE FLanes toFloat(Lanes low, Lanes high) {
@@ -69,15 +63,8 @@ TETRIG_INLINE Lanes highHalf(FLanes v) {
   return __builtin_convertvector(__builtin_shufflevector(v, v, 8, 9, 10, 11, 12, 13, 14, 15), Lanes);
 }
 // Eight floats of a TetBlock field (one half) as doubles, and back.
-TETRIG_INLINE Lanes loadHalf(const float* p) {
-  Float8 v;
-  std::memcpy(&v, p, sizeof v);
-  return __builtin_convertvector(v, Lanes);
-}
-TETRIG_INLINE void storeHalf(float* p, Lanes v) {
-  const Float8 f = __builtin_convertvector(v, Float8);
-  std::memcpy(p, &f, sizeof f);
-}
+TETRIG_INLINE Lanes loadHalf(const float* p) { return __builtin_convertvector(loadAs<Float8>(p), Lanes); }
+TETRIG_INLINE void storeHalf(float* p, Lanes v) { storeAs(p, __builtin_convertvector(v, Float8)); }
 
 // The 8-lane <-> 8 x 4 transposes between per-vertex vectors (x, y, z, pad) and per-coordinate
 // lanes (shuffles instead of scalar loads and inserts).
