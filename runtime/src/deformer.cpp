@@ -216,8 +216,10 @@ Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(s
       if (!in_range) {
         char volume[32];
         std::snprintf(volume, sizeof volume, "%.3g", frames.volume[static_cast<size_t>(t)]);
-        fail("tet " + std::to_string(t) + " (volume " + volume + ") is out of float range: its weight or inverse edge matrix does not fit in a float (about 1e-38 to "
-             "3e38); rescale the mesh to units where tets are between about 1e-9 and 1e9 across");
+        fail("tet " + std::to_string(t) + " (volume " + volume +
+             ") is out of float range: its weight or inverse edge matrix does not fit in a float "
+             "(about 1e-38 to 3e38); rescale the mesh to units where tets are between about 1e-9 and "
+             "1e9 across");
       }
     }
   }
