@@ -170,12 +170,15 @@ Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(s
     }
   }
 
-  // --- Point handles. ---
+  // --- Point handles; their rest positions p_rest = sum_c b_c x_rest_c. ---
   for (const auto& point : setup.point_handles) {
+    Eigen::Vector3d rest = Eigen::Vector3d::Zero();
     for (int c = 0; c < 4; ++c) {
       point_corner_.push_back(solver_index_[static_cast<size_t>(mesh.tets(point.tet, c))]);
       point_weight_.push_back(point.barycentric[c]);
+      rest += point.barycentric[c] * Eigen::Vector3d(mesh.vertices.row(mesh.tets(point.tet, c)).transpose());
     }
+    point_rest_.push_back(rest);
   }
 
   // --- Tet blocks, ordered by their lowest solver index for locality of gathers and scatters. ---
@@ -288,14 +291,7 @@ void Deformer::reset() {
     vertex_targets_[static_cast<size_t>(h)] = Eigen::Vector3d(p[0], p[1], p[2]);
   }
   for (auto& region : region_targets_) region = RigidTransform{};
-  for (size_t p = 0; p < point_targets_.size(); ++p) {
-    Eigen::Vector3d rest = Eigen::Vector3d::Zero();
-    for (int c = 0; c < 4; ++c) {
-      const double* q = &rest_solver_[kVectorStride * static_cast<size_t>(point_corner_[4 * p + static_cast<size_t>(c)])];
-      rest += point_weight_[4 * p + static_cast<size_t>(c)] * Eigen::Vector3d(q[0], q[1], q[2]);
-    }
-    point_targets_[p] = rest;
-  }
+  std::copy(point_rest_.begin(), point_rest_.end(), point_targets_.begin());
   for (auto& q : interpolated_rotation_) q = Eigen::Quaterniond::Identity();
   rebuildDelta();
   updateConstantRhs();
@@ -378,18 +374,14 @@ void Deformer::updateConstantRhs() {
     rhs_constant_[kVectorStride * i + 1] = s1;
     rhs_constant_[kVectorStride * i + 2] = s2;
   }
-  // Point handles: lambda b_a (p - p_rest - sum_{handle corners h} b_h u_h) for each free corner a,
-  // with p_rest = sum_c b_c x_rest_c (the point's rest position).
+  // Point handles: lambda b_a (p - p_rest - sum_{handle corners h} b_h u_h) for each free corner a.
   for (size_t p = 0; p < point_targets_.size(); ++p) {
-    Eigen::Vector3d target = point_targets_[p];
+    Eigen::Vector3d target = point_targets_[p] - point_rest_[p];
     for (int c = 0; c < 4; ++c) {
       const std::int32_t s = point_corner_[4 * p + static_cast<size_t>(c)];
-      const double b = point_weight_[4 * p + static_cast<size_t>(c)];
-      const double* rest = &rest_solver_[kVectorStride * static_cast<size_t>(s)];
-      target -= b * Eigen::Vector3d(rest[0], rest[1], rest[2]);
       if (s >= free_count_) {
         const double* uh = &u_[kVectorStride * static_cast<size_t>(s)];
-        target -= b * Eigen::Vector3d(uh[0], uh[1], uh[2]);
+        target -= point_weight_[4 * p + static_cast<size_t>(c)] * Eigen::Vector3d(uh[0], uh[1], uh[2]);
       }
     }
     for (int c = 0; c < 4; ++c) {

@@ -3,7 +3,8 @@
 //   Deformer deformer(mesh, setup);            // load: all allocation and the factorization
 //   StepStats s = deformer.step(targets, budget);  // per frame: no allocation, lock, throw or I/O
 //   deformer.positions();                      // #V*3 doubles, mesh order, valid after step()
-//   deformer.paddedPositions();                // the same as #V*4 (x, y, z, 0), for applyPoseTransferPadded
+//   deformer.paddedPositions();                // the same as #V*4 (x, y, z, 0), for applyPoseTransferPadded,
+//                                              // when DeformerOptions::padded_positions is set
 //
 // Handles (section 2.3.1):
 // - vertex handles: a vertex whose position is prescribed; eliminated from L.
@@ -192,6 +193,7 @@ class Deformer {
   // Point handles (soft): corners in solver order, barycentric weights, lambda.
   std::vector<std::int32_t> point_corner_;  // 4 per point handle
   std::vector<double> point_weight_;        // 4 per point handle
+  std::vector<Eigen::Vector3d> point_rest_; // rest position of each point handle
   double point_lambda_ = 0.0;
 
   // Tets in blocks.
