@@ -195,7 +195,7 @@ MarkerStreamStatus MarkerStreamDecoder::decodeFrame(std::span<const std::uint8_t
   for (std::size_t i = 0; i < h.marker_count; ++i, r += rec) {
     Marker& m = out.markers[i];
     m.id = loadU16(r + kRecId);
-    m.reserved = 0;
+    m.buttons = 0;
     const std::uint8_t mflags = r[kRecFlags];
     if ((mflags & kMarkerFlagValid) == 0) {
       clearMarker(m);

@@ -1,15 +1,11 @@
 // Shared helpers of the device transports: host clock, event names, counter snapshots.
 #include <tetrig/drivers/transport.hpp>
 
-#include <time.h>
+#include <tetrig/clock.hpp>
 
 namespace tetrig::devices {
 
-std::int64_t monotonicNowNs() noexcept {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
-}
+std::int64_t monotonicNowNs() noexcept { return tetrig::monotonicNowNs(); }
 
 std::string_view transportEventName(TransportEvent event) noexcept {
   switch (event) {

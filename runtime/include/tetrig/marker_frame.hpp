@@ -18,7 +18,7 @@ struct Marker {
   float position_mm[3] = {0.0f, 0.0f, 0.0f};
   std::uint16_t id = 0;  // label index in the source's label table (C3D point index, protocol id)
   std::uint8_t valid = 0;  // 1: measured this frame; 0: occluded/invalid (position meaningless)
-  std::uint8_t reserved = 0;
+  std::uint8_t buttons = 0;  // pose sensors (e.g. Razer Hydra): the controller's button bits; 0 otherwise
   // Optional orientation (unit quaternion w, x, y, z) for pose sensors such as the Razer Hydra.
   float orientation[4] = {1.0f, 0.0f, 0.0f, 0.0f};
   std::uint8_t has_orientation = 0;

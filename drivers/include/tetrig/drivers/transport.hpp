@@ -15,7 +15,8 @@
 
 namespace tetrig::devices {
 
-// Host CLOCK_MONOTONIC in nanoseconds (the clock MarkerFrame::receive_timestamp_ns uses).
+// Host CLOCK_MONOTONIC in nanoseconds (the clock MarkerFrame::receive_timestamp_ns uses): the
+// runtime's tetrig::monotonicNowNs() (tetrig/clock.hpp), named here for the transports' callers.
 // Any thread; no allocation.
 std::int64_t monotonicNowNs() noexcept;
 
