@@ -8,7 +8,45 @@
 // published last (stats()) always sees taken + dropped <= published.
 #include "tetrig/frame_mailbox.hpp"
 
+#include <algorithm>
+#include <chrono>
+#include <thread>
+
+#if defined(__linux__)
+#include <linux/futex.h>
+#include <sys/syscall.h>
+#include <time.h>
+#include <unistd.h>
+#endif
+
 namespace tetrig {
+
+namespace {
+
+// Sleeps while *word == expected, at most timeout_ns (spurious returns are fine: callers re-check).
+void futexWait(std::atomic<std::uint32_t>& word, std::uint32_t expected, std::int64_t timeout_ns) noexcept {
+#if defined(__linux__)
+  static_assert(sizeof(std::atomic<std::uint32_t>) == sizeof(std::uint32_t));
+  timespec ts{};
+  ts.tv_sec = static_cast<time_t>(timeout_ns / 1'000'000'000);
+  ts.tv_nsec = static_cast<long>(timeout_ns % 1'000'000'000);
+  syscall(SYS_futex, reinterpret_cast<std::uint32_t*>(&word), FUTEX_WAIT_PRIVATE, expected, &ts, nullptr, 0);
+#else
+  if (word.load(std::memory_order_seq_cst) == expected) {
+    std::this_thread::sleep_for(std::chrono::nanoseconds(std::min<std::int64_t>(timeout_ns, 1'000'000)));
+  }
+#endif
+}
+
+void futexWakeAll(std::atomic<std::uint32_t>& word) noexcept {
+#if defined(__linux__)
+  syscall(SYS_futex, reinterpret_cast<std::uint32_t*>(&word), FUTEX_WAKE_PRIVATE, 1 << 30, nullptr, nullptr, 0);
+#else
+  (void)word;
+#endif
+}
+
+}  // namespace
 
 FrameMailbox::FrameMailbox() noexcept : middle_(1u), back_(0u), front_(2u) {}
 
@@ -20,6 +58,23 @@ void FrameMailbox::commit() noexcept {
   if ((previous & kFreshBit) != 0u) {
     dropped_.fetch_add(1, std::memory_order_acq_rel);
   }
+  wake_word_.fetch_add(1, std::memory_order_seq_cst);
+  if (sleeping_.load(std::memory_order_seq_cst) != 0u) futexWakeAll(wake_word_);
+}
+
+void FrameMailbox::wake() noexcept {
+  wake_word_.fetch_add(1, std::memory_order_seq_cst);
+  futexWakeAll(wake_word_);
+}
+
+bool FrameMailbox::waitForFrame(std::int64_t timeout_ns) noexcept {
+  if ((middle_.load(std::memory_order_seq_cst) & kFreshBit) != 0u) return true;
+  if (timeout_ns <= 0) return false;
+  const std::uint32_t word = wake_word_.load(std::memory_order_seq_cst);
+  sleeping_.store(1u, std::memory_order_seq_cst);
+  if ((middle_.load(std::memory_order_seq_cst) & kFreshBit) == 0u) futexWait(wake_word_, word, timeout_ns);
+  sleeping_.store(0u, std::memory_order_seq_cst);
+  return (middle_.load(std::memory_order_acquire) & kFreshBit) != 0u;
 }
 
 void FrameMailbox::publish(const MarkerFrame& frame) noexcept {

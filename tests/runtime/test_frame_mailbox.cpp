@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <chrono>
 #include <cstdlib>
 #include <memory>
 #include <new>
@@ -261,6 +262,82 @@ TEST(FrameMailbox, StressNoTornFramesAndDropAccountingBalances) {
     EXPECT_EQ(s.published, s.taken + s.dropped);
     EXPECT_GE(s.taken, 1u);
   }
+}
+
+// ---- waking the consumer (waitForFrame / wake) ----
+
+TEST(FrameMailboxWait, ReturnsAtOnceWhenAFrameIsPendingAndFalseOnTimeout) {
+  auto box = std::make_unique<FrameMailbox>();
+  EXPECT_FALSE(box->waitForFrame(5'000'000));  // nothing published: times out
+  EXPECT_FALSE(box->waitForFrame(0));
+  MarkerFrame f;
+  stamp(f, 1);
+  box->publish(f);
+  EXPECT_TRUE(box->waitForFrame(0));
+  EXPECT_TRUE(box->waitForFrame(1'000'000'000));
+  ASSERT_NE(box->tryAcquireLatest(), nullptr);
+  EXPECT_FALSE(box->waitForFrame(1'000'000));  // taken: nothing pending again
+}
+
+TEST(FrameMailboxWait, APublishWakesASleepingConsumerAndWakeReleasesIt) {
+  auto box = std::make_unique<FrameMailbox>();
+  std::atomic<int> phase{0};
+  bool first = false, second = true;
+  std::chrono::steady_clock::duration first_wait{};
+  std::thread consumer([&] {
+    phase.store(1);
+    const auto t0 = std::chrono::steady_clock::now();
+    first = box->waitForFrame(60'000'000'000);  // 60 s: only the publish can end it early
+    first_wait = std::chrono::steady_clock::now() - t0;
+    (void)box->tryAcquireLatest();
+    phase.store(2);
+    second = box->waitForFrame(60'000'000'000);  // only wake() can end it early
+  });
+  while (phase.load() != 1) std::this_thread::yield();
+  std::this_thread::sleep_for(std::chrono::milliseconds(20));  // let it fall asleep
+  MarkerFrame f;
+  stamp(f, 7);
+  box->publish(f);
+  while (phase.load() != 2) std::this_thread::yield();
+  std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  box->wake();
+  consumer.join();
+  EXPECT_TRUE(first);
+  EXPECT_LT(first_wait, std::chrono::seconds(30)) << "woken by the publish, not by the timeout";
+  EXPECT_FALSE(second) << "wake() returns false: no frame pending";
+}
+
+// Many hand-offs with the consumer always asleep when it has nothing: a lost wake-up would leave
+// it asleep for the full (long) timeout, which the test reports as a stall.
+TEST(FrameMailboxWait, NoLostWakeUps) {
+  auto box = std::make_unique<FrameMailbox>();
+  constexpr std::uint64_t kFrames = TETRIG_MAILBOX_STRESS_FRAMES / 8;
+  std::atomic<std::uint64_t> acknowledged{0};
+  int stalls = 0;
+  std::uint64_t last = 0;
+  std::thread consumer([&] {
+    while (last < kFrames) {
+      const auto t0 = std::chrono::steady_clock::now();
+      const bool got = box->waitForFrame(5'000'000'000);
+      if (!got && std::chrono::steady_clock::now() - t0 >= std::chrono::seconds(4)) ++stalls;
+      if (const MarkerFrame* f = box->tryAcquireLatest()) {
+        last = f->frame_counter;
+        acknowledged.store(last, std::memory_order_release);
+      }
+    }
+  });
+  MarkerFrame f;
+  for (std::uint64_t k = 1; k <= kFrames; ++k) {
+    stamp(f, k);
+    box->publish(f);
+    // Every 4th frame: wait until the consumer took it, so that it goes back to sleep before the next.
+    if (k % 4 == 0) {
+      while (acknowledged.load(std::memory_order_acquire) < k) std::this_thread::yield();
+    }
+  }
+  consumer.join();
+  EXPECT_EQ(stalls, 0);
+  EXPECT_EQ(last, kFrames);
 }
 
 }  // namespace

@@ -15,9 +15,15 @@
 //    mailbox with new/make_unique or as a member, not on a small thread stack).
 //
 // Threads: exactly one producer thread (the driver's read loop) calls publish()/producerSlot()/
-// commit(); exactly one consumer thread (the solver) calls tryTakeLatest()/tryAcquireLatest().
-// The counters may be read from any thread. All member functions are wait-free, never allocate,
-// never throw and never block.
+// commit(); exactly one consumer thread (the solver) calls tryTakeLatest()/tryAcquireLatest()/
+// waitForFrame(). The counters and wake() may be used from any thread. Every member function
+// except waitForFrame() is wait-free, and none allocates or throws.
+//
+// Waking the consumer (waitForFrame): an event count. commit() bumps a wake word and, only when
+// the consumer has announced that it sleeps, wakes it with one futex call (Linux; elsewhere the
+// consumer polls in 1 ms slices). The consumer reads the wake word, announces itself, re-checks
+// for a fresh frame and sleeps only if the word is still the value it read, so a frame committed
+// between its check and its sleep is never missed (all four accesses are sequentially consistent).
 #pragma once
 
 #include <atomic>
@@ -65,6 +71,10 @@ class FrameMailbox {
   // tryAcquireLatest() or tryTakeLatest().
   [[nodiscard]] const MarkerFrame* tryAcquireLatest() noexcept;
 
+  // Sleeps until a frame is pending, wake() is called, or `timeout_ns` passes (no busy wait).
+  // Returns hasPending() on return: false means timeout or wake(). Never allocates or throws.
+  bool waitForFrame(std::int64_t timeout_ns) noexcept;
+
   // ---- any thread ----
 
   // True when a published frame waits to be taken (a hint while the producer is running).
@@ -73,6 +83,8 @@ class FrameMailbox {
   [[nodiscard]] std::uint64_t taken() const noexcept { return taken_.load(std::memory_order_relaxed); }
   [[nodiscard]] std::uint64_t dropped() const noexcept { return dropped_.load(std::memory_order_relaxed); }
   [[nodiscard]] FrameMailboxStats stats() const noexcept;
+  // Wakes a consumer sleeping in waitForFrame() (e.g. to make it see a stop request).
+  void wake() noexcept;
 
  private:
   static constexpr std::uint32_t kIndexMask = 0x3u;
@@ -89,6 +101,9 @@ class FrameMailbox {
   // Consumer-owned.
   alignas(kCacheLine) std::uint32_t front_;
   std::atomic<std::uint64_t> taken_{0};
+  // Event count for waitForFrame(): bumped by commit() and wake(); sleeping_ is set by the consumer.
+  alignas(kCacheLine) std::atomic<std::uint32_t> wake_word_{0};
+  std::atomic<std::uint32_t> sleeping_{0};
 };
 
 }  // namespace tetrig
