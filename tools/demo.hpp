@@ -1,15 +1,22 @@
-// `tetrig demo`: the main job on the project's own default data (owned by the deformation core).
+// `tetrig demo`: the main job. It runs the whole live path - a marker source on its driver thread
+// -> mailbox -> solver thread (deformation + pose transfer into shared memory) -> a consumer
+// process reading the segment (tetrig-shm-cat) - either on the project's own default data (the
+// demo bar rig made from assets/bar_4x4x33, driven by the synthetic source) or, with --mesh and
+// --c3d, on real data (the rig is built once and cached).
 #pragma once
 
+#include <cstdint>
 #include <string>
 
 namespace tetrig::tools {
 
 struct DemoOptions {
-  int frames = 240;                 // frames to run
-  int iterations = 3;               // iterations per frame (also bounded by the deadline)
-  double frame_budget_ms = 4.0;     // per-frame deadline
+  std::uint64_t frames = 0;         // frames to solve; 0: 600 (5 s of the 120 Hz synthetic source), or the whole clip with --c3d
+  int iterations = 3;               // iterations per frame (also bounded by the budget)
+  double frame_budget_ms = 0;       // receive -> published deadline; 0: from the source rate
   std::string out_obj;              // write the final deformed surface here (optional)
+  std::string mesh, c3d;            // real data: build (or reuse) a rig from these and play the clip
+  std::string publish;              // segment name (default: tetrig-demo-<pid>)
   bool quiet = false;
 };
 

@@ -14,6 +14,8 @@ packages=(
   libtet1.5-dev libassimp-dev libmeshoptimizer-dev libnanoflann-dev libcli11-dev nlohmann-json3-dev
   # fuzzing and sanitizers (clang, libFuzzer, LeakSanitizer runtime)
   clang libclang-rt-14-dev
+  # the latency harness's table (bench/latency.sh)
+  python3
 )
 
 missing=()

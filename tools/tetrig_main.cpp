@@ -1,6 +1,7 @@
-// The `tetrig` command: build-rig, inspect, demo. Every subcommand has --help; errors print one
+// The `tetrig` command: build-rig, inspect, run, demo. Every subcommand has --help; errors print one
 // line "tetrig <cmd>: error: ..." on stderr and exit non-zero; no partial output file is left.
 #include "demo.hpp"
+#include "run.hpp"
 #include "tetrig/rig_file.hpp"
 #include "tetrig/rigbuild/build_rig.hpp"
 #include "tetrig/rigbuild/describe_rig.hpp"
@@ -103,16 +104,54 @@ int main(int argc, char** argv) {
   inspect_cmd->add_flag("--markers", inspect_markers, "List every marker");
 
   tetrig::tools::DemoOptions demo;
-  CLI::App* demo_cmd = app.add_subcommand("demo", "Run the deformation demo on the project's own default data");
-  demo_cmd->add_option("--frames", demo.frames, "Frames to run")->capture_default_str()->check(CLI::Range(1, 100000000));
+  CLI::App* demo_cmd = app.add_subcommand("demo", "Run the live path (source -> solver -> shared memory -> a consumer) on the project's own default data, or on --mesh/--c3d");
+  demo_cmd->add_option("--frames", demo.frames, "Frames to solve (default: 600 on the default data, the whole clip with --c3d)")
+      ->check(CLI::Range(1, 100000000));
+  demo_cmd->add_option("--mesh", demo.mesh, "Real data: a surface mesh (with --c3d); the rig is built once and cached");
+  demo_cmd->add_option("--c3d", demo.c3d, "Real data: the C3D clip that drives the mesh (with --mesh)");
+  demo_cmd->add_option("--publish", demo.publish, "Shared-memory segment name (default: tetrig-demo-<pid>)");
   demo_cmd->add_option("--iterations", demo.iterations, "Iterations per frame (also bounded by the budget)")
       ->capture_default_str()
       ->check(CLI::Range(1, 1000));
-  demo_cmd->add_option("--budget-ms", demo.frame_budget_ms, "Per-frame time budget in milliseconds")
-      ->capture_default_str()
+  demo_cmd->add_option("--budget-ms", demo.frame_budget_ms, "Receive -> published deadline per frame (default: 0.9 of the source's period)")
       ->check(CLI::Range(0.001, 60000.0));
-  demo_cmd->add_option("--out", demo.out_obj, "Write the final deformed surface to this OBJ file");
+  demo_cmd->add_option("--out", demo.out_obj, "Write the last published surface to this OBJ file");
   demo_cmd->add_flag("-q,--quiet", demo.quiet, "Less output");
+
+  tetrig::tools::RunOptions run;
+  CLI::App* run_cmd = app.add_subcommand("run", "Run the live path: a marker source -> the rig, frame after frame -> shared memory");
+  run_cmd->add_option("--rig", run.rig_path, "Rig file (tetrig build-rig)")->required();
+  run_cmd->add_option("--source", run.source,
+                      "Marker source: c3d:PATH, replay:PATH, synthetic[:N], hid:VID:PID, usb:VID:PID (hex ids), hydra[:SERIAL]")
+      ->required();
+  run_cmd->add_option("--publish", run.publish, "Shared-memory segment name (docs/shm.md)")->capture_default_str();
+  run_cmd->add_option("--frames", run.frames, "Stop after this many solved frames (default: until the source ends or Ctrl-C)");
+  run_cmd->add_option("--iterations", run.iterations, "Iterations per frame (also bounded by the budget)")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 1000));
+  run_cmd->add_option("--budget-ms", run.budget_ms, "Receive -> published deadline per frame (default: 0.9 of the source's period)")
+      ->check(CLI::Range(0.01, 60000.0));
+  run_cmd->add_option("--stale-ms", run.stale_ms, "No frame for this long: the segment says the source is stale")
+      ->capture_default_str()
+      ->check(CLI::Range(1.0, 600000.0));
+  run_cmd->add_flag("--as-fast-as-possible", run.as_fast_as_possible, "Playback sources: no pacing (offline runs)");
+  run_cmd->add_option("--speed", run.speed, "Playback speed factor (real-time pacing)")->capture_default_str()->check(CLI::Range(0.01, 100.0));
+  run_cmd->add_flag("--loop", run.loop, "Playback sources: start again at the end");
+  run_cmd->add_flag("--normals", run.normals, "Also publish per-vertex normals");
+  run_cmd->add_option("--occlusion-blend-ms", run.occlusion_blend_ms, "Blend time when a marker drops out or returns")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 10000.0));
+  run_cmd->add_option("--label-timeout-ms", run.label_timeout_ms, "How long to wait for a device to name its markers")
+      ->capture_default_str()
+      ->check(CLI::Range(1.0, 600000.0));
+  run_cmd->add_option("--stats-json", run.stats_json, "Write the run's statistics (keys: docs/live.md)");
+  run_cmd->add_option("--cpu", run.cpu, "Pin the solver thread to this CPU")->check(CLI::Range(0, 4095));
+  run_cmd->add_flag("--fifo", run.fifo, "Run the solver thread under SCHED_FIFO (needs the privilege; reported when refused)");
+  bool no_mlock = false;
+  run_cmd->add_flag("--no-mlock", no_mlock, "Do not lock the process's memory");
+  std::string shm_mode;
+  run_cmd->add_option("--shm-mode", shm_mode, "Segment permissions in octal (default 600: owner only)");
+  run_cmd->add_flag("-q,--quiet", run.quiet, "Only errors");
 
   try {
     app.parse(argc, argv);
@@ -125,6 +164,16 @@ int main(int argc, char** argv) {
     if (cmd == "build-rig") return buildRigCommand(build);
     if (cmd == "inspect") return inspectCommand(inspect_path, inspect_markers);
     if (cmd == "demo") return tetrig::tools::runDemo(demo);
+    if (cmd == "run") {
+      run.lock_memory = !no_mlock;
+      if (!shm_mode.empty()) {
+        std::size_t used = 0;
+        const unsigned long mode = std::stoul(shm_mode, &used, 8);
+        if (used != shm_mode.size() || mode > 0777) throw std::invalid_argument("--shm-mode must be octal permissions such as 600 or 660");
+        run.shm_permissions = static_cast<unsigned>(mode);
+      }
+      return tetrig::tools::runLive(run);
+    }
   } catch (const std::exception& e) {
     std::string what = e.what();
     for (char& c : what) {

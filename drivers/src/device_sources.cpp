@@ -1,4 +1,5 @@
-// Device sources: transport + decoder + latest-frame mailbox (see device_sources.hpp).
+// Device sources: transport + decoder + latest-frame mailbox, and the marker-stream label table
+// handed from the driver thread to the control thread (see device_sources.hpp).
 #include <tetrig/drivers/device_sources.hpp>
 
 #include <algorithm>
@@ -33,6 +34,8 @@ HidTransportConfig prepareHidMarkerStream(const HidMarkerStreamSourceConfig& c) 
   hid.report_size = drivers::kMarkerStreamHidReportSize;
   hid.open_output_reports.push_back(
       commandReport(drivers::MarkerStreamCommand::kStart, static_cast<std::uint16_t>(c.record_format)));
+  // Right after START: a host that (re)connects mid-stream learns the labels at once.
+  hid.open_output_reports.push_back(commandReport(drivers::MarkerStreamCommand::kGetDescriptor, 0));
   if (c.rate_hz > 0) hid.open_output_reports.push_back(commandReport(drivers::MarkerStreamCommand::kSetRate, c.rate_hz));
   return hid;
 }
@@ -53,9 +56,11 @@ HidTransportConfig prepareHydra(const HydraSourceConfig& c) {
 
 UsbTransportConfig prepareUsbMarkerStream(const UsbMarkerStreamSourceConfig& c) {
   UsbTransportConfig usb = c.usb;
-  usb.transfer_size = std::max(usb.transfer_size, drivers::kMarkerStreamMaxFrameSize);
+  usb.transfer_size = std::max(usb.transfer_size, drivers::kMarkerStreamMaxMessageSize);  // frames and descriptors
   usb.open_control_requests.push_back(controlRequest(
       drivers::MarkerStreamCommand::kStart, static_cast<std::uint16_t>(c.record_format), usb.interface_number));
+  usb.open_control_requests.push_back(
+      controlRequest(drivers::MarkerStreamCommand::kGetDescriptor, 0, usb.interface_number));
   if (c.rate_hz > 0) {
     usb.open_control_requests.push_back(
         controlRequest(drivers::MarkerStreamCommand::kSetRate, c.rate_hz, usb.interface_number));
@@ -84,6 +89,29 @@ void mirrorDecoderStats(detail::AtomicSourceStats& stats, std::uint64_t lost, st
   stats.rejected_markers.store(rejected, kRelaxed);
 }
 
+void mirrorMarkerStreamStats(detail::AtomicSourceStats& stats, const drivers::MarkerStreamStats& d) noexcept {
+  mirrorDecoderStats(stats, d.frames_lost, d.duplicates, d.rejected_markers);
+  stats.descriptors_accepted.store(d.descriptors_accepted, kRelaxed);
+  stats.descriptors_rejected.store(d.descriptors_rejected, kRelaxed);
+}
+
+// What a marker-stream source does with one decoder verdict (driver thread, no allocation; the
+// label lock is taken only for a descriptor).
+void handleMarkerStreamStatus(drivers::MarkerStreamStatus status, FrameMailbox& mailbox,
+                              const drivers::MarkerStreamDecoder& decoder, detail::AtomicSourceStats& stats,
+                              detail::LabelStore& labels) noexcept {
+  switch (status) {
+    case drivers::MarkerStreamStatus::kFrame:
+      mailbox.commit();
+      stats.frames_published.fetch_add(1, kRelaxed);
+      break;
+    case drivers::MarkerStreamStatus::kDescriptor: labels.publish(decoder.labels()); break;
+    case drivers::MarkerStreamStatus::kNeedMore: break;
+    default: countMarkerStreamError(stats, status); break;
+  }
+  mirrorMarkerStreamStats(stats, decoder.stats());
+}
+
 }  // namespace
 
 namespace detail {
@@ -94,8 +122,29 @@ DeviceSourceStats AtomicSourceStats::snapshot() const noexcept {
   s.frames_lost = frames_lost.load(kRelaxed);
   s.duplicates = duplicates.load(kRelaxed);
   s.rejected_markers = rejected_markers.load(kRelaxed);
+  s.descriptors_accepted = descriptors_accepted.load(kRelaxed);
+  s.descriptors_rejected = descriptors_rejected.load(kRelaxed);
   s.last_error = last_error.load(kRelaxed);
   return s;
+}
+
+void LabelStore::publish(const drivers::MarkerLabelTable& table) noexcept {
+  {
+    std::lock_guard lock(mutex_);
+    table_ = table;
+    generation_.store(table.generation, std::memory_order_release);
+  }
+  changed_.notify_all();
+}
+
+bool LabelStore::wait(std::chrono::milliseconds timeout, std::vector<std::string>& labels) {
+  std::unique_lock lock(mutex_);
+  if (!changed_.wait_for(lock, timeout, [this] { return table_.generation != 0; })) return false;
+  labels.clear();
+  if (table_.count == 0) return true;
+  labels.resize(static_cast<std::size_t>(table_.entries[table_.count - 1u].id) + 1u);  // ids ascend
+  for (std::size_t i = 0; i < table_.count; ++i) labels[table_.entries[i].id] = std::string(table_.entries[i].label());
+  return true;
 }
 }  // namespace detail
 
@@ -116,21 +165,19 @@ void HidMarkerStreamSource::stop() { transport_.stop(); }
 
 void HidMarkerStreamSource::onReport(const ReceivedReport& report) noexcept {
   const auto status = decoder_.decodeHidReport(report.bytes, report.receive_ns, mailbox_.producerSlot());
-  if (status == drivers::MarkerStreamStatus::kFrame) {
-    mailbox_.commit();
-    stats_.frames_published.fetch_add(1, kRelaxed);
-  } else if (status != drivers::MarkerStreamStatus::kNeedMore) {
-    countMarkerStreamError(stats_, status);
-  }
-  const auto& d = decoder_.stats();
-  mirrorDecoderStats(stats_, d.frames_lost, d.duplicates, d.rejected_markers);
+  handleMarkerStreamStatus(status, mailbox_, decoder_, stats_, labels_);
 }
 
 DeviceSourceStats HidMarkerStreamSource::stats() const noexcept {
   DeviceSourceStats s = stats_.snapshot();
+  s.connected = transport_.connected();
   s.transport = transport_.stats();
   s.mailbox = mailbox_.stats();
   return s;
+}
+
+bool HidMarkerStreamSource::waitForLabels(std::chrono::milliseconds timeout, std::vector<std::string>& labels) {
+  return labels_.wait(timeout, labels);
 }
 
 // ---------------------------------------------------------------- Hydra
@@ -163,6 +210,7 @@ void HydraSource::onReport(const ReceivedReport& report) noexcept {
 
 DeviceSourceStats HydraSource::stats() const noexcept {
   DeviceSourceStats s = stats_.snapshot();
+  s.connected = transport_.connected();
   s.transport = transport_.stats();
   s.mailbox = mailbox_.stats();
   return s;
@@ -185,21 +233,19 @@ void UsbMarkerStreamSource::stop() { transport_.stop(); }
 
 void UsbMarkerStreamSource::onTransfer(const ReceivedReport& report) noexcept {
   const auto status = decoder_.decodeFrame(report.bytes, report.receive_ns, mailbox_.producerSlot());
-  if (status == drivers::MarkerStreamStatus::kFrame) {
-    mailbox_.commit();
-    stats_.frames_published.fetch_add(1, kRelaxed);
-  } else {
-    countMarkerStreamError(stats_, status);
-  }
-  const auto& d = decoder_.stats();
-  mirrorDecoderStats(stats_, d.frames_lost, d.duplicates, d.rejected_markers);
+  handleMarkerStreamStatus(status, mailbox_, decoder_, stats_, labels_);
 }
 
 DeviceSourceStats UsbMarkerStreamSource::stats() const noexcept {
   DeviceSourceStats s = stats_.snapshot();
+  s.connected = transport_.connected();
   s.transport = transport_.stats();
   s.mailbox = mailbox_.stats();
   return s;
+}
+
+bool UsbMarkerStreamSource::waitForLabels(std::chrono::milliseconds timeout, std::vector<std::string>& labels) {
+  return labels_.wait(timeout, labels);
 }
 
 }  // namespace tetrig::devices

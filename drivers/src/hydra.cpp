@@ -92,7 +92,7 @@ HydraStatus HydraDecoder::decode(std::span<const std::uint8_t> bytes, std::int64
     const HydraRawController& rc = raw.controllers[c];
     Marker& m = out.markers[c];
     m.id = static_cast<std::uint16_t>(c);
-    m.reserved = 0;
+    m.buttons = rc.buttons;  // raw bits, also when the pose is rejected (a press is still a press)
     float q[4];
     double n2 = 0.0;
     for (std::size_t k = 0; k < 4; ++k) {

@@ -1,6 +1,7 @@
 // The tetrig marker-stream protocol v1.0 (docs/protocol.md): frame validation, sequence tracking,
-// marker sanitising, the frame encoder, and the command / device-info blocks.
-// Fragment reassembly lives in marker_stream_fragment.cpp.
+// marker sanitising, the frame encoder, and the command / device-info blocks; the decoder hands
+// descriptor messages to marker_stream_descriptor.cpp. Fragment reassembly lives in
+// marker_stream_fragment.cpp.
 #include "tetrig/drivers/marker_stream.hpp"
 
 #include <algorithm>
@@ -51,6 +52,9 @@ std::size_t recordSize(MarkerRecordFormat f) noexcept {
 bool magicMatches(const std::uint8_t* p) noexcept {
   return std::memcmp(p + kOffMagic, kMarkerStreamMagic.data(), kMarkerStreamMagic.size()) == 0;
 }
+bool descriptorMagicMatches(const std::uint8_t* p) noexcept {
+  return std::memcmp(p + kOffMagic, kMarkerStreamDescriptorMagic.data(), kMarkerStreamDescriptorMagic.size()) == 0;
+}
 
 void clearMarker(Marker& m) noexcept {
   m.position_mm[0] = m.position_mm[1] = m.position_mm[2] = 0.0f;
@@ -60,7 +64,10 @@ void clearMarker(Marker& m) noexcept {
   m.valid = 0;
 }
 
-bool isKnownCommand(std::uint8_t op) noexcept { return op >= 0x01 && op <= 0x04; }
+bool isKnownCommand(std::uint8_t op) noexcept {
+  return op >= static_cast<std::uint8_t>(MarkerStreamCommand::kStart) &&
+         op <= static_cast<std::uint8_t>(MarkerStreamCommand::kGetDescriptor);
+}
 
 }  // namespace
 
@@ -68,6 +75,7 @@ const char* markerStreamStatusName(MarkerStreamStatus status) noexcept {
   switch (status) {
     case MarkerStreamStatus::kFrame: return "frame";
     case MarkerStreamStatus::kNeedMore: return "need more";
+    case MarkerStreamStatus::kDescriptor: return "descriptor";
     case MarkerStreamStatus::kTruncated: return "truncated";
     case MarkerStreamStatus::kBadMagic: return "bad magic";
     case MarkerStreamStatus::kUnsupportedVersion: return "unsupported version";
@@ -79,6 +87,7 @@ const char* markerStreamStatusName(MarkerStreamStatus status) noexcept {
     case MarkerStreamStatus::kBadReport: return "bad report";
     case MarkerStreamStatus::kBadFragment: return "bad fragment";
     case MarkerStreamStatus::kFragmentLost: return "fragment lost";
+    case MarkerStreamStatus::kBadDescriptor: return "bad descriptor";
   }
   return "unknown status";
 }
@@ -121,10 +130,19 @@ MarkerStreamStatus validateMarkerStreamFrame(std::span<const std::uint8_t> bytes
 std::size_t markerStreamPeekFrameLength(std::span<const std::uint8_t> bytes) noexcept {
   if (bytes.size() < kOffMarkerCount + 2) return 0;
   const std::uint8_t* p = bytes.data();
-  if (!magicMatches(p) || p[kOffVersionMajor] != kMarkerStreamVersionMajor) return 0;
+  // Both message kinds keep magic, major version and length at the same offsets (0, 4, 8).
   const std::size_t len = loadU16(p + kOffFrameLength);
-  if (len < kMarkerStreamHeaderSize + kMarkerStreamCrcSize || len > kMarkerStreamMaxFrameSize) return 0;
-  return len;
+  if (magicMatches(p)) {
+    if (p[kOffVersionMajor] != kMarkerStreamVersionMajor) return 0;
+    if (len < kMarkerStreamHeaderSize + kMarkerStreamCrcSize || len > kMarkerStreamMaxFrameSize) return 0;
+    return len;
+  }
+  if (descriptorMagicMatches(p)) {
+    if (p[kOffVersionMajor] != kMarkerStreamDescriptorVersionMajor) return 0;
+    if (len < kMarkerStreamDescriptorHeaderSize + kMarkerStreamCrcSize || len > kMarkerStreamMaxDescriptorSize) return 0;
+    return len;
+  }
+  return 0;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -137,6 +155,19 @@ void MarkerStreamDecoder::reset() noexcept {
 
 MarkerStreamStatus MarkerStreamDecoder::decodeFrame(std::span<const std::uint8_t> bytes, std::int64_t receive_ns,
                                                     MarkerFrame& out) noexcept {
+  if (bytes.size() >= kMarkerStreamDescriptorMagic.size() && descriptorMagicMatches(bytes.data())) {
+    // A descriptor: labels only; the frame, its sequence state and `out` are left alone.
+    const MarkerStreamStatus ds = decodeMarkerStreamDescriptor(bytes, labels_);
+    switch (ds) {
+      case MarkerStreamStatus::kDescriptor: ++stats_.descriptors_accepted; return ds;
+      case MarkerStreamStatus::kBadCrc: ++stats_.crc_errors; break;
+      case MarkerStreamStatus::kUnsupportedVersion: ++stats_.version_errors; break;
+      case MarkerStreamStatus::kBadDescriptor: break;
+      default: ++stats_.format_errors; break;
+    }
+    ++stats_.descriptors_rejected;
+    return ds;
+  }
   MarkerStreamHeader h;
   const MarkerStreamStatus st = validateMarkerStreamFrame(bytes, h);
   switch (st) {
@@ -254,9 +285,13 @@ MarkerStreamStatus MarkerStreamDecoder::decodeHidReport(std::span<const std::uin
     return st;
   }
   const std::span<const std::uint8_t> frame = reassembler_.frame();
-  if (frame.size() >= kOffFrameCounter + 4 && magicMatches(frame.data()) &&
+  // The tag is the low half of the u32 at offset 12 of either message kind (a frame's
+  // frame_counter, a descriptor's table_id). A message too short to hold it is judged by
+  // decodeFrame (truncated) instead.
+  if (frame.size() >= kOffFrameCounter + 4 && (magicMatches(frame.data()) || descriptorMagicMatches(frame.data())) &&
       static_cast<std::uint16_t>(loadU32(frame.data() + kOffFrameCounter)) != reassembler_.frameTag()) {
     ++stats_.fragment_errors;
+    if (descriptorMagicMatches(frame.data())) ++stats_.descriptors_rejected;
     return MarkerStreamStatus::kBadFragment;
   }
   return decodeFrame(frame, receive_ns, out);

@@ -1,8 +1,10 @@
-// Tetrig marker-stream protocol v1.0 (docs/protocol.md, section "HID: fragments"): in-order
-// reassembly of one frame from 64-byte HID input reports into a fixed buffer.
+// Tetrig marker-stream protocol v1.0 (docs/protocol.md, section 3.2 "HID"): in-order
+// reassembly of one message (a frame or a descriptor) from 64-byte HID input reports into a
+// fixed buffer.
 //
-// Fragment report: [0] report id 0x01, [1..2] tag = frame counter low 16 bits (LE), [3] index,
-// [4] count, [5] payload length (1..58; exactly 58 for every fragment but the last), [6..] payload.
+// Fragment report: [0] report id 0x01, [1..2] tag = low 16 bits (LE) of the message's u32 at
+// offset 12 (a frame's frame_counter, a descriptor's table_id), [3] index, [4] count (1..152),
+// [5] payload length (1..58; exactly 58 for every fragment but the last), [6..] payload.
 #include <cstring>
 
 #include "byte_io.hpp"

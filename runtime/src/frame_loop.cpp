@@ -1,1 +1,242 @@
-// placeholder: filled in by the live-runtime work
+// The solver thread: mailbox -> live rig -> shared-memory slot (tetrig/frame_loop.hpp).
+#include "tetrig/frame_loop.hpp"
+
+#include "tetrig/clock.hpp"
+#include "tetrig/live_rig.hpp"
+#include "tetrig/shm_publisher.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cerrno>
+#include <chrono>
+#include <cstring>
+
+#if defined(__linux__)
+#include <pthread.h>
+#include <sched.h>
+#include <sys/mman.h>
+#endif
+#if defined(__x86_64__) || defined(__i386__)
+#include <xmmintrin.h>
+#endif
+
+namespace tetrig {
+
+namespace {
+
+constexpr std::int64_t kHeartbeatNs = 100'000'000;  // heartbeat while idle
+constexpr std::int64_t kMaxSleepNs = 50'000'000;    // re-check stop/stale at least this often
+constexpr int kRecentWindow = 128;                  // frames behind the status line's p50/p99
+
+// Flush denormals to zero on this thread (near-identity covariances make them; DESIGN.md 8).
+bool flushDenormals() noexcept {
+#if defined(__x86_64__) || defined(__i386__)
+  _mm_setcsr(_mm_getcsr() | 0x8040u);  // FTZ (bit 15) | DAZ (bit 6)
+  return true;
+#elif defined(__aarch64__)
+  std::uint64_t fpcr = 0;
+  __asm__ volatile("mrs %0, fpcr" : "=r"(fpcr));
+  fpcr |= (1ull << 24);  // FZ
+  __asm__ volatile("msr fpcr, %0" : : "r"(fpcr));
+  return true;
+#else
+  return false;
+#endif
+}
+
+std::chrono::steady_clock::time_point steadyAt(std::int64_t ns) {
+  return std::chrono::steady_clock::time_point(std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::nanoseconds(ns)));
+}
+
+}  // namespace
+
+FrameLoop::FrameLoop(FrameMailbox& mailbox, LiveRig& live_rig, ShmPublisher& publisher, const FrameLoopOptions& options)
+    : mailbox_(mailbox), live_(live_rig), publisher_(publisher), options_(options) {}
+
+FrameLoop::~FrameLoop() {
+  requestStop();
+  join();
+}
+
+void FrameLoop::start() {
+  if (started_.exchange(true)) return;
+  mailbox_dropped_at_start_ = mailbox_.dropped();
+  thread_ = std::thread([this] { run(); });
+}
+
+void FrameLoop::requestStop() noexcept {
+  stop_.store(true, std::memory_order_release);
+  mailbox_.wake();
+}
+
+void FrameLoop::join() {
+  if (thread_.joinable()) thread_.join();
+}
+
+void FrameLoop::applyHygiene() {
+  std::string report;
+  auto add = [&report](const std::string& part) { report += (report.empty() ? "" : "; ") + part; };
+  if (options_.flush_denormals) add(flushDenormals() ? "flush-to-zero on" : "flush-to-zero not available on this CPU");
+#if defined(__linux__)
+  if (options_.lock_memory) {
+    // MCL_CURRENT only: everything the frame path touches is allocated at load, and MCL_FUTURE would
+    // make later allocations elsewhere in the process fail once RLIMIT_MEMLOCK is reached.
+    if (mlockall(MCL_CURRENT) == 0) {
+      add("memory locked");
+    } else {
+      add(std::string("memory lock refused: ") + std::strerror(errno));
+    }
+  }
+  if (options_.cpu >= 0) {
+    cpu_set_t set;
+    CPU_ZERO(&set);
+    CPU_SET(static_cast<unsigned>(options_.cpu), &set);
+    const int rc = pthread_setaffinity_np(pthread_self(), sizeof(set), &set);
+    add(rc == 0 ? "pinned to CPU " + std::to_string(options_.cpu)
+                : "pinning to CPU " + std::to_string(options_.cpu) + " refused: " + std::strerror(rc));
+  }
+  if (options_.realtime_fifo) {
+    sched_param param{};
+    param.sched_priority = options_.fifo_priority;
+    const int rc = pthread_setschedparam(pthread_self(), SCHED_FIFO, &param);
+    add(rc == 0 ? "SCHED_FIFO priority " + std::to_string(options_.fifo_priority)
+                : std::string("SCHED_FIFO refused: ") + std::strerror(rc));
+  }
+#else
+  if (options_.lock_memory || options_.cpu >= 0 || options_.realtime_fifo)
+    add("memory locking, pinning and SCHED_FIFO are Linux-only here: not applied");
+#endif
+  hygiene_ = report.empty() ? "none requested" : report;
+  hygiene_ready_.store(true, std::memory_order_release);
+}
+
+std::string FrameLoop::hygiene() const {
+  return hygiene_ready_.load(std::memory_order_acquire) ? hygiene_ : std::string("(solver thread not started)");
+}
+
+void FrameLoop::run() noexcept {
+  try {
+    applyHygiene();
+  } catch (...) {
+    // Only the report string can throw (allocation); the loop runs without it.
+  }
+  std::array<std::int64_t, kRecentWindow> recent{};
+  std::array<std::int64_t, kRecentWindow> sorted{};
+  int recent_count = 0;
+  std::int64_t pose_estimate_ns = 0;  // recent pose-transfer cost, reserved out of the step's deadline
+  std::int64_t last_frame_ns = monotonicNowNs();
+  std::int64_t last_heartbeat_ns = last_frame_ns;
+  const bool normals = publisher_.beginNormals() != nullptr;
+
+  while (!stop_.load(std::memory_order_acquire)) {
+    const MarkerFrame* frame = mailbox_.tryAcquireLatest();
+    if (frame == nullptr) {
+      const std::int64_t now = monotonicNowNs();
+      if (!stale_.load(std::memory_order_relaxed) && now - last_frame_ns > options_.stale_after_ns) {
+        stale_.store(true, std::memory_order_relaxed);
+        stale_periods_.fetch_add(1, std::memory_order_relaxed);
+        publisher_.heartbeat(ShmState::stale_source);
+        last_heartbeat_ns = now;
+      } else if (now - last_heartbeat_ns > kHeartbeatNs) {
+        publisher_.heartbeat(stale_.load(std::memory_order_relaxed) ? ShmState::stale_source : ShmState::running);
+        last_heartbeat_ns = now;
+      }
+      std::int64_t sleep_ns = std::min(kMaxSleepNs, kHeartbeatNs - (now - last_heartbeat_ns));
+      if (!stale_.load(std::memory_order_relaxed))
+        sleep_ns = std::min(sleep_ns, options_.stale_after_ns - (now - last_frame_ns) + 1);
+      mailbox_.waitForFrame(std::max<std::int64_t>(sleep_ns, 1'000'000));
+      continue;
+    }
+    const std::int64_t taken_ns = monotonicNowNs();
+    last_frame_ns = taken_ns;
+    if (stale_.exchange(false, std::memory_order_relaxed)) publisher_.heartbeat(ShmState::running);
+    const std::int64_t receive_ns = frame->receive_timestamp_ns != 0 ? frame->receive_timestamp_ns : taken_ns;
+
+    StepBudget budget;
+    budget.max_iterations = options_.max_iterations;
+    const std::int64_t frame_deadline = options_.budget_ns > 0 ? receive_ns + options_.budget_ns : 0;
+    if (frame_deadline != 0) budget.deadline = steadyAt(frame_deadline - pose_estimate_ns);
+
+    float* positions = publisher_.beginPositions();
+    float* slot_normals = normals ? publisher_.beginNormals() : nullptr;
+    const LiveFrameStats stats = live_.processFrame(*frame, budget, positions, slot_normals);
+    const std::int64_t pose_done_ns = monotonicNowNs();
+    const std::int64_t step_done_ns = pose_done_ns - stats.pose_transfer_ns;
+
+    ShmFrameInfo info;
+    info.source_frame = frame->frame_counter;
+    info.iterations = stats.step.iterations;
+    info.occluded_markers = stats.occluded_markers;
+    info.device_ns = frame->device_timestamp_ns;
+    info.receive_ns = receive_ns;
+    info.taken_ns = taken_ns;
+    info.step_done_ns = step_done_ns;
+    info.pose_done_ns = pose_done_ns;
+    info.flags = 0;
+    if (stats.flags & kLivePoseHeld) info.flags |= kShmFramePoseHeld;
+    if (stats.occluded_markers != 0) info.flags |= kShmFrameMarkersPredicted;
+    const bool miss = frame_deadline != 0 && pose_done_ns > frame_deadline;
+    if (miss) info.flags |= kShmFrameBudgetMiss;
+    publisher_.commit(info);
+    const std::int64_t published_ns = monotonicNowNs();
+
+    // Counters and histograms (solver thread only; no allocation).
+    const std::int64_t total = published_ns - receive_ns;
+    const std::int64_t step_ns = stats.flags & kLivePoseHeld ? 0 : stats.step.total_ns;
+    latency_.receive_to_taken.record(taken_ns - receive_ns);
+    latency_.step.record(step_ns);
+    latency_.pose_transfer.record(stats.pose_transfer_ns);
+    latency_.receive_to_step_done.record(step_done_ns - receive_ns);
+    latency_.receive_to_pose_done.record(pose_done_ns - receive_ns);
+    latency_.receive_to_published.record(total);
+    latency_.overhead.record(total - step_ns - stats.pose_transfer_ns);
+    pose_estimate_ns = pose_estimate_ns == 0 ? stats.pose_transfer_ns
+                                             : std::max(stats.pose_transfer_ns, (7 * pose_estimate_ns + stats.pose_transfer_ns) / 8);
+    if (frame_deadline != 0 && published_ns > frame_deadline) budget_misses_.fetch_add(1, std::memory_order_relaxed);
+    if (stats.flags & kLiveDeadlineHit) deadline_hits_.fetch_add(1, std::memory_order_relaxed);
+    if (stats.flags & kLivePoseHeld) held_frames_.fetch_add(1, std::memory_order_relaxed);
+    occluded_marker_frames_.fetch_add(stats.occluded_markers, std::memory_order_relaxed);
+    unknown_marker_frames_.fetch_add(stats.unknown_markers, std::memory_order_relaxed);
+    iterations_.fetch_add(static_cast<std::uint64_t>(std::max(0, stats.step.iterations)), std::memory_order_relaxed);
+    last_latency_ns_.store(total, std::memory_order_relaxed);
+    recent[static_cast<std::size_t>(recent_count % kRecentWindow)] = total;
+    ++recent_count;
+    if (recent_count % 16 == 0) {
+      const int n = std::min(recent_count, kRecentWindow);
+      std::copy_n(recent.begin(), n, sorted.begin());
+      std::sort(sorted.begin(), sorted.begin() + n);
+      recent_p50_ns_.store(sorted[static_cast<std::size_t>((n - 1) / 2)], std::memory_order_relaxed);
+      recent_p99_ns_.store(sorted[static_cast<std::size_t>(((n - 1) * 99) / 100)], std::memory_order_relaxed);
+    }
+    const std::uint64_t done = frames_.fetch_add(1, std::memory_order_relaxed) + 1;
+    if (options_.max_frames != 0 && done >= options_.max_frames) break;
+  }
+  done_.store(true, std::memory_order_release);
+}
+
+FrameLoopCounters FrameLoop::counters() const noexcept {
+  FrameLoopCounters c;
+  c.frames = frames_.load(std::memory_order_relaxed);
+  c.budget_misses = budget_misses_.load(std::memory_order_relaxed);
+  c.deadline_hits = deadline_hits_.load(std::memory_order_relaxed);
+  c.held_frames = held_frames_.load(std::memory_order_relaxed);
+  c.occluded_marker_frames = occluded_marker_frames_.load(std::memory_order_relaxed);
+  c.unknown_marker_frames = unknown_marker_frames_.load(std::memory_order_relaxed);
+  c.stale_periods = stale_periods_.load(std::memory_order_relaxed);
+  c.iterations = iterations_.load(std::memory_order_relaxed);
+  c.mailbox_dropped = mailbox_.dropped() - mailbox_dropped_at_start_;
+  return c;
+}
+
+FrameLoopSnapshot FrameLoop::snapshot() const noexcept {
+  FrameLoopSnapshot s;
+  s.counters = counters();
+  s.last_receive_to_published_ns = last_latency_ns_.load(std::memory_order_relaxed);
+  s.recent_p50_ns = recent_p50_ns_.load(std::memory_order_relaxed);
+  s.recent_p99_ns = recent_p99_ns_.load(std::memory_order_relaxed);
+  s.stale = stale_.load(std::memory_order_relaxed);
+  s.running = started_.load(std::memory_order_relaxed) && !done_.load(std::memory_order_acquire);
+  return s;
+}
+
+}  // namespace tetrig

@@ -1,1 +1,349 @@
-// placeholder: filled in by the live-runtime work
+// The live rig (DESIGN.md 6a): marker binding by label, occlusion prediction blended in and out
+// without pops, Deformer::step (Stoll et al. 2007 section 2.3) and pose transfer x_fine = B x_tet
+// (eq. 2.12) with area-weighted vertex normals. Equations in tetrig/live_rig.hpp and docs/live.md.
+#include "tetrig/live_rig.hpp"
+
+#include "tetrig/clock.hpp"
+#include "tetrig/pose_transfer.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <stdexcept>
+#include <string_view>
+
+namespace tetrig {
+namespace {
+
+constexpr std::size_t kMaxIds = 65536;  // Marker::id is 16 bits
+
+const Rig& validated(const Rig& rig) {
+  if (std::string e = validateRig(rig); !e.empty()) throw std::invalid_argument("live rig: " + e);
+  return rig;
+}
+
+DeformerSetup paddedSetup(const Rig& rig) {
+  DeformerSetup setup = rig.setup;
+  setup.options.padded_positions = true;  // the input of applyPoseTransferPadded
+  return setup;
+}
+
+std::vector<std::int32_t> markerVertices(const Rig& rig) {
+  std::vector<std::int32_t> v;
+  for (const RigMarker& m : rig.markers) v.push_back(m.tet_vertex);
+  return v;
+}
+
+MarkerPredictionOptions predictionOptions(const LiveRigOptions& options) {
+  MarkerPredictionOptions p;
+  p.rings = options.prediction_rings;
+  return p;
+}
+
+std::string_view afterLastColon(std::string_view s) {
+  const std::size_t colon = s.rfind(':');
+  return colon == std::string_view::npos ? s : s.substr(colon + 1);
+}
+
+// Area-weighted vertex normals: sum over incident triangles of (b - a) x (c - a) (twice the area
+// times the unit normal), normalised. A vertex whose sum is zero or not finite keeps `fallback`'s
+// value (its previous normal). `sum` is #V*3 scratch; `normals` may alias `fallback`.
+void vertexNormals(const float* x, std::span<const std::int32_t> triangles, std::span<float> sum, const float* fallback,
+                   float* normals) noexcept {
+  std::fill(sum.begin(), sum.end(), 0.0f);
+  for (std::size_t f = 0; f + 2 < triangles.size(); f += 3) {
+    const auto a = static_cast<std::size_t>(triangles[f]) * 3, b = static_cast<std::size_t>(triangles[f + 1]) * 3,
+               c = static_cast<std::size_t>(triangles[f + 2]) * 3;
+    const float e1x = x[b] - x[a], e1y = x[b + 1] - x[a + 1], e1z = x[b + 2] - x[a + 2];
+    const float e2x = x[c] - x[a], e2y = x[c + 1] - x[a + 1], e2z = x[c + 2] - x[a + 2];
+    const float nx = e1y * e2z - e1z * e2y, ny = e1z * e2x - e1x * e2z, nz = e1x * e2y - e1y * e2x;
+    for (const std::size_t v : {a, b, c}) {
+      sum[v] += nx;
+      sum[v + 1] += ny;
+      sum[v + 2] += nz;
+    }
+  }
+  for (std::size_t v = 0; v < sum.size(); v += 3) {
+    const double nx = sum[v], ny = sum[v + 1], nz = sum[v + 2];
+    const double length = std::sqrt(nx * nx + ny * ny + nz * nz);
+    if (length > 0.0 && std::isfinite(length)) {
+      normals[v] = static_cast<float>(nx / length);
+      normals[v + 1] = static_cast<float>(ny / length);
+      normals[v + 2] = static_cast<float>(nz / length);
+    } else {
+      normals[v] = fallback[v];
+      normals[v + 1] = fallback[v + 1];
+      normals[v + 2] = fallback[v + 2];
+    }
+  }
+}
+
+}  // namespace
+
+LiveRig::LiveRig(const Rig& rig, const LiveRigOptions& options)
+    : rig_(&validated(rig)),
+      options_(options),
+      deformer_(rig.tet_mesh, paddedSetup(rig)),
+      predictor_(rig.tet_mesh, rig.body_vertex_count, rig.body_tet_count, markerVertices(rig), predictionOptions(options)) {
+  if (!(options.occlusion_blend_s >= 0.0) || !std::isfinite(options.occlusion_blend_s)) {
+    throw std::invalid_argument("live rig: occlusion_blend_s must be finite and >= 0");
+  }
+  if (!(options.untimed_frame_period_s >= 0.0) || !std::isfinite(options.untimed_frame_period_s)) {
+    throw std::invalid_argument("live rig: untimed_frame_period_s must be finite and >= 0");
+  }
+  blend_ns_ = static_cast<std::int64_t>(std::llround(options.occlusion_blend_s * 1e9));
+  untimed_ns_ = static_cast<std::int64_t>(std::llround(options.untimed_frame_period_s * 1e9));
+  max_abs_coordinate_ = rig.setup.options.max_abs_coordinate;
+
+  const DeformerSetup& setup = rig.setup;
+  for (const std::int32_t v : setup.vertex_handles) vertex_targets_.push_back(rig.tet_mesh.vertices.row(v).transpose());
+  region_targets_.assign(setup.region_handles.size(), RigidTransform{});
+  for (const PointHandle& p : setup.point_handles) {
+    Eigen::Vector3d rest = Eigen::Vector3d::Zero();
+    for (int c = 0; c < 4; ++c) rest += p.barycentric[c] * rig.tet_mesh.vertices.row(rig.tet_mesh.tets(p.tet, c)).transpose();
+    point_targets_.push_back(rest);
+  }
+
+  const std::size_t markers = rig.markers.size();
+  tracks_.assign(markers, Track{});
+  measurement_.assign(markers, Eigen::Vector3d::Zero());
+  measured_.assign(markers, 0);
+  prediction_.resize(markers);
+  for (std::size_t k = 0; k < markers; ++k) {
+    // The deformer starts at rest, where every prediction is the marker's rest position.
+    prediction_[k] = rig.tet_mesh.vertices.row(rig.markers[k].tet_vertex).transpose();
+  }
+  previous_prediction_ = prediction_;
+  marker_target_ = prediction_;
+
+  const auto fine = static_cast<std::size_t>(rig.fine_vertices.rows());
+  rest_positions_.resize(fine * 3);
+  for (std::size_t v = 0; v < fine; ++v)
+    for (int c = 0; c < 3; ++c) rest_positions_[v * 3 + static_cast<std::size_t>(c)] = static_cast<float>(rig.fine_vertices(static_cast<Eigen::Index>(v), c));
+  last_positions_ = rest_positions_;
+  if (options.normals) {
+    // Fallback of a vertex with no usable triangle at rest: the direction from the rest centroid.
+    Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+    for (std::size_t v = 0; v < fine; ++v) centroid += rig.fine_vertices.row(static_cast<Eigen::Index>(v)).transpose();
+    centroid /= static_cast<double>(std::max<std::size_t>(fine, 1));
+    std::vector<float> outward(fine * 3);
+    for (std::size_t v = 0; v < fine; ++v) {
+      Eigen::Vector3d d = rig.fine_vertices.row(static_cast<Eigen::Index>(v)).transpose() - centroid;
+      d = d.norm() > 0.0 ? Eigen::Vector3d(d.normalized()) : Eigen::Vector3d::UnitY();
+      for (int c = 0; c < 3; ++c) outward[v * 3 + static_cast<std::size_t>(c)] = static_cast<float>(d[c]);
+    }
+    rest_normals_.resize(fine * 3);
+    normal_sum_.resize(fine * 3);
+    vertexNormals(rest_positions_.data(), fineTriangles(), normal_sum_, outward.data(), rest_normals_.data());
+    last_normals_ = rest_normals_;
+  }
+}
+
+std::span<const std::int32_t> LiveRig::fineTriangles() const noexcept {
+  return {rig_->fine_triangles.data(), static_cast<std::size_t>(rig_->fine_triangles.rows()) * 3};
+}
+
+MarkerBindingReport LiveRig::bindLabels(std::span<const std::string> labels_by_id) {
+  const std::size_t ids = std::min(labels_by_id.size(), kMaxIds);
+  const std::vector<RigMarker>& markers = rig_->markers;
+  // Best id per rig marker: exact (rank 2) beats stripped (rank 1), then the lowest id.
+  std::vector<std::int32_t> best_id(markers.size(), -1);
+  std::vector<int> best_rank(markers.size(), 0);
+  std::vector<std::int32_t> candidate(ids, -1);  // the rig marker a label names, if any
+  for (std::size_t id = 0; id < ids; ++id) {
+    const std::string& label = labels_by_id[id];
+    if (label.empty()) continue;
+    int rank = 0;
+    std::int32_t marker = -1;
+    for (std::size_t k = 0; k < markers.size(); ++k) {
+      int r = 0;
+      if (label == markers[k].label) {
+        r = 2;
+      } else if (afterLastColon(label) == afterLastColon(markers[k].label)) {
+        r = 1;
+      }
+      if (r > rank) {
+        rank = r;
+        marker = static_cast<std::int32_t>(k);
+      }
+    }
+    if (marker < 0) continue;
+    candidate[id] = marker;
+    const auto k = static_cast<std::size_t>(marker);
+    if (rank > best_rank[k]) {
+      best_rank[k] = rank;
+      best_id[k] = static_cast<std::int32_t>(id);
+    }
+  }
+  MarkerBindingReport report;
+  marker_of_id_.assign(ids, -1);
+  for (std::size_t k = 0; k < markers.size(); ++k) {
+    if (best_id[k] < 0) {
+      report.missing.push_back(markers[k].label);
+      continue;
+    }
+    marker_of_id_[static_cast<std::size_t>(best_id[k])] = static_cast<std::int32_t>(k);
+    ++report.matched;
+  }
+  for (std::size_t id = 0; id < ids; ++id) {
+    if (labels_by_id[id].empty() || marker_of_id_[id] >= 0) continue;
+    (candidate[id] >= 0 ? report.duplicates : report.unknown).push_back(labels_by_id[id]);
+  }
+  return report;
+}
+
+double LiveRig::blendWeight(std::int64_t since_ns) const noexcept {
+  if (blend_ns_ <= 0) return 1.0;
+  const double u = std::clamp(static_cast<double>(since_ns) / static_cast<double>(blend_ns_), 0.0, 1.0);
+  return u * u * (3.0 - 2.0 * u);
+}
+
+LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget& budget, float* positions, float* normals) noexcept {
+  LiveFrameStats stats;
+  const Rig& rig = *rig_;
+  const std::size_t markers = rig.markers.size();
+
+  // 1. Time since the previous frame, from the frames' own timestamps (never negative).
+  const std::int64_t source_ns = frame.device_timestamp_ns != 0 ? frame.device_timestamp_ns : frame.receive_timestamp_ns;
+  std::int64_t dt_ns = 0;
+  if (!have_time_) {
+    have_time_ = true;
+  } else if (source_ns == 0) {
+    dt_ns = untimed_ns_;
+  } else if (source_ns > last_source_ns_) {
+    dt_ns = source_ns - last_source_ns_;
+  }
+  if (source_ns != 0) last_source_ns_ = source_ns;
+
+  // 2. Measurements: bound ids, valid, finite, sane after alignment.
+  std::fill(measured_.begin(), measured_.end(), std::uint8_t{0});
+  const int count = std::min<int>(frame.marker_count, kMaxMarkers);
+  std::uint32_t unknown = 0;
+  for (int i = 0; i < count; ++i) {
+    const Marker& mk = frame.markers[static_cast<std::size_t>(i)];
+    const std::int32_t k = markerOfId(mk.id);
+    if (k < 0) {
+      ++unknown;
+      continue;
+    }
+    const auto ku = static_cast<std::size_t>(k);
+    if (!mk.valid || measured_[ku]) continue;
+    const Eigen::Vector3d mm(mk.position_mm[0], mk.position_mm[1], mk.position_mm[2]);
+    if (!mm.allFinite()) continue;
+    const Eigen::Vector3d x = rig.alignment.linear * mm + rig.alignment.translation;
+    if (!x.allFinite() || x.cwiseAbs().maxCoeff() > max_abs_coordinate_) continue;
+    measurement_[ku] = x;
+    measured_[ku] = 1;
+  }
+  std::uint32_t measured = 0;
+  for (const std::uint8_t m : measured_) measured += m;
+  stats.unknown_markers = static_cast<std::uint16_t>(std::min<std::uint32_t>(unknown, 0xFFFF));
+  stats.measured_markers = static_cast<std::uint16_t>(std::min<std::size_t>(measured, 0xFFFF));
+  stats.occluded_markers = static_cast<std::uint16_t>(std::min<std::size_t>(markers - measured, 0xFFFF));
+  // The blend clock runs only on frames that step: while the pose is held nothing is shown, so
+  // no blend may progress unseen and land in one step when the markers return.
+  if (measured > 0) now_ns_ += dt_ns;
+
+  // 3. Predictions from the deformer's current pose (a non-finite one keeps the previous).
+  previous_prediction_.swap(prediction_);
+  if (!predictor_.predict(deformer_.positions(), prediction_)) {
+    for (std::size_t k = 0; k < markers; ++k)
+      if (!prediction_[k].allFinite()) prediction_[k] = previous_prediction_[k];
+  }
+
+  // 4. Targets through the blend states.
+  std::uint32_t blending = 0;
+  for (std::size_t k = 0; k < markers; ++k) {
+    Track& track = tracks_[k];
+    const Eigen::Vector3d& p = prediction_[k];
+    Eigen::Vector3d target;
+    if (measured_[k]) {
+      if (track.state == MarkerTrackState::kPredicted) {
+        if (stepped_) {
+          track.state = MarkerTrackState::kReturning;
+          track.return_ns = now_ns_;
+        } else {
+          track.state = MarkerTrackState::kMeasured;  // the first pose: nothing to blend from
+          track.offset.setZero();
+        }
+      }
+      if (track.state == MarkerTrackState::kReturning) {
+        const double a = blendWeight(now_ns_ - track.return_ns);
+        if (a >= 1.0) {
+          track.state = MarkerTrackState::kMeasured;
+          track.offset.setZero();
+          target = measurement_[k];
+        } else {
+          const Eigen::Vector3d predicted = p + (1.0 - blendWeight(now_ns_ - track.dropout_ns)) * track.offset;
+          target = predicted + a * (measurement_[k] - predicted);
+          ++blending;
+        }
+      } else {
+        target = measurement_[k];
+      }
+    } else {
+      if (track.state != MarkerTrackState::kPredicted) {
+        track.state = MarkerTrackState::kPredicted;
+        track.offset = marker_target_[k] - previous_prediction_[k];
+        track.dropout_ns = now_ns_;
+      }
+      const double fade = 1.0 - blendWeight(now_ns_ - track.dropout_ns);
+      target = p + fade * track.offset;
+      if (fade > 0.0 && !track.offset.isZero(0.0)) ++blending;
+    }
+    marker_target_[k] = target;
+    vertex_targets_[static_cast<std::size_t>(rig.markers[k].vertex_handle)] = target;
+  }
+  stats.blending_markers = static_cast<std::uint16_t>(std::min<std::uint32_t>(blending, 0xFFFF));
+  if (stats.occluded_markers > 0) stats.flags |= kLiveMarkersPredicted;
+  if (blending > 0) stats.flags |= kLiveMarkersBlending;
+
+  // 5. Hold the pose when nothing was measured.
+  if (measured == 0) {
+    stats.flags |= kLivePoseHeld;
+    const std::int64_t t0 = monotonicNowNs();
+    writeLastPose(positions, normals);
+    stats.pose_transfer_ns = monotonicNowNs() - t0;
+    return stats;
+  }
+
+  // 6. The step.
+  HandleTargets targets;
+  targets.vertex_positions = vertex_targets_;
+  targets.region_transforms = region_targets_;
+  targets.point_positions = point_targets_;
+  stats.step = deformer_.step(targets, budget);
+  stepped_ = true;
+  if (stats.step.flags & kStepDeadlineHit) stats.flags |= kLiveDeadlineHit;
+  if (stats.step.flags & (kStepTargetsRejected | kStepTargetsWrongSize)) stats.flags |= kLiveTargetsRejected;
+
+  // 7. Pose transfer into the caller's buffer; never publish a non-finite value.
+  const std::int64_t t0 = monotonicNowNs();
+  const std::size_t n = rest_positions_.size();
+  applyPoseTransferPadded(rig.pose_transfer.view(), deformer_.paddedPositions().data(), positions);
+  bool finite = true;
+  for (std::size_t i = 0; i < n; ++i)
+    if (!std::isfinite(positions[i])) finite = false;
+  if (finite) {
+    std::memcpy(last_positions_.data(), positions, n * sizeof(float));
+    if (options_.normals) {
+      vertexNormals(positions, fineTriangles(), normal_sum_, last_normals_.data(), last_normals_.data());
+      if (normals != nullptr) std::memcpy(normals, last_normals_.data(), n * sizeof(float));
+    }
+  } else {
+    stats.flags |= kLiveNonFinitePose;
+    writeLastPose(positions, normals);
+    deformer_.reset();
+    predictor_.reset();
+  }
+  stats.pose_transfer_ns = monotonicNowNs() - t0;
+  return stats;
+}
+
+void LiveRig::writeLastPose(float* positions, float* normals) const noexcept {
+  if (positions != nullptr) std::memcpy(positions, last_positions_.data(), last_positions_.size() * sizeof(float));
+  if (normals != nullptr && options_.normals) std::memcpy(normals, last_normals_.data(), last_normals_.size() * sizeof(float));
+}
+
+}  // namespace tetrig

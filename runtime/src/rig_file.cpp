@@ -40,6 +40,10 @@ constexpr std::uint32_t kTagStiffness = tag("STIF");
 constexpr std::uint32_t kTagMarkers = tag("MARK");
 constexpr std::uint32_t kTagAlignment = tag("ALGN");
 constexpr std::uint32_t kTagOptions = tag("OPTS");
+// Optional sections: written only when non-empty; absent means empty (files written before they
+// existed stay loadable, and older readers skip them as unknown tags).
+constexpr std::uint32_t kTagPoseSensors = tag("PSNS");
+constexpr std::size_t kPoseSensorMinBytes = 4 + 4 + 1 + 1 + 8;  // empty label, region, mode, buttons, scale
 
 constexpr std::array<std::uint32_t, 13> kRequiredTags = {
     kTagMeta,       kTagTetVertices, kTagTets,      kTagFine,    kTagPoseTransfer, kTagVertexHandles, kTagRegionHandles,
@@ -271,6 +275,24 @@ std::string validateRig(const Rig& rig) {
       std::abs(a.linear.determinant()) <= 0.0) {
     return "the alignment transform is not finite and invertible";
   }
+  std::vector<std::uint8_t> driven(s.region_handles.size(), 0);
+  for (std::size_t p = 0; p < rig.pose_sensors.size(); ++p) {
+    const RigPoseSensor& ps = rig.pose_sensors[p];
+    const std::string who = "pose sensor " + num(p) + (ps.sensor_label.empty() ? std::string() : " (" + ps.sensor_label + ")");
+    if (ps.sensor_label.empty()) return who + " has an empty sensor label";
+    if (ps.region_handle < 0 || static_cast<std::size_t>(ps.region_handle) >= s.region_handles.size()) {
+      return who + " names region handle " + num(ps.region_handle) + " of " + num(s.region_handles.size());
+    }
+    const auto r = static_cast<std::size_t>(ps.region_handle);
+    if (!s.region_handles[r].oriented) return who + " drives region handle " + num(r) + ", which is not oriented";
+    if (driven[r]) return "region handle " + num(r) + " is driven by two pose sensors";
+    driven[r] = 1;
+    if (ps.mode != PoseSensorMode::kClutch && ps.mode != PoseSensorMode::kAbsolute) return who + " has an unknown mode";
+    if (ps.mode == PoseSensorMode::kClutch && ps.clutch_buttons == 0) return who + " is in clutch mode with no clutch button";
+    if (!(ps.translation_scale > 0.0) || !std::isfinite(ps.translation_scale)) {
+      return who + " has a translation scale that is not a finite positive number";
+    }
+  }
   const DeformerOptions& o = s.options;
   if (o.rotation_steps < 0 || o.rotation_steps > 64) return "rotation_steps " + num(o.rotation_steps) + " is not in [0, 64]";
   if (!(o.point_handle_weight > 0.0) || !std::isfinite(o.point_handle_weight) || !(o.max_abs_coordinate > 0.0) ||
@@ -285,7 +307,7 @@ std::vector<std::uint8_t> serializeRig(const Rig& rig) {
   std::vector<std::array<std::uint64_t, 3>> table;
   Writer out;
   // Header and table placeholders; filled at the end.
-  const std::size_t section_count = kRequiredTags.size();
+  const std::size_t section_count = kRequiredTags.size() + (rig.pose_sensors.empty() ? 0 : 1);
   out.bytes().resize(kHeaderBytes + section_count * kTableEntryBytes, 0);
   {
     Writer w;
@@ -419,6 +441,18 @@ std::vector<std::uint8_t> serializeRig(const Rig& rig) {
     w.f64(o.max_abs_coordinate);
     writeSection(out, table, kTagOptions, w.bytes());
   }
+  if (!rig.pose_sensors.empty()) {
+    Writer w;
+    w.count(rig.pose_sensors.size(), "pose sensors");
+    for (const RigPoseSensor& ps : rig.pose_sensors) {
+      w.str(ps.sensor_label);
+      w.i32(ps.region_handle);
+      w.u8(static_cast<std::uint8_t>(ps.mode));
+      w.u8(ps.clutch_buttons);
+      w.f64(ps.translation_scale);
+    }
+    writeSection(out, table, kTagPoseSensors, w.bytes());
+  }
   // No padding after the last section: the file ends where it does.
   std::vector<std::uint8_t>& bytes = out.bytes();
   // Section table.
@@ -496,6 +530,9 @@ Rig parseRig(std::span<const std::uint8_t> bytes, std::string_view source_name, 
     }
     entries.push_back({t, static_cast<std::size_t>(offset), static_cast<std::size_t>(size)});
   }
+  auto has_section = [&](std::uint32_t t) {
+    return std::any_of(entries.begin(), entries.end(), [t](const Entry& e) { return e.tag == t; });
+  };
   auto section = [&](std::uint32_t t) -> Cursor {
     for (const Entry& e : entries) {
       if (e.tag == t) return Cursor(bytes.data() + e.offset, e.size, name + ": section " + tagName(t));
@@ -668,6 +705,23 @@ Rig parseRig(std::span<const std::uint8_t> bytes, std::string_view source_name, 
     o.max_abs_coordinate = c.f64("max_abs_coordinate");
     c.end();
   }
+  if (has_section(kTagPoseSensors)) {
+    Cursor c = section(kTagPoseSensors);
+    const std::size_t n = c.count("pose sensors", kPoseSensorMinBytes);
+    rig.pose_sensors.resize(n);
+    for (RigPoseSensor& ps : rig.pose_sensors) {
+      ps.sensor_label = c.str("pose sensor label");
+      ps.region_handle = c.i32("pose sensor region handle");
+      const std::uint8_t mode = c.u8("pose sensor mode");
+      if (mode > static_cast<std::uint8_t>(PoseSensorMode::kAbsolute)) {
+        c.fail("pose sensor mode " + std::to_string(mode) + " is not 0 (clutch) or 1 (absolute)");
+      }
+      ps.mode = static_cast<PoseSensorMode>(mode);
+      ps.clutch_buttons = c.u8("pose sensor clutch buttons");
+      ps.translation_scale = c.f64("pose sensor translation scale");
+    }
+    c.end();
+  }
   if (std::string e = validateRig(rig); !e.empty()) fail(e);
   return rig;
 }
@@ -686,7 +740,8 @@ std::int64_t rigMemoryBytes(const Rig& rig) {
   bytes += rig.fine_vertices.size() * 8 + rig.fine_triangles.size() * 4;
   bytes += rig.pose_transfer.bytes();
   bytes += static_cast<std::int64_t>(rig.setup.vertex_handles.size() * 4 + rig.setup.point_handles.size() * 40 +
-                                     rig.setup.stiffness.size() * 8 + rig.markers.size() * sizeof(RigMarker));
+                                     rig.setup.stiffness.size() * 8 + rig.markers.size() * sizeof(RigMarker) +
+                                     rig.pose_sensors.size() * sizeof(RigPoseSensor));
   for (const RegionHandle& r : rig.setup.region_handles) bytes += static_cast<std::int64_t>(r.tets.size() * 4);
   for (const RigidGroup& g : rig.setup.rigid_groups) bytes += static_cast<std::int64_t>(g.tets.size() * 4);
   return bytes;

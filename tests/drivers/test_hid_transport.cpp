@@ -285,9 +285,9 @@ TEST_F(HidSourceTest, MarkerStreamSourcePublishesReassembledFramesAndSurvivesRep
   tetrig::devices::HidMarkerStreamSource source(config, *mailbox_);
   ASSERT_TRUE(source.start());
 
-  // START then SET_RATE arrive as 64-byte output reports 0x02.
-  const auto commands = dev.readOutput(128, 2000);
-  ASSERT_EQ(commands.size(), 128u);
+  // START, GET_DESCRIPTOR, then SET_RATE arrive as 64-byte output reports 0x02.
+  const auto commands = dev.readOutput(192, 2000);
+  ASSERT_EQ(commands.size(), 192u);
   drv::MarkerStreamCommand command{};
   std::uint16_t param = 0;
   ASSERT_TRUE(drv::decodeMarkerStreamCommandReport(std::span(commands).first(64), command, param));
@@ -295,11 +295,13 @@ TEST_F(HidSourceTest, MarkerStreamSourcePublishesReassembledFramesAndSurvivesRep
   EXPECT_EQ(commands[0], 0x02);
   EXPECT_EQ(commands[1], 0x01);  // START, position records
   EXPECT_EQ(commands[2], 0x00);
-  EXPECT_EQ(commands[64 + 1], 0x03);  // SET_RATE
-  EXPECT_EQ(commands[64 + 2], 120);
-  EXPECT_EQ(commands[64 + 3], 0);
+  EXPECT_EQ(commands[64 + 0], 0x02);
+  EXPECT_EQ(commands[64 + 1], 0x05);  // GET_DESCRIPTOR, right after START
+  EXPECT_EQ(commands[128 + 1], 0x03);  // SET_RATE
+  EXPECT_EQ(commands[128 + 2], 120);
+  EXPECT_EQ(commands[128 + 3], 0);
   EXPECT_EQ(command, drv::MarkerStreamCommand::kStart);
-  ASSERT_TRUE(drv::decodeMarkerStreamCommandReport(std::span(commands).subspan(64, 64), command, param));
+  ASSERT_TRUE(drv::decodeMarkerStreamCommandReport(std::span(commands).subspan(128, 64), command, param));
   EXPECT_EQ(command, drv::MarkerStreamCommand::kSetRate);
   EXPECT_EQ(param, 120);
 
@@ -336,7 +338,7 @@ TEST_F(HidSourceTest, MarkerStreamSourcePublishesReassembledFramesAndSurvivesRep
   ASSERT_TRUE(waitFor([&] { return !source.transport().connected(); }, 2s));
   dev.plug();
   ASSERT_TRUE(waitFor([&] { return source.transport().connected(); }, 1s)) << "no resume within 1 s";
-  EXPECT_EQ(dev.readOutput(128, 2000).size(), 128u) << "START/SET_RATE not re-sent after replug";
+  EXPECT_EQ(dev.readOutput(192, 2000).size(), 192u) << "START/GET_DESCRIPTOR/SET_RATE not re-sent after replug";
   // The rest of the interrupted frame, then a whole new one.
   ASSERT_TRUE(dev.inject(half[2]));
   ASSERT_TRUE(dev.inject(half[3]));
@@ -410,6 +412,233 @@ TEST_F(HidSourceTest, HydraSourceSwitchesMotionModeOnInterfaceOneAndDecodesBothS
   EXPECT_EQ(source.stats().decode_errors, 0u);
   EXPECT_EQ(source.stats().frames_lost, 0u);
   source.stop();
+  dev1.unplug();  // the shared-usb interface goes first
+}
+
+}  // namespace
+
+// ------------------------------------------------------------------------------------------------
+// The device sources in the MarkerSource shape (device_marker_sources.hpp): labels from a device
+// that answers START / GET_DESCRIPTOR with its descriptor, then streams frames; the Hydra's fixed
+// sensor names and buttons.
+
+#include <tetrig/drivers/device_marker_sources.hpp>
+
+#include <string>
+
+namespace {
+
+// The 41 marker names of a Vicon full-body set (as in the HDM05 clips), prefixed like HDM05's.
+std::vector<std::string> viconNames() {
+  const char* names[] = {"LFHD", "RFHD", "LBHD", "RBHD", "C7",   "T10",  "CLAV", "STRN", "RBAK", "LSHO", "LUPA",
+                         "LELB", "LFRM", "LWRA", "LWRB", "LFIN", "RSHO", "RUPA", "RELB", "RFRM", "RWRA", "RWRB",
+                         "RFIN", "LFWT", "RFWT", "LBWT", "RBWT", "LTHI", "LKNE", "LSHN", "LANK", "LHEE", "LTOE",
+                         "LMT5", "RTHI", "RKNE", "RSHN", "RANK", "RHEE", "RTOE", "RMT5"};
+  std::vector<std::string> out;
+  for (const char* n : names) out.push_back(std::string("meinard:") + n);
+  return out;
+}
+
+// Encodes (id, label) pairs as a descriptor message with `table_id`.
+std::vector<std::uint8_t> descriptorBytes(const std::vector<std::pair<std::uint16_t, std::string>>& table,
+                                          std::uint32_t table_id) {
+  std::vector<drv::MarkerLabel> labels;
+  for (const auto& [id, text] : table) labels.push_back({id, text});
+  std::vector<std::uint8_t> bytes(drv::kMarkerStreamMaxDescriptorSize);
+  bytes.resize(drv::encodeMarkerStreamDescriptor(labels, table_id, bytes));
+  return bytes;
+}
+
+std::vector<std::vector<std::uint8_t>> messageReports(const std::vector<std::uint8_t>& message) {
+  std::vector<std::vector<std::uint8_t>> out;
+  for (std::size_t i = 0; i < drv::markerStreamFragmentCount(message.size()); ++i) {
+    std::vector<std::uint8_t> report(drv::kMarkerStreamHidReportSize);
+    if (drv::encodeMarkerStreamFragment(message, i, report) != report.size()) return {};
+    out.push_back(report);
+  }
+  return out;
+}
+
+// Plays the device side of the control exchange: reads `n` command reports the host wrote and
+// answers every START and GET_DESCRIPTOR with the descriptor (docs/protocol.md 2a.1). Returns the
+// opcodes seen, in order.
+std::vector<int> answerCommands(tetrig::testing::MockHidDevice& dev, std::size_t n,
+                                const std::vector<std::uint8_t>& descriptor) {
+  std::vector<int> seen;
+  const auto bytes = dev.readOutput(n * drv::kMarkerStreamHidReportSize, 2000);
+  for (std::size_t k = 0; k + drv::kMarkerStreamHidReportSize <= bytes.size(); k += drv::kMarkerStreamHidReportSize) {
+    drv::MarkerStreamCommand command{};
+    std::uint16_t param = 0;
+    if (!drv::decodeMarkerStreamCommandReport(std::span(bytes).subspan(k, drv::kMarkerStreamHidReportSize), command,
+                                              param)) {
+      seen.push_back(-1);
+      continue;
+    }
+    seen.push_back(static_cast<int>(command));
+    if (command == drv::MarkerStreamCommand::kStart || command == drv::MarkerStreamCommand::kGetDescriptor) {
+      for (const auto& r : messageReports(descriptor)) dev.inject(r);
+    }
+  }
+  return seen;
+}
+
+TEST_F(HidSourceTest, MarkerSourceAdapterLearnsLabelsFromTheDescriptorAndStreams) {
+  auto& dev = makeDevice();
+  dev.plug();
+  tetrig::devices::HidMarkerStreamSourceConfig config;
+  config.hid = baseConfig();
+  config.rate_hz = 120;
+  const auto source = tetrig::devices::makeHidMarkerStreamSource(config);
+  EXPECT_NE(source->describe().find("1209:7e70"), std::string::npos) << source->describe();
+  EXPECT_EQ(source->nominalRateHz(), 120.0);
+  EXPECT_FALSE(source->finished());
+  std::vector<std::string> labels;
+  EXPECT_FALSE(source->waitForLabels(0ms, labels)) << "labels before start";
+  ASSERT_TRUE(source->start(*mailbox_));
+  EXPECT_FALSE(source->start(*mailbox_)) << "second start must be refused";
+  EXPECT_NE(source->lastError().find("already running"), std::string::npos) << source->lastError();
+
+  // The device: 41 labelled markers; it answers START and GET_DESCRIPTOR with the descriptor.
+  const auto names = viconNames();
+  std::vector<std::pair<std::uint16_t, std::string>> table;
+  for (std::size_t i = 0; i < names.size(); ++i) table.emplace_back(static_cast<std::uint16_t>(i), names[i]);
+  const auto descriptor = descriptorBytes(table, 1);
+  ASSERT_GT(messageReports(descriptor).size(), 5u) << "the descriptor should need several HID reports";
+  const auto seen = answerCommands(dev, 3, descriptor);
+  EXPECT_EQ(seen, (std::vector<int>{0x01, 0x05, 0x03})) << "START, GET_DESCRIPTOR, SET_RATE";
+
+  ASSERT_TRUE(source->waitForLabels(3s, labels)) << "no labels; last error: " << source->lastError();
+  EXPECT_EQ(labels, names);
+
+  constexpr int kFrames = 20;
+  for (int i = 1; i <= kFrames; ++i) {
+    for (const auto& r : fragments(makeFrame(static_cast<std::uint64_t>(i), 41))) ASSERT_TRUE(dev.inject(r));
+  }
+  ASSERT_TRUE(waitFor([&] { return source->stats().frames_published == kFrames; }, 5s))
+      << source->stats().frames_published << " published, " << source->stats().decode_errors << " errors";
+  MarkerFrame got;
+  ASSERT_TRUE(mailbox_->tryTakeLatest(got));
+  EXPECT_EQ(got.frame_counter, static_cast<std::uint64_t>(kFrames));
+  ASSERT_EQ(got.marker_count, 41);
+  EXPECT_EQ(labels[got.markers[40].id], "meinard:RMT5");
+  EXPECT_FLOAT_EQ(got.markers[40].position_mm[0], kFrames + 400.0f);
+  auto stats = source->stats();
+  EXPECT_TRUE(stats.connected);
+  EXPECT_EQ(stats.decode_errors, 0u);
+  EXPECT_EQ(stats.frames_lost, 0u);
+  EXPECT_EQ(stats.late_frames, 0u);
+
+  // The labels change mid-stream (ids 0, 2, 5): the new table replaces the old one.
+  for (const auto& r : messageReports(descriptorBytes({{0, "head"}, {2, "chest"}, {5, "hips"}}, 2))) {
+    ASSERT_TRUE(dev.inject(r));
+  }
+  const std::vector<std::string> changed = {"head", "", "chest", "", "", "hips"};
+  ASSERT_TRUE(waitFor(
+      [&] {
+        std::vector<std::string> now;
+        return source->waitForLabels(10ms, now) && now == changed;
+      },
+      3s));
+  // A corrupted descriptor is rejected whole: the labels stay, the error is counted.
+  auto bad = descriptorBytes({{0, "x"}}, 3);
+  bad[bad.size() - 6] ^= 0x01;
+  for (const auto& r : messageReports(bad)) ASSERT_TRUE(dev.inject(r));
+  ASSERT_TRUE(waitFor([&] { return source->stats().decode_errors == 1; }, 2s));
+  ASSERT_TRUE(source->waitForLabels(0ms, labels));
+  EXPECT_EQ(labels, changed);
+
+  // Unplug: reported as the last trouble; on replug START and GET_DESCRIPTOR are sent again and
+  // the device's new answer is learnt.
+  dev.unplug();
+  ASSERT_TRUE(waitFor([&] { return !source->stats().connected; }, 2s));
+  // "disconnected ...", or already the next poll's "not found: no matching HID device".
+  const std::string trouble = source->lastError();
+  EXPECT_TRUE(trouble.rfind("disconnected /dev/hidraw", 0) == 0 || trouble.rfind("not found", 0) == 0) << trouble;
+  dev.plug();
+  ASSERT_TRUE(waitFor([&] { return source->stats().connected; }, 1s)) << "no resume within 1 s";
+  EXPECT_EQ(answerCommands(dev, 3, descriptor), (std::vector<int>{0x01, 0x05, 0x03}));
+  ASSERT_TRUE(waitFor(
+      [&] {
+        std::vector<std::string> now;
+        return source->waitForLabels(10ms, now) && now == names;
+      },
+      3s))
+      << "labels not re-learnt after the replug";
+  source->stop();
+  EXPECT_FALSE(source->stats().connected);
+  EXPECT_EQ(source->stats().frames_published, static_cast<std::uint64_t>(kFrames));
+}
+
+TEST_F(HidSourceTest, MarkerSourceAdapterTimesOutWhenTheDeviceNeverNamesItsMarkers) {
+  auto& dev = makeDevice();
+  dev.plug();
+  tetrig::devices::HidMarkerStreamSourceConfig config;
+  config.hid = baseConfig();
+  const auto source = tetrig::devices::makeHidMarkerStreamSource(config);
+  EXPECT_EQ(source->nominalRateHz(), 0.0) << "no rate configured";
+  ASSERT_TRUE(source->start(*mailbox_));
+  EXPECT_EQ(dev.readOutput(128, 2000).size(), 128u) << "START and GET_DESCRIPTOR, no SET_RATE";
+  for (const auto& r : fragments(makeFrame(1, 3))) ASSERT_TRUE(dev.inject(r));
+  ASSERT_TRUE(waitFor([&] { return source->stats().frames_published == 1; }, 2s));
+  std::vector<std::string> labels = {"stale"};
+  EXPECT_FALSE(source->waitForLabels(100ms, labels)) << "frames alone do not name markers";
+  EXPECT_EQ(labels, std::vector<std::string>{"stale"}) << "labels touched on timeout";
+  source->stop();
+}
+
+TEST_F(HidSourceTest, HydraAdapterNamesItsSensorsAndCarriesButtons) {
+  tetrig::testing::MockHidSpec motion;
+  motion.vendor_id = drv::kHydraVendorId;
+  motion.product_id = drv::kHydraProductId;
+  motion.serial = "HY2";
+  motion.input_report_size = drv::kHydraReportSize;
+  tetrig::testing::MockHidSpec control = motion;
+  control.hidraw_index = 10;
+  control.interface_number = 1;
+  control.shares_usb_device = true;
+  auto& dev0 = makeDevice(motion);
+  dev0.plug();
+  tetrig::testing::MockHidDevice dev1(*testbed_, control);
+  dev1.plug();
+
+  tetrig::devices::HydraSourceConfig config;
+  config.hid.read_timeout_ms = 20;
+  config.hid.reconnect_poll_ms = 20;
+  const auto source = tetrig::devices::makeHydraSource(config);
+  EXPECT_EQ(source->nominalRateHz(), 250.0);
+  EXPECT_NE(source->describe().find("1532:0300"), std::string::npos) << source->describe();
+  std::vector<std::string> labels;
+  ASSERT_TRUE(source->waitForLabels(0ms, labels)) << "fixed labels need no device";
+  EXPECT_EQ(labels, (std::vector<std::string>{"hydra0", "hydra1"}));
+  ASSERT_TRUE(source->start(*mailbox_));
+  ASSERT_TRUE(waitFor([&] { return dev1.featureReports().size() == 1; }, 2s)) << source->lastError();
+
+  const float p[3] = {10.0f, 20.0f, 30.0f}, q[4] = {1.0f, 0.0f, 0.0f, 0.0f};
+  for (std::uint8_t seq = 1; seq <= 8; ++seq) {
+    drv::HydraRawReport raw;
+    raw.sequence = seq;
+    raw.controllers[0] = drv::hydraControllerFromPose(p, q);
+    raw.controllers[1] = drv::hydraControllerFromPose(p, q);
+    raw.controllers[0].buttons = static_cast<std::uint8_t>(1u << (seq - 1));  // one bit per report
+    raw.controllers[1].buttons = static_cast<std::uint8_t>(0xF0 | seq);
+    std::vector<std::uint8_t> report(drv::kHydraReportSize);
+    ASSERT_EQ(drv::encodeHydraReport(raw, report), drv::kHydraReportSize);
+    ASSERT_TRUE(dev0.inject(report));
+  }
+  ASSERT_TRUE(waitFor([&] { return source->stats().frames_published == 8; }, 3s))
+      << source->stats().frames_published << " published; " << source->lastError();
+  MarkerFrame got;
+  ASSERT_TRUE(mailbox_->tryTakeLatest(got));
+  ASSERT_EQ(got.marker_count, 2);
+  EXPECT_EQ(got.markers[0].id, 0);
+  EXPECT_EQ(got.markers[1].id, 1);
+  EXPECT_EQ(got.markers[0].buttons, 0x80);
+  EXPECT_EQ(got.markers[1].buttons, 0xF8);
+  EXPECT_FLOAT_EQ(got.markers[1].position_mm[2], 30.0f);
+  EXPECT_TRUE(source->stats().connected);
+  EXPECT_EQ(source->stats().decode_errors, 0u);
+  EXPECT_FALSE(source->finished());
+  source->stop();
   dev1.unplug();  // the shared-usb interface goes first
 }
 

@@ -67,8 +67,10 @@ TEST(Hydra, GoldenReportDecodes) {
   EXPECT_EQ(m0.position_mm[2], 300.0f);
   EXPECT_FLOAT_EQ(m0.orientation[0], 1.0f);  // 32767/32768 normalised
   EXPECT_EQ(m0.orientation[1], 0.0f);
+  EXPECT_EQ(m0.buttons, 0x05);  // byte 22 (block 0 + 14), raw
   const auto& m1 = out->markers[1];
   EXPECT_EQ(m1.id, 1u);
+  EXPECT_EQ(m1.buttons, 0x00);
   EXPECT_EQ(m1.position_mm[0], -1.0f);
   EXPECT_EQ(m1.position_mm[2], 1.0f);
   EXPECT_EQ(m1.orientation[0], 0.0f);
@@ -266,6 +268,42 @@ TEST(Hydra, PoseQuantisation) {
   EXPECT_EQ(out->markers[0].position_mm[2], 678.0f);
   EXPECT_NEAR(out->markers[0].orientation[0], s, 1e-4f);
   EXPECT_NEAR(out->markers[0].orientation[2], s, 1e-4f);
+}
+
+TEST(Hydra, ButtonsReachTheMarkersAlsoWhenThePoseIsRejected) {
+  HydraDecoder dec;
+  auto out = std::make_unique<MarkerFrame>();
+  // Every button byte value on each controller, one report each; controller 1 has no valid pose.
+  for (int v = 0; v < 256; ++v) {
+    HydraRawReport r;
+    r.sequence = static_cast<std::uint8_t>(v);
+    r.controllers[0].quaternion[0] = 32767;
+    r.controllers[0].buttons = static_cast<std::uint8_t>(v);
+    r.controllers[1].quaternion[0] = 0;  // not tracked
+    r.controllers[1].buttons = static_cast<std::uint8_t>(255 - v);
+    Bytes b(kHydraReportSize);
+    ASSERT_EQ(encodeHydraReport(r, b), kHydraReportSize);
+    out->markers[0].buttons = 0xA5;  // stale values from an older frame in the slot
+    out->markers[1].buttons = 0xA5;
+    ASSERT_EQ(dec.decode(b, 0, *out), HydraStatus::kFrame) << v;
+    ASSERT_EQ(out->markers[0].buttons, v) << v;
+    ASSERT_EQ(out->markers[1].buttons, 255 - v) << v;
+    ASSERT_EQ(out->markers[1].valid, 0u);
+  }
+  // The raw byte sits at block offset 14: bytes 22 and 44 of the report.
+  Bytes raw = report(1);
+  raw[22] = 0x81;
+  raw[44] = 0x40;
+  HydraDecoder d2;
+  ASSERT_EQ(d2.decode(raw, 0, *out), HydraStatus::kFrame);
+  EXPECT_EQ(out->markers[0].buttons, 0x81);
+  EXPECT_EQ(out->markers[1].buttons, 0x40);
+}
+
+TEST(Hydra, FixedSensorLabelsAndNominalRate) {
+  EXPECT_STREQ(kHydraSensorLabels[0], "hydra0");
+  EXPECT_STREQ(kHydraSensorLabels[1], "hydra1");
+  EXPECT_EQ(kHydraNominalRateHz, 250.0);
 }
 
 TEST(Hydra, StatusNames) {

@@ -6,6 +6,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <cstdlib>
@@ -14,7 +15,10 @@
 #include <memory>
 #include <new>
 #include <random>
+#include <set>
 #include <string>
+#include <string_view>
+#include <type_traits>
 #include <vector>
 
 #include "tetrig/drivers/crc32c.hpp"
@@ -850,7 +854,7 @@ TEST(MarkerStreamControl, InfoBlockLayout) {
 
 TEST(MarkerStream, StatusNamesAreDistinct) {
   std::vector<std::string> names;
-  for (int v = -11; v <= 1; ++v) {
+  for (int v = -12; v <= 2; ++v) {
     const std::string n = markerStreamStatusName(static_cast<S>(v));
     EXPECT_NE(n, "unknown status") << v;
     for (const auto& other : names) EXPECT_NE(n, other);
@@ -858,6 +862,9 @@ TEST(MarkerStream, StatusNamesAreDistinct) {
   }
   EXPECT_STREQ(markerStreamStatusName(static_cast<S>(-99)), "unknown status");
   EXPECT_STREQ(markerStreamStatusName(S::kBadCrc), "bad crc");
+  EXPECT_STREQ(markerStreamStatusName(S::kDescriptor), "descriptor");
+  EXPECT_STREQ(markerStreamStatusName(S::kBadDescriptor), "bad descriptor");
+  EXPECT_EQ(static_cast<int>(S::kDescriptor), 2);  // a success kind (>= 0), as documented
 }
 
 TEST(MarkerStream, PeekFrameLengthForByteStreams) {
@@ -871,6 +878,569 @@ TEST(MarkerStream, PeekFrameLengthForByteStreams) {
   bad[8] = 0xFF;
   bad[9] = 0xFF;  // 65535 > max frame size
   EXPECT_EQ(markerStreamPeekFrameLength(bad), 0u);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Descriptor messages ("TMSD", docs/protocol.md section 2a): labels for marker ids.
+
+// Three labels, table_id 0x00010003 (HID tag 0x0003). Written from docs/protocol.md 2a.2; the
+// CRC was computed with the bitwise reference of section 2.1 (Python), not with the code under test.
+const Bytes kGoldenDescriptor = {
+    0x54, 0x4D, 0x53, 0x44,  // magic "TMSD"
+    0x01, 0x00, 0x14, 0x00,  // version 1.0, header_size 20, reserved
+    0x2F, 0x00, 0x03, 0x00,  // descriptor_length 47, entry_count 3
+    0x03, 0x00, 0x01, 0x00,  // table_id 0x00010003
+    0x00, 0x00, 0x00, 0x00,  // reserved
+    0x00, 0x00, 0x04, 0x4C, 0x46, 0x48, 0x44,              // id 0, 4 bytes "LFHD"
+    0x01, 0x00, 0x04, 0x52, 0x46, 0x48, 0x44,              // id 1, 4 bytes "RFHD"
+    0x02, 0x01, 0x06, 0x68, 0xC3, 0xBC, 0x66, 0x74, 0x65,  // id 0x0102, 6 bytes "hüfte" (UTF-8)
+    0x0B, 0xC1, 0x49, 0x95,  // CRC-32C 0x9549C10B
+};
+
+// Same kind of message, laid out by hand: header (header_size 20 unless given) + raw entry bytes +
+// CRC, with entry_count and descriptor_length as given (0xFFFF: computed from the bytes).
+Bytes rawDescriptor(const Bytes& entries, std::uint16_t count, std::uint32_t table_id = 9, std::uint8_t header_size = 20,
+                    std::uint32_t length = 0xFFFF) {
+  Bytes b(header_size, 0x00);
+  const Bytes head = {0x54, 0x4D, 0x53, 0x44, 0x01, 0x00, header_size, 0x00};
+  std::copy(head.begin(), head.end(), b.begin());
+  b.insert(b.end(), entries.begin(), entries.end());
+  b.resize(b.size() + 4);
+  const std::uint32_t len = length == 0xFFFF ? static_cast<std::uint32_t>(b.size()) : length;
+  b[8] = static_cast<std::uint8_t>(len);
+  b[9] = static_cast<std::uint8_t>(len >> 8);
+  b[10] = static_cast<std::uint8_t>(count);
+  b[11] = static_cast<std::uint8_t>(count >> 8);
+  putU32(b, 12, table_id);
+  fixCrc(b);
+  return b;
+}
+Bytes entry(std::uint16_t id, std::string_view label) {
+  Bytes e(3 + label.size());
+  e[0] = static_cast<std::uint8_t>(id);
+  e[1] = static_cast<std::uint8_t>(id >> 8);
+  e[2] = static_cast<std::uint8_t>(label.size());
+  for (std::size_t i = 0; i < label.size(); ++i) e[3 + i] = static_cast<std::uint8_t>(label[i]);
+  return e;
+}
+
+Bytes encodeLabels(const std::vector<MarkerLabel>& labels, std::uint32_t table_id) {
+  Bytes b(kMarkerStreamMaxDescriptorSize + 16);
+  const std::size_t n = encodeMarkerStreamDescriptor(labels, table_id, b);
+  b.resize(n);
+  return b;
+}
+
+// A decoder that has accepted the golden descriptor (the "previous table" the rejections must keep).
+void expectGoldenTable(const MarkerLabelTable& t) {
+  ASSERT_EQ(t.count, 3u);
+  EXPECT_EQ(t.label(0), "LFHD");
+  EXPECT_EQ(t.label(1), "RFHD");
+  EXPECT_EQ(t.label(0x0102), "h\xC3\xBC" "fte");
+  EXPECT_EQ(t.table_id, 0x00010003u);
+}
+
+static_assert(std::is_trivially_copyable_v<MarkerLabelTable>);
+
+TEST(MarkerStreamDescriptor, GoldenBytesDecodeIntoTheTableAndLeaveTheFrameAlone) {
+  ASSERT_EQ(kGoldenDescriptor.size(), 47u);
+  MarkerStreamDecoder dec;
+  EXPECT_EQ(dec.labels().generation, 0u);
+  EXPECT_EQ(dec.labels().count, 0u);
+  auto out = sentinelFrame();
+  ASSERT_EQ(dec.decodeFrame(kGoldenDescriptor, 5, *out), S::kDescriptor);
+  expectUntouched(*out);
+  expectGoldenTable(dec.labels());
+  EXPECT_EQ(dec.labels().generation, 1u);
+  EXPECT_EQ(dec.labels().label(2), "");       // not named
+  EXPECT_EQ(dec.labels().label(0xFFFF), "");
+  EXPECT_EQ(dec.labels().find(0x0101), nullptr);
+  ASSERT_NE(dec.labels().find(1), nullptr);
+  EXPECT_EQ(dec.labels().find(1)->id, 1u);
+  EXPECT_EQ(dec.stats().descriptors_accepted, 1u);
+  EXPECT_EQ(dec.stats().frames_decoded, 0u);
+  // The stateless form gives the same table.
+  MarkerLabelTable t;
+  ASSERT_EQ(decodeMarkerStreamDescriptor(kGoldenDescriptor, t), S::kDescriptor);
+  expectGoldenTable(t);
+}
+
+TEST(MarkerStreamDescriptor, EncoderReproducesGoldenBytes) {
+  const std::vector<MarkerLabel> labels = {{0, "LFHD"}, {1, "RFHD"}, {0x0102, "h\xC3\xBC" "fte"}};
+  EXPECT_EQ(markerStreamDescriptorSize(labels), 47u);
+  Bytes out(100, 0xEE);
+  ASSERT_EQ(encodeMarkerStreamDescriptor(labels, 0x00010003, out), 47u);
+  out.resize(47);
+  EXPECT_EQ(out, kGoldenDescriptor);
+  Bytes small(46);
+  EXPECT_EQ(encodeMarkerStreamDescriptor(labels, 0x00010003, small), 0u);
+  const std::string long_label(kMarkerLabelMaxLength + 1, 'x');
+  const std::vector<MarkerLabel> too_long = {{0, long_label}};
+  EXPECT_EQ(encodeMarkerStreamDescriptor(too_long, 1, out), 0u);
+  std::vector<MarkerLabel> too_many(kMarkerStreamMaxMarkers + 1, MarkerLabel{0, "a"});
+  Bytes big(kMarkerStreamMaxDescriptorSize);
+  EXPECT_EQ(encodeMarkerStreamDescriptor(too_many, 1, big), 0u);
+}
+
+// Random valid labels: printable ASCII plus 2-, 3- and 4-byte UTF-8 sequences, 1..31 bytes.
+std::string randomLabel(std::mt19937& rng, std::size_t max_len) {
+  static const char* pieces[] = {"\xC3\xA4", "\xE2\x82\xAC", "\xF0\x9F\x98\x80", "\xC2\xA0", "\xEF\xBF\xBD"};
+  std::string s;
+  const std::size_t want = 1 + rng() % max_len;
+  while (s.size() < want) {
+    if (rng() % 4 == 0) {
+      const std::string p = pieces[rng() % 5];
+      if (s.size() + p.size() > max_len) break;
+      s += p;
+    } else {
+      s.push_back(static_cast<char>(0x20 + rng() % 95));
+    }
+  }
+  if (s.empty()) s = "m";
+  return s;
+}
+
+TEST(MarkerStreamDescriptor, RoundTripRandomTablesUpToTheLargest) {
+  std::mt19937 rng(41);
+  for (int round = 0; round < 40; ++round) {
+    const std::size_t count = round == 0 ? kMarkerStreamMaxMarkers : round == 1 ? 0 : rng() % 257;
+    std::vector<std::string> texts;
+    std::set<std::string> seen;
+    while (texts.size() < count) {
+      std::string t;
+      if (round == 0) {  // 256 labels of exactly 31 bytes: the largest descriptor a v1.0 sender writes
+        const std::size_t i = texts.size();
+        t.assign(kMarkerLabelMaxLength - 2, 'A');
+        t.push_back(static_cast<char>('a' + i % 26));
+        t.push_back(static_cast<char>('a' + (i / 26) % 26));
+      } else {
+        t = randomLabel(rng, kMarkerLabelMaxLength);
+      }
+      if (seen.insert(t).second) texts.push_back(t);
+    }
+    std::vector<MarkerLabel> labels;
+    auto id = static_cast<std::uint32_t>(rng() % 50);
+    for (std::size_t i = 0; i < count; ++i) {
+      labels.push_back({static_cast<std::uint16_t>(id), texts[i]});
+      id += static_cast<std::uint32_t>(1 + rng() % 200);
+    }
+    ASSERT_LE(labels.empty() ? 0u : labels.back().id, 0xFFFFu);
+    const Bytes b = encodeLabels(labels, static_cast<std::uint32_t>(round));
+    ASSERT_EQ(b.size(), markerStreamDescriptorSize(labels));
+    if (round == 0) {
+      EXPECT_EQ(b.size(), kMarkerStreamMaxDescriptorSize - 44);  // header 20, not 64
+    }
+    MarkerLabelTable t;
+    ASSERT_EQ(decodeMarkerStreamDescriptor(b, t), S::kDescriptor) << "round " << round;
+    ASSERT_EQ(t.count, count);
+    EXPECT_EQ(t.table_id, static_cast<std::uint32_t>(round));
+    EXPECT_EQ(t.generation, 1u);
+    for (const auto& l : labels) {
+      ASSERT_TRUE(isValidMarkerLabel(l.label)) << l.label;
+      ASSERT_EQ(t.label(l.id), l.label) << "round " << round << " id " << l.id;
+    }
+    // Ids between the named ones are unnamed.
+    for (std::size_t i = 0; i + 1 < labels.size(); ++i) {
+      if (labels[i + 1].id - labels[i].id > 1) {
+        ASSERT_EQ(t.label(static_cast<std::uint16_t>(labels[i].id + 1)), "");
+      }
+    }
+    EXPECT_EQ(markerStreamPeekFrameLength(b), b.size());
+  }
+}
+
+TEST(MarkerStreamDescriptor, EveryTruncationIsReportedAndKeepsThePreviousTable) {
+  MarkerStreamDecoder dec;
+  auto out = sentinelFrame();
+  ASSERT_EQ(dec.decodeFrame(kGoldenDescriptor, 0, *out), S::kDescriptor);
+  std::vector<MarkerLabel> other = {{5, "other"}};
+  const Bytes b = encodeLabels(other, 77);
+  for (std::size_t len = 0; len < b.size(); ++len) {
+    ASSERT_EQ(dec.decodeFrame(std::span(b.data(), len), 0, *out), S::kTruncated) << "length " << len;
+  }
+  expectUntouched(*out);
+  expectGoldenTable(dec.labels());
+  EXPECT_EQ(dec.labels().generation, 1u);
+  // Four of those (lengths 0..3) cannot be told apart from a frame; the rest carry the descriptor magic.
+  EXPECT_EQ(dec.stats().descriptors_rejected, b.size() - 4);
+  EXPECT_EQ(dec.stats().format_errors, b.size());
+  ASSERT_EQ(dec.decodeFrame(b, 0, *out), S::kDescriptor);
+  EXPECT_EQ(dec.labels().label(5), "other");
+  EXPECT_EQ(dec.labels().label(0), "");
+  EXPECT_EQ(dec.labels().generation, 2u);
+}
+
+TEST(MarkerStreamDescriptor, EverySingleBitFlipIsCaught) {
+  for (std::size_t byte = 0; byte < kGoldenDescriptor.size(); ++byte) {
+    for (int bit = 0; bit < 8; ++bit) {
+      Bytes b = kGoldenDescriptor;
+      b[byte] = static_cast<std::uint8_t>(b[byte] ^ (1u << bit));
+      MarkerStreamDecoder dec;
+      auto out = sentinelFrame();
+      const S st = dec.decodeFrame(b, 0, *out);
+      ASSERT_NE(st, S::kDescriptor) << "byte " << byte << " bit " << bit;
+      ASSERT_NE(st, S::kFrame) << "byte " << byte << " bit " << bit;  // "TMSD" -> "TMSF" is one bit away
+      if (byte >= 12 || byte == 5 || byte == 7) {
+        ASSERT_EQ(st, S::kBadCrc) << "byte " << byte << " bit " << bit;
+      }
+      EXPECT_EQ(dec.labels().generation, 0u);
+      EXPECT_EQ(dec.labels().count, 0u);
+      expectUntouched(*out);
+    }
+  }
+}
+
+TEST(MarkerStreamDescriptor, BadEntriesRejectTheWholeDescriptorAndKeepThePreviousTable) {
+  struct Case {
+    const char* what;
+    Bytes bytes;
+  };
+  const std::string l31(31, 'q');
+  auto cat = [](std::initializer_list<Bytes> parts) {
+    Bytes b;
+    for (const auto& p : parts) b.insert(b.end(), p.begin(), p.end());
+    return b;
+  };
+  const Case cases[] = {
+      {"duplicate id", rawDescriptor(cat({entry(1, "A"), entry(1, "B")}), 2)},
+      {"descending ids", rawDescriptor(cat({entry(2, "A"), entry(1, "B")}), 2)},
+      {"duplicate label", rawDescriptor(cat({entry(1, "LFHD"), entry(2, "LFHD")}), 2)},
+      {"empty label", rawDescriptor(cat({entry(1, "ABC"), entry(2, "")}), 2)},
+      {"label of 32 bytes", rawDescriptor(cat({entry(1, l31 + "q"), entry(2, "B")}), 2)},
+      {"NUL in label", rawDescriptor(cat({entry(1, std::string_view("A\0B", 3))}), 1)},
+      {"control character", rawDescriptor(cat({entry(1, "A\x1F")}), 1)},
+      {"DEL", rawDescriptor(cat({entry(1, "A\x7F")}), 1)},
+      {"C1 control U+0085", rawDescriptor(cat({entry(1, "A\xC2\x85")}), 1)},
+      {"lone continuation byte", rawDescriptor(cat({entry(1, "A\x80")}), 1)},
+      {"overlong '/'", rawDescriptor(cat({entry(1, "\xC0\xAF")}), 1)},
+      {"overlong 3-byte", rawDescriptor(cat({entry(1, "\xE0\x80\xAF")}), 1)},
+      {"surrogate", rawDescriptor(cat({entry(1, "\xED\xA0\x80")}), 1)},
+      {"above U+10FFFF", rawDescriptor(cat({entry(1, "\xF4\x90\x80\x80")}), 1)},
+      {"byte F5", rawDescriptor(cat({entry(1, "\xF5\x80\x80\x80")}), 1)},
+      {"UTF-8 cut by the label end", rawDescriptor(cat({entry(1, "ab\xE2\x82")}), 1)},
+      {"entries shorter than the message", rawDescriptor(cat({entry(1, "A"), Bytes{0x00}}), 1)},
+      {"count larger than the entries", rawDescriptor(cat({entry(1, "ABCDEFGH"), entry(2, "C")}), 3)},
+      {"entry runs past the end", rawDescriptor(cat({entry(1, "A"), Bytes{0x02, 0x00, 0x05, 'x'}}), 2)},
+  };
+  for (const auto& c : cases) {
+    MarkerStreamDecoder dec;
+    auto out = sentinelFrame();
+    ASSERT_EQ(dec.decodeFrame(kGoldenDescriptor, 0, *out), S::kDescriptor);
+    const S st = dec.decodeFrame(c.bytes, 0, *out);
+    EXPECT_EQ(st, S::kBadDescriptor) << c.what << ": " << markerStreamStatusName(st);
+    expectGoldenTable(dec.labels());
+    EXPECT_EQ(dec.labels().generation, 1u) << c.what;
+    EXPECT_EQ(dec.stats().descriptors_rejected, 1u) << c.what;
+    EXPECT_EQ(dec.stats().descriptors_accepted, 1u) << c.what;
+    expectUntouched(*out);
+    MarkerLabelTable fresh;
+    EXPECT_EQ(decodeMarkerStreamDescriptor(c.bytes, fresh), S::kBadDescriptor) << c.what;
+    EXPECT_EQ(fresh.generation, 0u);
+  }
+  // The same layout with valid contents is accepted (the cases fail for the stated reason only).
+  const Bytes good = rawDescriptor(cat({entry(1, "A"), entry(2, "B\xC2\xA0" "C"), entry(0xFFFF, l31)}), 3);
+  MarkerLabelTable t;
+  ASSERT_EQ(decodeMarkerStreamDescriptor(good, t), S::kDescriptor);
+  EXPECT_EQ(t.label(0xFFFF), l31);
+  EXPECT_EQ(t.label(2), "B\xC2\xA0" "C");
+}
+
+TEST(MarkerStreamDescriptor, LabelRules) {
+  for (std::string_view ok : {"A", "LFHD", "meinard:LFHD", "h\xC3\xBC" "fte", "\xE6\x97\xA5\xE6\x9C\xAC",
+                              "\xF0\x9F\x98\x80", "~ !", "0123456789012345678901234567890"}) {
+    EXPECT_TRUE(isValidMarkerLabel(ok)) << ok;
+  }
+  for (std::string_view bad : {std::string_view(""), std::string_view("01234567890123456789012345678901"),
+                               std::string_view("\0", 1), std::string_view("\t"), std::string_view("a\nb"),
+                               std::string_view("\x7F"), std::string_view("\xC2\x9F"), std::string_view("\xC1\xBF"),
+                               std::string_view("\xFF"), std::string_view("\xE2\x82"), std::string_view("\xF0\x8F\xBF\xBF")}) {
+    EXPECT_FALSE(isValidMarkerLabel(bad)) << "length " << bad.size();
+  }
+}
+
+TEST(MarkerStreamDescriptor, HeaderVersionAndLengthChecks) {
+  const Bytes entries = entry(1, "A");
+  MarkerLabelTable t;
+  EXPECT_EQ(decodeMarkerStreamDescriptor(rawDescriptor(entries, 1, 9, 16), t), S::kBadHeader);  // header < 20
+  EXPECT_EQ(decodeMarkerStreamDescriptor(rawDescriptor(entries, 1, 9, 22), t), S::kBadHeader);  // not a multiple of 4
+  EXPECT_EQ(decodeMarkerStreamDescriptor(rawDescriptor(entries, 1, 9, 68), t), S::kBadHeader);  // > 64
+  EXPECT_EQ(decodeMarkerStreamDescriptor(rawDescriptor(entries, 257), t), S::kBadHeader);      // > 256 entries
+  // descriptor_length outside what entry_count allows (4..34 bytes per entry), or not the message size.
+  EXPECT_EQ(decodeMarkerStreamDescriptor(rawDescriptor(entries, 2), t), S::kBadLength);
+  EXPECT_EQ(decodeMarkerStreamDescriptor(rawDescriptor(entries, 0), t), S::kBadLength);
+  // descriptor_length plausible but larger than the bytes given: truncated.
+  EXPECT_EQ(decodeMarkerStreamDescriptor(rawDescriptor(entries, 1, 9, 20, 29), t), S::kTruncated);
+  Bytes longer = rawDescriptor(entries, 1);
+  longer.push_back(0);
+  EXPECT_EQ(decodeMarkerStreamDescriptor(longer, t), S::kBadLength);
+  // Unknown major version: nothing after byte 4 is looked at.
+  Bytes v2 = kGoldenDescriptor;
+  v2[4] = 2;
+  MarkerStreamDecoder dec;
+  auto out = sentinelFrame();
+  EXPECT_EQ(dec.decodeFrame(v2, 0, *out), S::kUnsupportedVersion);
+  EXPECT_EQ(dec.decodeFrame(std::span(v2.data(), 5), 0, *out), S::kUnsupportedVersion);
+  EXPECT_EQ(dec.stats().version_errors, 2u);
+  EXPECT_EQ(dec.stats().descriptors_rejected, 2u);
+  EXPECT_EQ(markerStreamPeekFrameLength(v2), 0u);
+  EXPECT_EQ(t.generation, 0u);
+  // A newer minor version with a longer header (an extension field a v1.0 decoder skips).
+  Bytes v11 = rawDescriptor(entries, 1, 9, 24);
+  v11[5] = 1;
+  v11[20] = 0xAB;  // the unknown field
+  fixCrc(v11);
+  ASSERT_EQ(dec.decodeFrame(v11, 0, *out), S::kDescriptor);
+  EXPECT_EQ(dec.labels().label(1), "A");
+  EXPECT_EQ(markerStreamPeekFrameLength(v11), v11.size());
+  // An empty table is a valid descriptor ("no labels").
+  const Bytes empty = rawDescriptor({}, 0);
+  ASSERT_EQ(empty.size(), 24u);
+  ASSERT_EQ(dec.decodeFrame(empty, 0, *out), S::kDescriptor);
+  EXPECT_EQ(dec.labels().count, 0u);
+  EXPECT_EQ(dec.labels().label(1), "");
+  expectUntouched(*out);
+}
+
+TEST(MarkerStreamDescriptor, GenerationChangesOnlyWithTheLabels) {
+  MarkerStreamDecoder dec;
+  auto out = sentinelFrame();
+  const std::vector<MarkerLabel> a = {{0, "A"}, {3, "B"}};
+  const std::vector<MarkerLabel> b = {{0, "A"}, {3, "C"}};
+  const std::vector<MarkerLabel> c = {{0, "A"}, {4, "B"}};
+  ASSERT_EQ(dec.decodeFrame(encodeLabels(a, 1), 0, *out), S::kDescriptor);
+  EXPECT_EQ(dec.labels().generation, 1u);
+  ASSERT_EQ(dec.decodeFrame(encodeLabels(a, 1), 0, *out), S::kDescriptor);  // repeat (GET_DESCRIPTOR)
+  EXPECT_EQ(dec.labels().generation, 1u);
+  ASSERT_EQ(dec.decodeFrame(encodeLabels(a, 2), 0, *out), S::kDescriptor);  // new table_id, same labels
+  EXPECT_EQ(dec.labels().generation, 1u);
+  EXPECT_EQ(dec.labels().table_id, 2u);
+  ASSERT_EQ(dec.decodeFrame(encodeLabels(b, 2), 0, *out), S::kDescriptor);  // a label changed
+  EXPECT_EQ(dec.labels().generation, 2u);
+  EXPECT_EQ(dec.labels().label(3), "C");
+  ASSERT_EQ(dec.decodeFrame(encodeLabels(c, 2), 0, *out), S::kDescriptor);  // an id changed
+  EXPECT_EQ(dec.labels().generation, 3u);
+  EXPECT_EQ(dec.labels().label(3), "");
+  EXPECT_EQ(dec.labels().label(4), "B");
+  ASSERT_EQ(dec.decodeFrame(encodeLabels({}, 2), 0, *out), S::kDescriptor);  // fewer entries
+  EXPECT_EQ(dec.labels().generation, 4u);
+  EXPECT_EQ(dec.stats().descriptors_accepted, 6u);
+  // reset() keeps the table; clearLabels() empties it.
+  ASSERT_EQ(dec.decodeFrame(encodeLabels(a, 3), 0, *out), S::kDescriptor);
+  dec.reset();
+  EXPECT_EQ(dec.labels().label(3), "B");
+  dec.clearLabels();
+  EXPECT_EQ(dec.labels().count, 0u);
+  EXPECT_EQ(dec.labels().label(3), "");
+  // A first descriptor that is empty still counts as "named" (generation 1).
+  MarkerStreamDecoder fresh;
+  ASSERT_EQ(fresh.decodeFrame(encodeLabels({}, 0), 0, *out), S::kDescriptor);
+  EXPECT_EQ(fresh.labels().generation, 1u);
+  expectUntouched(*out);
+}
+
+TEST(MarkerStreamDescriptor, DescriptorsBetweenFramesLeaveTheSequenceAlone) {
+  MarkerStreamDecoder dec;
+  auto out = std::make_unique<MarkerFrame>();
+  ASSERT_EQ(dec.decodeFrame(makeFrame(10, 2), 0, *out), S::kFrame);
+  ASSERT_EQ(dec.decodeFrame(kGoldenDescriptor, 0, *out), S::kDescriptor);
+  EXPECT_EQ(out->frame_counter, 10u);
+  ASSERT_EQ(dec.decodeFrame(makeFrame(11, 2), 0, *out), S::kFrame);
+  EXPECT_EQ(out->flags & tetrig::kFrameSequenceGap, 0u);
+  EXPECT_EQ(out->frame_counter, 11u);
+  EXPECT_EQ(dec.stats().frames_decoded, 2u);
+  EXPECT_EQ(dec.stats().frames_lost, 0u);
+  EXPECT_EQ(dec.stats().duplicates, 0u);
+  expectGoldenTable(dec.labels());
+}
+
+TEST(MarkerStreamDescriptor, PeekCutsAStreamOfFramesAndDescriptors) {
+  const Bytes f1 = makeFrame(1, 3);
+  const Bytes f2 = makeFrame(2, 41);
+  Bytes stream = f1;
+  stream.insert(stream.end(), kGoldenDescriptor.begin(), kGoldenDescriptor.end());
+  stream.insert(stream.end(), f2.begin(), f2.end());
+  MarkerStreamDecoder dec;
+  auto out = std::make_unique<MarkerFrame>();
+  std::vector<S> got;
+  for (std::size_t pos = 0; pos < stream.size();) {
+    const std::size_t len = markerStreamPeekFrameLength(std::span(stream).subspan(pos));
+    ASSERT_GT(len, 0u) << "at " << pos;
+    got.push_back(dec.decodeFrame(std::span(stream).subspan(pos, len), 0, *out));
+    pos += len;
+  }
+  EXPECT_EQ(got, (std::vector<S>{S::kFrame, S::kDescriptor, S::kFrame}));
+  EXPECT_EQ(markerStreamPeekFrameLength(std::span(kGoldenDescriptor.data(), 12)), 47u);
+  EXPECT_EQ(markerStreamPeekFrameLength(std::span(kGoldenDescriptor.data(), 11)), 0u);
+  Bytes tiny = kGoldenDescriptor;
+  tiny[8] = 23;  // below header + CRC
+  tiny[9] = 0;
+  EXPECT_EQ(markerStreamPeekFrameLength(tiny), 0u);
+  tiny[8] = 0x45;  // 8773 > kMarkerStreamMaxDescriptorSize
+  tiny[9] = 0x22;
+  EXPECT_EQ(markerStreamPeekFrameLength(tiny), 0u);
+  tiny[8] = 0x44;  // 8772: the largest
+  EXPECT_EQ(markerStreamPeekFrameLength(tiny), 8772u);
+}
+
+TEST(MarkerStreamDescriptorHid, GoldenReportCarriesTheDescriptorWithItsTableIdAsTag) {
+  // docs/protocol.md 3.2: tag = table_id & 0xFFFF = 0x0003, one fragment of 47 bytes.
+  Bytes report = {0x01, 0x03, 0x00, 0x00, 0x01, 0x2F};
+  report.insert(report.end(), kGoldenDescriptor.begin(), kGoldenDescriptor.end());
+  report.resize(64, 0x00);
+  Bytes enc(64);
+  ASSERT_EQ(encodeMarkerStreamFragment(kGoldenDescriptor, 0, enc), 64u);
+  EXPECT_EQ(enc, report);
+  MarkerStreamDecoder dec;
+  auto out = sentinelFrame();
+  ASSERT_EQ(dec.decodeHidReport(report, 0, *out), S::kDescriptor);
+  expectGoldenTable(dec.labels());
+  expectUntouched(*out);
+  // A tag that does not match the table_id is a bad fragment; the table is kept.
+  MarkerStreamDecoder other;
+  report[1] = 0x04;
+  EXPECT_EQ(other.decodeHidReport(report, 0, *out), S::kBadFragment);
+  EXPECT_EQ(other.labels().generation, 0u);
+  EXPECT_EQ(other.stats().descriptors_rejected, 1u);
+}
+
+std::vector<MarkerLabel> viconLabels(std::vector<std::string>& storage, std::size_t n) {
+  storage.clear();
+  for (std::size_t i = 0; i < n; ++i) storage.push_back("meinard:M" + std::to_string(i));
+  std::vector<MarkerLabel> out;
+  for (std::size_t i = 0; i < n; ++i) out.push_back({static_cast<std::uint16_t>(i), storage[i]});
+  return out;
+}
+
+TEST(MarkerStreamDescriptorHid, FragmentedDescriptorLostOrReorderedFragmentsKeepTheTable) {
+  std::vector<std::string> s41;
+  const Bytes d41 = encodeLabels(viconLabels(s41, 41), 0x00120034);
+  const auto reports = fragmentsOf(d41);
+  ASSERT_GT(reports.size(), 5u);
+  for (const auto& r : reports) {
+    ASSERT_EQ(r[1], 0x34);  // tag = table_id low 16 bits
+    ASSERT_EQ(r[2], 0x00);
+  }
+  const auto frame = fragmentsOf(makeFrame(5, 41));
+  MarkerStreamDecoder dec;
+  auto out = sentinelFrame();
+  ASSERT_EQ(dec.decodeHidReport(fragmentsOf(kGoldenDescriptor)[0], 0, *out), S::kDescriptor);
+  // Lost fragment: the descriptor is dropped, the old table stays, the stream recovers.
+  for (std::size_t i = 0; i < reports.size(); ++i) {
+    if (i == 2) continue;
+    const S st = dec.decodeHidReport(reports[i], 0, *out);
+    ASSERT_NE(st, S::kDescriptor) << i;
+  }
+  expectGoldenTable(dec.labels());
+  // Swapped fragments: dropped as well.
+  for (std::size_t i = 0; i < reports.size(); ++i) {
+    const std::size_t j = i == 3 ? 4 : i == 4 ? 3 : i;
+    ASSERT_NE(dec.decodeHidReport(reports[j], 0, *out), S::kDescriptor) << i;
+  }
+  expectGoldenTable(dec.labels());
+  expectUntouched(*out);
+  // A frame, then the whole descriptor, then a frame: both kinds share the reassembler.
+  for (std::size_t i = 0; i + 1 < frame.size(); ++i) ASSERT_EQ(dec.decodeHidReport(frame[i], 0, *out), S::kNeedMore);
+  ASSERT_EQ(dec.decodeHidReport(frame.back(), 0, *out), S::kFrame);
+  for (std::size_t i = 0; i + 1 < reports.size(); ++i) ASSERT_EQ(dec.decodeHidReport(reports[i], 0, *out), S::kNeedMore);
+  ASSERT_EQ(dec.decodeHidReport(reports.back(), 0, *out), S::kDescriptor);
+  EXPECT_EQ(out->frame_counter, 5u);
+  EXPECT_EQ(dec.labels().count, 41u);
+  EXPECT_EQ(dec.labels().label(40), "meinard:M40");
+  EXPECT_EQ(dec.labels().generation, 2u);
+  EXPECT_EQ(dec.reassembler().stats().partial_frames_dropped, 2u);
+  // A descriptor cut by a frame's first fragment is abandoned; the frame completes.
+  const auto frame2 = fragmentsOf(makeFrame(6, 41));
+  ASSERT_EQ(dec.decodeHidReport(reports[0], 0, *out), S::kNeedMore);
+  for (std::size_t i = 0; i + 1 < frame2.size(); ++i) ASSERT_EQ(dec.decodeHidReport(frame2[i], 0, *out), S::kNeedMore);
+  ASSERT_EQ(dec.decodeHidReport(frame2.back(), 0, *out), S::kFrame);
+  EXPECT_EQ(out->frame_counter, 6u);
+}
+
+TEST(MarkerStreamDescriptorHid, LargestDescriptorNeedsAllFragments) {
+  std::vector<std::string> texts;
+  std::vector<MarkerLabel> labels;
+  for (std::size_t i = 0; i < kMarkerStreamMaxMarkers; ++i) {
+    std::string t = std::to_string(i);
+    t.insert(t.begin(), 'L');
+    t.resize(kMarkerLabelMaxLength, '_');
+    texts.push_back(t);
+  }
+  for (std::size_t i = 0; i < kMarkerStreamMaxMarkers; ++i) {
+    labels.push_back({static_cast<std::uint16_t>(i * 250), texts[i]});
+  }
+  // With a 64-byte header (a v1.x sender) this is kMarkerStreamMaxDescriptorSize exactly.
+  Bytes entries;
+  for (const auto& l : labels) {
+    const Bytes e = entry(l.id, l.label);
+    entries.insert(entries.end(), e.begin(), e.end());
+  }
+  Bytes big = rawDescriptor(entries, static_cast<std::uint16_t>(labels.size()), 0xBEEF, 64);
+  big[5] = 7;  // minor 7
+  fixCrc(big);
+  ASSERT_EQ(big.size(), kMarkerStreamMaxDescriptorSize);
+  const auto reports = fragmentsOf(big);
+  ASSERT_EQ(reports.size(), kMarkerStreamMaxFragments);
+  EXPECT_EQ(kMarkerStreamMaxFragments, 152u);
+  MarkerStreamDecoder dec;
+  auto out = sentinelFrame();
+  for (std::size_t i = 0; i + 1 < reports.size(); ++i) ASSERT_EQ(dec.decodeHidReport(reports[i], 0, *out), S::kNeedMore);
+  ASSERT_EQ(dec.decodeHidReport(reports.back(), 0, *out), S::kDescriptor);
+  EXPECT_EQ(dec.labels().count, 256u);
+  EXPECT_EQ(dec.labels().label(255 * 250), texts[255]);
+  EXPECT_EQ(dec.labels().table_id, 0xBEEFu);
+  // One byte more than the largest message cannot be fragmented.
+  Bytes too_big(kMarkerStreamMaxMessageSize + 1, 0);
+  std::copy(big.begin(), big.begin() + 16, too_big.begin());
+  Bytes r(64);
+  EXPECT_EQ(markerStreamFragmentCount(too_big.size()), 0u);
+  EXPECT_EQ(encodeMarkerStreamFragment(too_big, 0, r), 0u);
+}
+
+TEST(MarkerStreamDescriptor, DecodingDescriptorsDoesNotAllocate) {
+  std::vector<std::string> s41;
+  const Bytes d41 = encodeLabels(viconLabels(s41, 41), 1);
+  const Bytes d40 = encodeLabels(viconLabels(s41, 40), 2);
+  const auto r41 = fragmentsOf(d41);
+  const auto r40 = fragmentsOf(d40);
+  Bytes bad = d41;
+  bad[30] ^= 1;
+  MarkerStreamDecoder dec;
+  MarkerStreamDecoder hid;
+  auto out = std::make_unique<MarkerFrame>();
+  const std::uint64_t before = ::tetrig::test::allocationCount();
+  int accepted = 0;
+  for (int k = 0; k < 20; ++k) {
+    accepted += dec.decodeFrame(k % 2 == 0 ? d41 : d40, 0, *out) == S::kDescriptor ? 1 : 0;
+    EXPECT_EQ(dec.decodeFrame(bad, 0, *out), S::kBadCrc);
+    for (const auto& r : (k % 2 == 0 ? r41 : r40)) accepted += hid.decodeHidReport(r, 0, *out) == S::kDescriptor ? 1 : 0;
+  }
+  const std::string_view l = dec.labels().label(39);
+  EXPECT_EQ(::tetrig::test::allocationCount(), before);
+  EXPECT_EQ(accepted, 40);
+  EXPECT_EQ(l, "meinard:M39");
+  EXPECT_EQ(dec.labels().generation, 20u);
+}
+
+TEST(MarkerStreamControl, GetDescriptorCommand) {
+  Bytes r(64, 0xEE);
+  ASSERT_EQ(encodeMarkerStreamCommandReport(MarkerStreamCommand::kGetDescriptor, 0, r), 64u);
+  Bytes expected(64, 0x00);
+  expected[0] = 0x02;
+  expected[1] = 0x05;  // GET_DESCRIPTOR
+  EXPECT_EQ(r, expected);
+  MarkerStreamCommand cmd{};
+  std::uint16_t param = 1;
+  ASSERT_TRUE(decodeMarkerStreamCommandReport(r, cmd, param));
+  EXPECT_EQ(cmd, MarkerStreamCommand::kGetDescriptor);
+  EXPECT_EQ(param, 0u);
+  r[1] = 0x06;
+  EXPECT_FALSE(decodeMarkerStreamCommandReport(r, cmd, param));
+  const auto setup = markerStreamControlSetup(MarkerStreamCommand::kGetDescriptor, 0, 3);
+  EXPECT_EQ(setup.request_type, 0x41);  // OUT: the descriptor comes on the bulk IN pipe
+  EXPECT_EQ(setup.request, 0x05);
+  EXPECT_EQ(setup.value, 0u);
+  EXPECT_EQ(setup.index, 3u);
+  EXPECT_EQ(setup.length, 0u);
 }
 
 }  // namespace

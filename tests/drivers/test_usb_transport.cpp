@@ -10,6 +10,7 @@
 
 #include <cerrno>
 #include <chrono>
+#include <memory>
 #include <mutex>
 #include <string>
 #include <thread>
@@ -270,19 +271,20 @@ TEST_F(UsbTransportTest, MarkerStreamSourceSendsStartAndPublishesWholeFrames) {
   ASSERT_TRUE(source.start(rec.status()));
   ASSERT_TRUE(waitFor([&] { return device_->urbsPending() == 4; }, 2s)) << rec.log();
 
-  // START and SET_RATE went out as vendor control requests before streaming (setup packet:
-  // bmRequestType, bRequest, wValue LE, wIndex LE, wLength LE).
+  // START, GET_DESCRIPTOR and SET_RATE went out as vendor control requests before streaming
+  // (setup packet: bmRequestType, bRequest, wValue LE, wIndex LE, wLength LE).
   const auto control = device_->controlRequests();
-  ASSERT_EQ(control.size(), 2u);
+  ASSERT_EQ(control.size(), 3u);
   const auto start = drv::markerStreamControlSetup(drv::MarkerStreamCommand::kStart, 0, 0);
   const auto rate = drv::markerStreamControlSetup(drv::MarkerStreamCommand::kSetRate, 200, 0);
   ASSERT_EQ(control[0].size(), 8u);
-  // docs/protocol.md 3.3: bmRequestType 0x41, bRequest = opcode (START 0x01, SET_RATE 0x03),
-  // wValue = param, wIndex = interface, wLength 0.
+  // docs/protocol.md 3.3: bmRequestType 0x41, bRequest = opcode (START 0x01, GET_DESCRIPTOR
+  // 0x05, SET_RATE 0x03), wValue = param, wIndex = interface, wLength 0.
   EXPECT_EQ(control[0], (std::vector<std::uint8_t>{0x41, 0x01, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00}));
-  EXPECT_EQ(control[1], (std::vector<std::uint8_t>{0x41, 0x03, 200, 0x00, 0x00, 0x00, 0x00, 0x00}));
+  EXPECT_EQ(control[1], (std::vector<std::uint8_t>{0x41, 0x05, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00}));
+  EXPECT_EQ(control[2], (std::vector<std::uint8_t>{0x41, 0x03, 200, 0x00, 0x00, 0x00, 0x00, 0x00}));
   EXPECT_EQ(control[0][1], start.request);
-  EXPECT_EQ(control[1][1], rate.request);
+  EXPECT_EQ(control[2][1], rate.request);
 
   constexpr int kFrames = 50;
   for (int i = 1; i <= kFrames; ++i) device_->pushIn(encodedFrame(static_cast<std::uint64_t>(i), 40));
@@ -308,6 +310,81 @@ TEST_F(UsbTransportTest, MarkerStreamSourceSendsStartAndPublishesWholeFrames) {
   ASSERT_TRUE(mailbox->tryTakeLatest(got));
   EXPECT_EQ(got.frame_counter, static_cast<std::uint64_t>(kFrames + 2));
   source.stop();
+  EXPECT_EQ(device_->urbsPending(), 0);
+}
+
+}  // namespace
+
+// ------------------------------------------------------------------------------------------------
+// The USB marker stream in the MarkerSource shape: the device answers START / GET_DESCRIPTOR with
+// its descriptor as one bulk transfer, then streams frames.
+
+#include <tetrig/drivers/device_marker_sources.hpp>
+
+namespace {
+
+std::vector<std::uint8_t> descriptorBytes(const std::vector<std::string>& names, std::uint16_t first_id,
+                                          std::uint32_t table_id) {
+  std::vector<drv::MarkerLabel> labels;
+  for (std::size_t i = 0; i < names.size(); ++i) labels.push_back({static_cast<std::uint16_t>(first_id + i), names[i]});
+  std::vector<std::uint8_t> bytes(drv::kMarkerStreamMaxDescriptorSize);
+  bytes.resize(drv::encodeMarkerStreamDescriptor(labels, table_id, bytes));
+  return bytes;
+}
+
+TEST_F(UsbTransportTest, MarkerSourceAdapterLearnsLabelsOverBulkIncludingTheLargestDescriptor) {
+  device_->plug();
+  auto mailbox = std::make_unique<tetrig::FrameMailbox>();
+  tetrig::devices::UsbMarkerStreamSourceConfig config;
+  config.usb = baseConfig();
+  const auto source = tetrig::devices::makeUsbMarkerStreamSource(config);
+  EXPECT_NE(source->describe().find("1209:7e71"), std::string::npos) << source->describe();
+  EXPECT_EQ(source->nominalRateHz(), 0.0);
+  ASSERT_TRUE(source->start(*mailbox));
+  ASSERT_TRUE(waitFor([&] { return device_->urbsPending() == 4; }, 2s)) << source->lastError();
+  const auto control = device_->controlRequests();
+  ASSERT_EQ(control.size(), 2u) << "START and GET_DESCRIPTOR (no rate configured)";
+  EXPECT_EQ(control[0][1], 0x01);
+  EXPECT_EQ(control[1], (std::vector<std::uint8_t>{0x41, 0x05, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00}));
+
+  // The device's answer: the descriptor as one bulk transfer (ids 100.. like encodedFrame's).
+  std::vector<std::string> names;
+  for (int i = 0; i < 40; ++i) names.push_back("marker " + std::to_string(i));
+  device_->pushIn(descriptorBytes(names, 100, 1));
+  std::vector<std::string> labels;
+  ASSERT_TRUE(source->waitForLabels(3s, labels)) << source->lastError();
+  ASSERT_EQ(labels.size(), 140u);
+  EXPECT_EQ(labels[99], "");
+  EXPECT_EQ(labels[100], "marker 0");
+  EXPECT_EQ(labels[139], "marker 39");
+
+  for (int i = 1; i <= 10; ++i) device_->pushIn(encodedFrame(static_cast<std::uint64_t>(i), 40));
+  ASSERT_TRUE(waitFor([&] { return source->stats().frames_published == 10; }, 3s)) << source->lastError();
+  tetrig::MarkerFrame got;
+  ASSERT_TRUE(mailbox->tryTakeLatest(got));
+  EXPECT_EQ(labels[got.markers[7].id], "marker 7");
+
+  // The largest descriptor a v1.0 sender writes (256 labels of 31 bytes, 8728 bytes) is longer
+  // than the largest frame (8260): it must still fit one IN transfer.
+  std::vector<std::string> big;
+  for (int i = 0; i < 256; ++i) {
+    std::string t = std::to_string(i);
+    t.resize(drv::kMarkerLabelMaxLength, '.');
+    big.push_back(t);
+  }
+  const auto big_bytes = descriptorBytes(big, 0, 2);
+  ASSERT_GT(big_bytes.size(), drv::kMarkerStreamMaxFrameSize);
+  device_->pushIn(big_bytes);
+  ASSERT_TRUE(waitFor(
+      [&] {
+        std::vector<std::string> now;
+        return source->waitForLabels(10ms, now) && now.size() == 256 && now[255] == big[255];
+      },
+      3s))
+      << "decode errors " << source->stats().decode_errors;
+  EXPECT_EQ(source->stats().decode_errors, 0u);
+  EXPECT_TRUE(source->stats().connected);
+  source->stop();
   EXPECT_EQ(device_->urbsPending(), 0);
 }
 

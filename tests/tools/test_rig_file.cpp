@@ -1,6 +1,9 @@
 // The rig file (runtime/include/tetrig/rig_file.hpp) and the rig builder's tet-mesh, selection and
 // marker-binding paths, on a small generated rig: round trip, every truncation length, bit flips,
-// clear refusals, the rest pose as a fixed point, and the atomic writer.
+// clear refusals, the rest pose as a fixed point, and the atomic writer. The fixture's rig carries
+// a pose sensor, so every sweep covers the optional PSNS section too; rigs without one still
+// write and read the thirteen required sections alone. The example puppet rig
+// (assets/puppet_hydra.json) is built here with the rig builder.
 #include "small_rig.hpp"
 #include "tetrig/deformer.hpp"
 #include "tetrig/rig_file.hpp"
@@ -10,7 +13,10 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstring>
+#include <limits>
+#include <utility>
 #include <random>
 
 namespace tetrig {
@@ -20,6 +26,28 @@ using test::TempDir;
 
 #define EXPECT_CONTAINS(haystack, needle) \
   EXPECT_NE(std::string(haystack).find(needle), std::string::npos) << "text: " << (haystack)
+
+// Offset and size of the section `name` in the table, or {0, 0} when absent.
+std::pair<std::size_t, std::size_t> findSection(const std::vector<std::uint8_t>& b, const char (&name)[5]) {
+  auto u32 = [&b](std::size_t at) {
+    std::uint32_t v = 0;
+    for (int i = 0; i < 4; ++i) v |= static_cast<std::uint32_t>(b[at + static_cast<std::size_t>(i)]) << (8 * i);
+    return v;
+  };
+  auto u64 = [&b](std::size_t at) {
+    std::uint64_t v = 0;
+    for (int i = 0; i < 8; ++i) v |= static_cast<std::uint64_t>(b[at + static_cast<std::size_t>(i)]) << (8 * i);
+    return v;
+  };
+  std::uint32_t wanted = 0;
+  for (int i = 0; i < 4; ++i) wanted |= static_cast<std::uint32_t>(static_cast<unsigned char>(name[i])) << (8 * i);
+  const std::uint32_t sections = u32(12);
+  for (std::uint32_t i = 0; i < sections; ++i) {
+    const std::size_t entry = 32 + 24 * static_cast<std::size_t>(i);
+    if (u32(entry) == wanted) return {static_cast<std::size_t>(u64(entry + 8)), static_cast<std::size_t>(u64(entry + 16))};
+  }
+  return {0, 0};
+}
 
 std::string parseError(const std::vector<std::uint8_t>& bytes, const RigParseOptions& options = {}) {
   try {
@@ -36,12 +64,28 @@ void putU32(std::vector<std::uint8_t>& b, std::size_t at, std::uint32_t v) {
 void putU64(std::vector<std::uint8_t>& b, std::size_t at, std::uint64_t v) {
   for (int i = 0; i < 8; ++i) b[at + static_cast<std::size_t>(i)] = static_cast<std::uint8_t>(v >> (8 * i));
 }
+// Recomputes the header's CRC-32C after an edit, so the edit reaches the section parsers.
+void fixChecksum(std::vector<std::uint8_t>& b) {
+  putU32(b, 24, rigCrc32c(std::span<const std::uint8_t>(b).subspan(32)));
+}
+
+// The pose sensor the fixture adds to the small rig (its only region, "floor", is oriented).
+RigPoseSensor smallPoseSensor() {
+  RigPoseSensor ps;
+  ps.sensor_label = "hydra1";
+  ps.region_handle = 0;
+  ps.mode = PoseSensorMode::kClutch;
+  ps.clutch_buttons = 0x21;
+  ps.translation_scale = 0.75;
+  return ps;
+}
 
 class SmallRig : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
     dir_ = new TempDir();
     rig_ = new Rig(test::buildSmallRig(*dir_, &report_));
+    rig_->pose_sensors.push_back(smallPoseSensor());
     bytes_ = new std::vector<std::uint8_t>(serializeRig(*rig_));
   }
   static void TearDownTestSuite() {
@@ -160,6 +204,12 @@ TEST_F(SmallRig, RoundTripIsExact) {
   EXPECT_EQ(back.alignment.translation, r.alignment.translation);
   EXPECT_EQ(back.alignment.device_up, r.alignment.device_up);
   EXPECT_EQ(back.setup.options.rotation_steps, r.setup.options.rotation_steps);
+  ASSERT_EQ(back.pose_sensors.size(), 1u);
+  EXPECT_EQ(back.pose_sensors[0].sensor_label, "hydra1");
+  EXPECT_EQ(back.pose_sensors[0].region_handle, 0);
+  EXPECT_EQ(back.pose_sensors[0].mode, PoseSensorMode::kClutch);
+  EXPECT_EQ(back.pose_sensors[0].clutch_buttons, 0x21);
+  EXPECT_EQ(back.pose_sensors[0].translation_scale, 0.75);
   // Serialising again gives the same bytes.
   EXPECT_EQ(serializeRig(back), *bytes_);
   // The atomic writer left no temporary file behind.
@@ -292,6 +342,119 @@ TEST_F(SmallRig, InconsistentRigsAreNotWritten) {
   EXPECT_CONTAINS(validateRig(bad), "inverted");
 }
 
+TEST_F(SmallRig, RigsWithoutPoseSensorsHaveNoPoseSensorSection) {
+  // No pose sensors: the thirteen required sections only, exactly what the writer produced before
+  // the optional section existed, and it loads with no pose sensors.
+  Rig plain = *rig_;
+  plain.pose_sensors.clear();
+  const std::vector<std::uint8_t> bytes = serializeRig(plain);
+  EXPECT_EQ(bytes[12], 13u);
+  EXPECT_EQ(findSection(bytes, "PSNS").second, 0u);
+  EXPECT_EQ(findSection(*bytes_, "PSNS").first + findSection(*bytes_, "PSNS").second, bytes_->size());  // the last section
+  EXPECT_EQ((*bytes_)[12], 14u);
+  // The same bytes before the pose sensors' section: the required sections did not change.
+  EXPECT_TRUE(std::equal(bytes.begin() + 32 + 13 * 24, bytes.end(), bytes_->begin() + 32 + 14 * 24));
+  const Rig back = parseRig(bytes, "plain.rig");
+  EXPECT_TRUE(back.pose_sensors.empty());
+  EXPECT_EQ(back.setup.region_handles.size(), 1u);
+}
+
+TEST_F(SmallRig, PoseSensorSectionTruncatedAtEveryLengthIsRefused) {
+  // A consistent file (table size, header size, checksum) whose PSNS section is cut short.
+  const auto [offset, size] = findSection(*bytes_, "PSNS");
+  ASSERT_GT(size, 0u);
+  ASSERT_EQ(offset + size, bytes_->size());
+  std::size_t entry = 0;
+  for (std::size_t i = 0; i < 14; ++i) {
+    if (std::memcmp(bytes_->data() + 32 + 24 * i, "PSNS", 4) == 0) entry = 32 + 24 * i;
+  }
+  ASSERT_NE(entry, 0u);
+  for (std::size_t cut = 0; cut < size; ++cut) {
+    std::vector<std::uint8_t> b(bytes_->begin(), bytes_->begin() + static_cast<std::ptrdiff_t>(offset + cut));
+    putU64(b, entry + 16, cut);
+    putU64(b, 16, b.size());
+    fixChecksum(b);
+    const std::string e = parseError(b);
+    EXPECT_CONTAINS(e, "section PSNS");
+    EXPECT_CONTAINS(e, "truncated");
+  }
+}
+
+TEST_F(SmallRig, PoseSensorSectionFaultsHaveClearMessages) {
+  const auto [offset, size] = findSection(*bytes_, "PSNS");
+  ASSERT_GT(size, 0u);
+  // Layout: u32 n, str label ("hydra1": u32 6 + 6 bytes), i32 region, u8 mode, u8 buttons, f64 scale.
+  const std::size_t region_at = offset + 4 + 4 + 6, mode_at = region_at + 4, scale_at = mode_at + 2;
+  auto edited = [&](auto edit) {
+    std::vector<std::uint8_t> b = *bytes_;
+    edit(b);
+    fixChecksum(b);
+    return parseError(b);
+  };
+  EXPECT_EQ(edited([](std::vector<std::uint8_t>&) {}), "");
+  EXPECT_CONTAINS(edited([&](std::vector<std::uint8_t>& b) { b[mode_at] = 2; }), "pose sensor mode 2 is not 0 (clutch) or 1 (absolute)");
+  EXPECT_CONTAINS(edited([&](std::vector<std::uint8_t>& b) { putU32(b, region_at, 1); }), "pose sensor 0 (hydra1) names region handle 1 of 1");
+  EXPECT_CONTAINS(edited([&](std::vector<std::uint8_t>& b) { b[mode_at + 1] = 0; }), "clutch mode with no clutch button");
+  EXPECT_CONTAINS(edited([&](std::vector<std::uint8_t>& b) { putU64(b, scale_at, 0x7FF0000000000000ull); }),  // +inf
+                  "non-finite value in pose sensor translation scale");
+  EXPECT_CONTAINS(edited([&](std::vector<std::uint8_t>& b) { putU64(b, scale_at, 0xBFF0000000000000ull); }),  // -1.0
+                  "translation scale that is not a finite positive number");
+  EXPECT_CONTAINS(edited([&](std::vector<std::uint8_t>& b) { putU32(b, offset, 1000); }), "truncated: 1000 pose sensors");
+  EXPECT_CONTAINS(edited([&](std::vector<std::uint8_t>& b) { putU32(b, offset, 0); }), "24 unexpected bytes at the end of the section");
+  // Absolute mode (1) with any button byte is fine.
+  std::vector<std::uint8_t> b = *bytes_;
+  b[mode_at] = 1;
+  fixChecksum(b);
+  EXPECT_EQ(parseRig(b, "abs.rig").pose_sensors[0].mode, PoseSensorMode::kAbsolute);
+}
+
+TEST_F(SmallRig, RandomCorruptionOfThePoseSensorSectionNeverCrashes) {
+  // Bytes of the PSNS section replaced at random, behind the checksum: each file is refused with
+  // RigFileError or parses into a rig that passes validation.
+  const auto [offset, size] = findSection(*bytes_, "PSNS");
+  ASSERT_GT(size, 0u);
+  std::mt19937 rng(4242);
+  RigParseOptions no_crc;
+  no_crc.verify_checksum = false;
+  int refused = 0, accepted = 0;
+  for (int trial = 0; trial < 2000; ++trial) {
+    std::vector<std::uint8_t> b = *bytes_;
+    const int flips = 1 + static_cast<int>(rng() % 3);
+    for (int f = 0; f < flips; ++f) b[offset + rng() % size] = static_cast<std::uint8_t>(rng());
+    try {
+      const Rig r = parseRig(b, "fuzz.rig", no_crc);
+      EXPECT_EQ(validateRig(r), "");
+      ++accepted;
+    } catch (const RigFileError& e) {
+      EXPECT_NE(std::string(e.what()).find("fuzz.rig: "), std::string::npos) << e.what();
+      ++refused;
+    }
+  }
+  EXPECT_GT(refused, 0);
+  EXPECT_GT(accepted, 0);  // e.g. another label byte or button mask
+}
+
+TEST_F(SmallRig, InvalidPoseSensorsAreNotWritten) {
+  auto fault = [&](auto edit) {
+    Rig bad = *rig_;
+    edit(bad.pose_sensors[0], bad);
+    EXPECT_THROW((void)serializeRig(bad), RigFileError);
+    return validateRig(bad);
+  };
+  EXPECT_CONTAINS(fault([](RigPoseSensor& p, Rig&) { p.sensor_label.clear(); }), "empty sensor label");
+  EXPECT_CONTAINS(fault([](RigPoseSensor& p, Rig&) { p.region_handle = -1; }), "names region handle -1 of 1");
+  EXPECT_CONTAINS(fault([](RigPoseSensor&, Rig& r) { r.setup.region_handles[0].oriented = false; }), "which is not oriented");
+  EXPECT_CONTAINS(fault([](RigPoseSensor& p, Rig&) { p.clutch_buttons = 0; }), "no clutch button");
+  EXPECT_CONTAINS(fault([](RigPoseSensor& p, Rig&) { p.translation_scale = 0.0; }), "translation scale");
+  EXPECT_CONTAINS(fault([](RigPoseSensor& p, Rig&) { p.translation_scale = std::numeric_limits<double>::quiet_NaN(); }),
+                  "translation scale");
+  EXPECT_CONTAINS(fault([](RigPoseSensor& p, Rig& r) { r.pose_sensors.push_back(p); }), "driven by two pose sensors");
+  Rig ok = *rig_;
+  ok.pose_sensors[0].mode = PoseSensorMode::kAbsolute;
+  ok.pose_sensors[0].clutch_buttons = 0;  // buttons do not matter in absolute mode
+  EXPECT_EQ(validateRig(ok), "");
+}
+
 TEST(RigBuild, MarkerBeyondTheLimitStopsTheBuildNamingIt) {
   const TempDir dir;
   // TOP, FRONT and BACK are 15 mm out, LEFT and RIGHT 12 mm: with a 13.5 mm limit the build stops
@@ -328,6 +491,119 @@ TEST(RigDescription, RefusalsNameThePath) {
   const rigbuild::RigDescription d =
       rigbuild::parseRigDescription(R"({"vertex_handles": [{"name": "h", "select": {"sel_file": "a.sel", "sel_values": [2]}}]})", "/x/r.json");
   EXPECT_EQ(d.vertex_handles[0].select.sel_file, std::filesystem::path("/x/a.sel"));
+}
+
+TEST(RigDescription, PoseSensorsNameAnOrientedRegionOfTheSameDescription) {
+  auto error = [](const std::string& sensors) {
+    const std::string json = R"({"region_handles": [
+        {"name": "left", "select": {"vertices": [0]}},
+        {"name": "right", "select": {"vertices": [1]}},
+        {"name": "loose", "select": {"vertices": [2]}, "oriented": false}], "pose_sensors": )" + sensors + "}";
+    try {
+      (void)rigbuild::parseRigDescription(json, "p.json");
+    } catch (const rigbuild::RigBuildError& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  EXPECT_EQ(error(R"([{"sensor": "hydra0", "region": "left"}, {"sensor": "hydra1", "region": "right", "mode": "absolute"}])"), "");
+  EXPECT_CONTAINS(error(R"([{"sensor": "hydra1", "region": "right_hand"}])"),
+                  "p.json: pose_sensors[0].region: no region handle is named 'right_hand' (region handles: left, right, loose)");
+  EXPECT_CONTAINS(error(R"([{"sensor": "hydra1", "region": "loose"}])"), "pose_sensors[0].region: region handle 'loose' is not oriented");
+  EXPECT_CONTAINS(error(R"([{"sensor": "hydra0", "region": "left"}, {"sensor": "hydra1", "region": "left"}])"),
+                  "pose_sensors[1].region: region handle 'left' is already driven by pose_sensors[0]");
+  EXPECT_CONTAINS(error(R"([{"region": "left"}])"), "pose_sensors[0]: needs a sensor");
+  EXPECT_CONTAINS(error(R"([{"sensor": "", "region": "left"}])"), "pose_sensors[0].sensor: must not be empty");
+  EXPECT_CONTAINS(error(R"([{"sensor": "hydra0"}])"), "pose_sensors[0]: needs a region");
+  EXPECT_CONTAINS(error(R"([{"sensor": "hydra0", "region": "left", "mode": "relative"}])"), "pose_sensors[0].mode: expected \"clutch\" or \"absolute\"");
+  EXPECT_CONTAINS(error(R"([{"sensor": "hydra0", "region": "left", "clutch_buttons": 0}])"), "pose_sensors[0].clutch_buttons");
+  EXPECT_CONTAINS(error(R"([{"sensor": "hydra0", "region": "left", "clutch_buttons": 256}])"), "pose_sensors[0].clutch_buttons");
+  EXPECT_CONTAINS(error(R"([{"sensor": "hydra0", "region": "left", "translation_scale": -2}])"), "pose_sensors[0].translation_scale");
+  EXPECT_CONTAINS(error(R"([{"sensor": "hydra0", "region": "left", "scale": 2}])"), "pose_sensors[0]: unknown key 'scale'");
+  EXPECT_CONTAINS(error(R"({"sensor": "hydra0"})"), "pose_sensors: expected an array");
+  const rigbuild::RigDescription d = rigbuild::parseRigDescription(R"({"region_handles": [
+        {"name": "a", "select": {"vertices": [0]}}, {"name": "b", "select": {"vertices": [1]}}],
+      "pose_sensors": [{"sensor": "hydra1", "region": "b", "mode": "absolute", "clutch_buttons": 6, "translation_scale": 2.5}]})",
+                                                                   "p.json");
+  ASSERT_EQ(d.pose_sensors.size(), 1u);
+  EXPECT_EQ(d.pose_sensors[0].sensor, "hydra1");
+  EXPECT_EQ(d.pose_sensors[0].region_index, 1);
+  EXPECT_EQ(d.pose_sensors[0].mode, PoseSensorMode::kAbsolute);
+  EXPECT_EQ(d.pose_sensors[0].clutch_buttons, 6);
+  EXPECT_EQ(d.pose_sensors[0].translation_scale, 2.5);
+}
+
+TEST(RigBuild, PoseSensorsWithoutAClipTakeTheAlignmentFromTheDescription) {
+  const TempDir dir;
+  rigbuild::BuildRigInputs in;
+  in.mesh = test::writeBlockTetMesh(dir, "block");
+  const std::string floor = R"("region_handles": [ { "name": "floor", "select": { "box": { "min": [-1, -0.01, -1], "max": [1, 0.01, 1] } } } ])";
+  const std::string regions = floor + R"(,
+      "pose_sensors": [ { "sensor": "hydra0", "region": "floor", "clutch_buttons": 4, "translation_scale": 0.5 } ])";
+  // Axes and unit: device z up -> rig y up, mm -> m.
+  in.description = rigbuild::parseRigDescription("{ \"mesh_unit\": \"m\", \"mesh_up\": \"y\", \"markers\": { \"device_up\": \"z\" }, " +
+                                                     regions + "}", dir.path() / "r.json");
+  rigbuild::BuildRigReport report;
+  const Rig rig = rigbuild::buildRig(in, &report);
+  ASSERT_EQ(rig.pose_sensors.size(), 1u);
+  EXPECT_EQ(rig.pose_sensors[0].sensor_label, "hydra0");
+  EXPECT_EQ(rig.pose_sensors[0].region_handle, 0);
+  EXPECT_EQ(rig.pose_sensors[0].clutch_buttons, 4);
+  EXPECT_EQ(rig.pose_sensors[0].translation_scale, 0.5);
+  EXPECT_LT((rig.alignment.apply(Eigen::Vector3d(0, 0, 1000)) - Eigen::Vector3d(0, 1, 0)).norm(), 1e-12);
+  EXPECT_NEAR(rig.alignment.linear.determinant(), 1e-9, 1e-21);  // a rotation times 0.001
+  EXPECT_TRUE(std::any_of(report.notes.begin(), report.notes.end(),
+                          [](const std::string& n) { return n.find("device up z -> rig up y") != std::string::npos; }));
+  // An explicit matrix.
+  in.description = rigbuild::parseRigDescription(R"({ "mesh_unit": "m", "markers": { "alignment": "matrix",
+      "matrix": [0, 0, 0.002, 1,  0.002, 0, 0, 2,  0, 0.002, 0, 3] }, )" + regions + "}", dir.path() / "r.json");
+  const Rig m = rigbuild::buildRig(in);
+  EXPECT_LT((m.alignment.apply(Eigen::Vector3d(10, 20, 30)) - Eigen::Vector3d(1.06, 2.02, 3.04)).norm(), 1e-12);
+  EXPECT_NEAR(m.alignment.fit_scale, 2.0, 1e-12);
+  // Without pose sensors a rig without a clip keeps the unit-only alignment it always had.
+  in.description = rigbuild::parseRigDescription(R"({ "mesh_unit": "m", "markers": { "device_up": "z" }, )" + floor + "}", dir.path() / "r.json");
+  EXPECT_EQ(rigbuild::buildRig(in).alignment.linear, Eigen::Matrix3d(1e-3 * Eigen::Matrix3d::Identity()));
+}
+
+TEST(RigBuild, ThePuppetHydraExampleBuilds) {
+  // assets/puppet_hydra.json on assets/bar_4x4x33.node: the two ends of the bar as oriented
+  // regions, hydra0 on the near end and hydra1 on the far end, clutch on button bit 0x01; bar in
+  // cm, the Hydra's mm -> 0.1 cm with the same axes (both y up).
+  const std::filesystem::path source(TETRIG_SOURCE_DIR);
+  rigbuild::BuildRigInputs in;
+  in.mesh = source / "assets" / "bar_4x4x33.node";
+  in.description = rigbuild::readRigDescription(source / "assets" / "puppet_hydra.json");
+  const Rig rig = rigbuild::buildRig(in);  // also builds the Deformer once (check_deformer)
+  ASSERT_EQ(rig.setup.region_handles.size(), 2u);
+  EXPECT_EQ(rig.region_handle_names, (std::vector<std::string>{"near_end", "far_end"}));
+  for (std::size_t r = 0; r < 2; ++r) {
+    const RegionHandle& region = rig.setup.region_handles[r];
+    EXPECT_TRUE(region.oriented);
+    EXPECT_EQ(region.tets.size(), 4u * 4u * 5u) << "one layer of 4 x 4 cubes, 5 tets each";
+    for (const std::int32_t t : region.tets) {
+      for (int k = 0; k < 4; ++k) {
+        const double z = rig.tet_mesh.vertices(rig.tet_mesh.tets(t, k), 2);
+        EXPECT_TRUE(r == 0 ? z <= 1.0 : z >= 32.0) << "region " << r << " tet " << t << " corner z " << z;
+      }
+    }
+  }
+  ASSERT_EQ(rig.pose_sensors.size(), 2u);
+  EXPECT_EQ(rig.pose_sensors[0].sensor_label, "hydra0");
+  EXPECT_EQ(rig.pose_sensors[0].region_handle, 0);
+  EXPECT_EQ(rig.pose_sensors[1].sensor_label, "hydra1");
+  EXPECT_EQ(rig.pose_sensors[1].region_handle, 1);
+  for (const RigPoseSensor& ps : rig.pose_sensors) {
+    EXPECT_EQ(ps.mode, PoseSensorMode::kClutch);
+    EXPECT_EQ(ps.clutch_buttons, 1);
+    EXPECT_EQ(ps.translation_scale, 1.0);
+  }
+  EXPECT_EQ(rig.unit, "cm");
+  EXPECT_LT((rig.alignment.linear - 0.1 * Eigen::Matrix3d::Identity()).norm(), 1e-15);
+  // Through the file and back.
+  const Rig back = parseRig(serializeRig(rig), "puppet.rig");
+  ASSERT_EQ(back.pose_sensors.size(), 2u);
+  EXPECT_EQ(back.pose_sensors[1].sensor_label, "hydra1");
+  EXPECT_EQ(back.pose_sensors[1].region_handle, 1);
 }
 
 TEST(RigBuild, OverlappingHandlesAreRefusedByName) {

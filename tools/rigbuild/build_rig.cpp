@@ -207,6 +207,41 @@ std::vector<std::int32_t> resolveTets(const Context& ctx, const Selection& s, co
   return tets;
 }
 
+// Pose sensors without a marker clip: nothing to fit, so device mm -> rig units comes from the
+// description alone: markers.matrix when markers.alignment is "matrix", else ("units", or "auto"
+// with no markers to fit) the device up axis turned onto the rig up axis and mm scaled to the rig
+// unit, translation 0 (pose sensors use only relative motion: clutch and absolute anchors).
+RigAlignment poseSensorAlignment(const MarkerOptions& mopt, const std::string& rig_up, double rig_units_per_mm) {
+  RigAlignment a;
+  a.rig_units_per_mm = rig_units_per_mm;
+  a.device_up = mopt.device_up;
+  a.rig_up = rig_up;
+  if (mopt.alignment == "matrix") {
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 3; ++c) a.linear(r, c) = mopt.matrix[static_cast<std::size_t>(r * 4 + c)];
+      a.translation[r] = mopt.matrix[static_cast<std::size_t>(r * 4 + 3)];
+    }
+    if (!a.linear.allFinite() || std::abs(a.linear.determinant()) < 1e-300) {
+      throw RigBuildError("pose sensors: markers.matrix is not invertible");
+    }
+    a.fit_scale = std::cbrt(std::abs(a.linear.determinant())) / rig_units_per_mm;
+    return a;
+  }
+  const Eigen::Vector3d up_device = axisVector(mopt.device_up);
+  const Eigen::Vector3d up_rig = axisVector(rig_up);
+  Eigen::Matrix3d axes;
+  if (up_device.dot(up_rig) < -0.5) {
+    // Opposite: a half turn about an axis perpendicular to both.
+    const Eigen::Vector3d perp = up_device.cross(Eigen::Vector3d::UnitX()).norm() > 0.5 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
+    axes = Eigen::AngleAxisd(M_PI, perp).toRotationMatrix();
+  } else {
+    axes = Eigen::Quaterniond::FromTwoVectors(up_device, up_rig).toRotationMatrix();
+  }
+  a.linear = rig_units_per_mm * axes;
+  a.fit_scale = 1.0;
+  return a;
+}
+
 }  // namespace
 
 bool isTetMeshPath(const std::filesystem::path& path) {
@@ -424,6 +459,14 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
                           "); check the clip's rest frame and axes, exclude the marker, or raise --max-marker-distance");
     }
   }
+  if (!clip && !desc.pose_sensors.empty()) {
+    rig.alignment = poseSensorAlignment(mopt, desc.mesh_up, rig.alignment.rig_units_per_mm);
+    report.notes.push_back(mopt.alignment == "matrix"
+                               ? std::string("pose sensors: no marker clip, device mm -> rig units from markers.matrix")
+                               : "pose sensors: no marker clip, device mm -> rig units by axes and unit only (device up " +
+                                     mopt.device_up + " -> rig up " + desc.mesh_up + ", " + fmt("%.4g", rig.alignment.rig_units_per_mm) +
+                                     " " + unit + " per mm)");
+  }
   ctx.marker_labels = &markers.labels;
   ctx.marker_positions = &marker_rig;
 
@@ -485,6 +528,20 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
     if (best.tet < 0) throw RigBuildError("point handle '" + p.name + "': no tet can carry it");
     setup.point_handles.push_back(best);
     rig.point_handle_names.push_back(p.name);
+  }
+  // Pose sensors: the description parser resolved each region name to its index in
+  // desc.region_handles, which is its index in setup.region_handles (same order, above).
+  for (const PoseSensorSpec& p : desc.pose_sensors) {
+    if (p.region_index < 0 || static_cast<std::size_t>(p.region_index) >= setup.region_handles.size()) {
+      throw RigBuildError(p.where + ": pose sensor " + p.sensor + " names no region handle of this rig");
+    }
+    RigPoseSensor ps;
+    ps.sensor_label = p.sensor;
+    ps.region_handle = p.region_index;
+    ps.mode = p.mode;
+    ps.clutch_buttons = p.clutch_buttons;
+    ps.translation_scale = p.translation_scale;
+    rig.pose_sensors.push_back(ps);
   }
   std::vector<std::string> group_of(static_cast<std::size_t>(body.tetCount()));
   for (const NamedSelection& n : desc.rigid_groups) {

@@ -187,7 +187,7 @@ RigDescription parseRigDescription(const std::string& json_text, const std::file
     throw RigBuildError(file + ": not valid JSON at byte " + std::to_string(e.byte) + ": fix the syntax");
   }
   r.allowKeys(root, "", {"format", "version", "name", "mesh_unit", "mesh_up", "tet_vertices", "pose_transfer", "vertex_handles",
-                         "region_handles", "point_handles", "rigid_groups", "stiffness", "markers", "deformer"});
+                         "region_handles", "point_handles", "rigid_groups", "stiffness", "markers", "pose_sensors", "deformer"});
   if (root.contains("format") && r.string(root["format"], "format") != "tetrig-rig") {
     r.fail("format", "expected \"tetrig-rig\"");
   }
@@ -276,6 +276,59 @@ RigDescription parseRigDescription(const std::string& json_text, const std::file
     if (o.faces_per_marker < 1 || o.faces_per_marker > 16) r.fail("markers.faces_per_marker", "must be in [1, 16]");
     if (m.contains("invisible_stiffness")) o.invisible_stiffness = r.number(m["invisible_stiffness"], "markers.invisible_stiffness");
     if (!(o.invisible_stiffness > 0)) r.fail("markers.invisible_stiffness", "must be positive");
+  }
+  if (root.contains("pose_sensors")) {
+    const json& arr = root["pose_sensors"];
+    if (!arr.is_array()) r.fail("pose_sensors", "expected an array");
+    for (std::size_t i = 0; i < arr.size(); ++i) {
+      const std::string where = "pose_sensors[" + std::to_string(i) + "]";
+      r.allowKeys(arr[i], where, {"sensor", "region", "mode", "clutch_buttons", "translation_scale"});
+      PoseSensorSpec p;
+      p.where = where;
+      if (!arr[i].contains("sensor")) r.fail(where, "needs a sensor (the marker label of the controller, e.g. \"hydra0\")");
+      p.sensor = r.string(arr[i]["sensor"], where + ".sensor");
+      if (p.sensor.empty()) r.fail(where + ".sensor", "must not be empty");
+      if (!arr[i].contains("region")) r.fail(where, "needs a region (the name of an oriented region handle)");
+      p.region = r.string(arr[i]["region"], where + ".region");
+      std::string names;
+      for (std::size_t h = 0; h < d.region_handles.size(); ++h) {
+        const NamedSelection& region = d.region_handles[h];
+        names += (names.empty() ? "" : ", ") + region.name;
+        if (region.name != p.region) continue;
+        if (p.region_index >= 0) r.fail(where + ".region", "two region handles are named '" + p.region + "': rename one");
+        p.region_index = static_cast<std::int32_t>(h);
+      }
+      if (p.region_index < 0) {
+        r.fail(where + ".region", "no region handle is named '" + p.region + "' (region handles: " +
+                                      (names.empty() ? std::string("none") : names) + ")");
+      }
+      if (!d.region_handles[static_cast<std::size_t>(p.region_index)].oriented) {
+        r.fail(where + ".region", "region handle '" + p.region + "' is not oriented; a pose sensor drives its rotation (set \"oriented\": true)");
+      }
+      for (const PoseSensorSpec& other : d.pose_sensors) {
+        if (other.region_index == p.region_index) {
+          r.fail(where + ".region", "region handle '" + p.region + "' is already driven by " + other.where + " (sensor " + other.sensor + ")");
+        }
+      }
+      if (arr[i].contains("mode")) {
+        const std::string mode = r.string(arr[i]["mode"], where + ".mode");
+        if (mode == "clutch") {
+          p.mode = PoseSensorMode::kClutch;
+        } else if (mode == "absolute") {
+          p.mode = PoseSensorMode::kAbsolute;
+        } else {
+          r.fail(where + ".mode", "expected \"clutch\" or \"absolute\"");
+        }
+      }
+      if (arr[i].contains("clutch_buttons")) {
+        const std::int64_t b = r.integer(arr[i]["clutch_buttons"], where + ".clutch_buttons");
+        if (b < 1 || b > 255) r.fail(where + ".clutch_buttons", "must be a button bit mask in [1, 255]");
+        p.clutch_buttons = static_cast<std::uint8_t>(b);
+      }
+      if (arr[i].contains("translation_scale")) p.translation_scale = r.number(arr[i]["translation_scale"], where + ".translation_scale");
+      if (!(p.translation_scale > 0)) r.fail(where + ".translation_scale", "must be positive");
+      d.pose_sensors.push_back(std::move(p));
+    }
   }
   if (root.contains("deformer")) {
     const json& m = root["deformer"];

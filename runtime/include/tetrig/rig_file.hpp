@@ -6,9 +6,13 @@
 //   // per frame: device marker (mm, device axes) -> rig units with rig.alignment, write the
 //   // target of marker k at targets.vertex_positions[rig.markers[k].vertex_handle];
 //   // x_fine = B x_tet with rig.pose_transfer (tetrig/pose_transfer.hpp).
+//   // pose sensors: one tetrig::PoseSensorDriver per rig.pose_sensors[k] (tetrig/pose_sensor.hpp)
+//   // updates targets.region_transforms[rig.pose_sensors[k].region_handle].
 //
 // File = 32-byte header (magic "TETRIGRF", format version, section count, file size, CRC-32C of
 // every byte after the header) + a section table (tag, offset, size per section) + sections.
+// Thirteen sections are required; optional ones (PSNS: pose sensors) are written only when the
+// rig has something to put in them, and a file without them loads as before.
 // The loader checks magic, version, file size, checksum, every section's bounds and exact size,
 // every count against the bytes present (before allocating), every index range and every float
 // for finiteness, then that the tet mesh has no inverted or degenerate tet. Any mismatch throws
@@ -67,6 +71,22 @@ struct RigAlignment {
   Eigen::Vector3d apply(const Eigen::Vector3d& device_mm) const { return linear * device_mm + translation; }
 };
 
+// How a pose sensor drives its region handle (tetrig/pose_sensor.hpp has the equations).
+enum class PoseSensorMode : std::uint8_t {
+  kClutch = 0,    // the region follows the controller's motion while a clutch button is held
+  kAbsolute = 1,  // the region follows the controller's pose, anchored at its first valid sample
+};
+
+// A pose sensor (a marker with an orientation, e.g. one Razer Hydra controller) bound by its label
+// to an oriented region handle. Stored in the optional PSNS section of the rig file.
+struct RigPoseSensor {
+  std::string sensor_label;                     // e.g. "hydra0": the label the source gives the marker
+  std::int32_t region_handle = -1;              // index into setup.region_handles (an oriented region)
+  PoseSensorMode mode = PoseSensorMode::kClutch;
+  std::uint8_t clutch_buttons = 0xFF;           // clutch engaged while any of these Marker::buttons bits is set
+  double translation_scale = 1.0;               // controller motion (rig units after alignment) -> region motion
+};
+
 struct Rig {
   std::string name;              // free text: source mesh, clip
   std::string unit = "m";        // rig unit name ("m", "mm", "cm", "mesh")
@@ -87,6 +107,7 @@ struct Rig {
   std::vector<std::string> rigid_group_names;    // one per setup.rigid_groups
   std::vector<RigMarker> markers;
   RigAlignment alignment;
+  std::vector<RigPoseSensor> pose_sensors;       // optional (empty: the file has no PSNS section)
 };
 
 // Serialises a rig into the file format (header, section table, sections, checksum). Validates the
@@ -104,7 +125,9 @@ Rig parseRig(std::span<const std::uint8_t> bytes, std::string_view source_name, 
 Rig loadRigFile(const std::filesystem::path& path);
 
 // Checks a rig's internal consistency (sizes, index ranges, finite values, orientation, marker
-// handles). Returns "" when valid, else a one-line description of the first fault.
+// handles, pose sensors: label non-empty, region in range and oriented, one sensor per region,
+// clutch buttons non-zero in clutch mode, finite positive translation scale). Returns "" when valid, else a one-line
+// description of the first fault.
 std::string validateRig(const Rig& rig);
 
 // Bytes the rig's arrays occupy in memory (positions, tets, B, handles; excluding the Deformer).

@@ -6,7 +6,7 @@
 //   byte 7        sequence counter (u8, wraps)
 //   bytes 8..29   controller 0, bytes 30..51 controller 1; each block (offsets within it):
 //     +0  int16 LE position x, y, z (mm)        +6  int16 LE quaternion w, x, y, z (/ 32768)
-//     +14 u8 buttons                            +15 int16 LE joystick x, +17 joystick y
+//     +14 u8 buttons (-> Marker::buttons)        +15 int16 LE joystick x, +17 joystick y
 //     +19 u8 trigger                            +20..+21 not used here
 // Bytes 0..6 are not interpreted. Motion mode is switched on by a 91-byte feature report
 // (report id 0) sent to interface 1: hydraMotionModeFeatureReport().
@@ -32,6 +32,10 @@ inline constexpr std::size_t kHydraReportSize = 52;
 inline constexpr std::size_t kHydraFeatureReportSize = 91;
 inline constexpr std::size_t kHydraControllerCount = 2;
 inline constexpr float kHydraQuaternionScale = 1.0f / 32768.0f;
+// Nominal report rate (documented ~250 Hz; the device sends no rate of its own).
+inline constexpr double kHydraNominalRateHz = 250.0;
+// Fixed labels of the two sensors: marker id 0 is "hydra0" (block at byte 8), id 1 "hydra1" (byte 30).
+inline constexpr std::array<const char*, kHydraControllerCount> kHydraSensorLabels = {"hydra0", "hydra1"};
 
 // One controller block exactly as on the wire (raw integers).
 struct HydraRawController {
@@ -88,8 +92,10 @@ struct HydraDecoderStats {
 class HydraDecoder {
  public:
   // Decodes one 52-byte report. On kFrame `out` holds two markers (id 0 = first block, id 1 =
-  // second block): position in mm (device axes), has_orientation = 1 and a normalised
-  // quaternion (w, x, y, z); a controller whose quaternion is zero, non-finite or far from unit
+  // second block; their labels are kHydraSensorLabels, "hydra0" and "hydra1"): position in mm
+  // (device axes), has_orientation = 1 and a normalised quaternion (w, x, y, z), and
+  // Marker::buttons = the block's raw button byte (bits as sent, also when the pose is
+  // rejected); a controller whose quaternion is zero, non-finite or far from unit
   // length (|q| outside [0.5, 2]) is invalidated (valid = 0, position 0, identity orientation)
   // and counted in rejected_count with kFrameRejectedMarkers. frame_counter is the 8-bit
   // sequence extended to 64 bits (first report: its sequence value); a forward step of d > 1

@@ -1,14 +1,16 @@
-// The tetrig marker-stream protocol, version 1.0: pure decoder, fragment reassembler and encoder.
-// The normative specification (byte tables, CRC, fragmentation, commands) is docs/protocol.md;
-// this header mirrors it. Summary:
+// The tetrig marker-stream protocol, version 1.0, and its descriptor message, version 1.0: pure
+// decoder, fragment reassembler and encoders. The normative specification (byte tables, CRC,
+// fragmentation, commands) is docs/protocol.md; this header mirrors it. Summary:
 //
-//   frame   = header (28 bytes) + marker_count records (16 or 32 bytes) + CRC-32C (4 bytes),
-//             all little-endian; positions are IEEE-754 binary32 millimetres.
-//   HID     = a frame split over 64-byte input reports (report id 0x01, 6-byte fragment header,
-//             up to 58 payload bytes each), reassembled strictly in order.
-//   USB     = one whole frame per bulk IN transfer (at most kMarkerStreamMaxFrameSize bytes).
-//   control = start / stop / set-rate as HID output report 0x02 or USB vendor control requests;
-//             device info as HID feature report 0x03 or a vendor IN control request.
+//   frame      = header (28 bytes) + marker_count records (16 or 32 bytes) + CRC-32C (4 bytes),
+//                all little-endian; positions are IEEE-754 binary32 millimetres.
+//   descriptor = header (20 bytes) + entry_count (id u16, label_length u8, label bytes) entries
+//                sorted by id + CRC-32C: the label of each marker id ("TMSD"; section 2a).
+//   HID        = a message (frame or descriptor) split over 64-byte input reports (report id
+//                0x01, 6-byte fragment header, up to 58 payload bytes each), reassembled in order.
+//   USB        = one whole message per bulk IN transfer (at most kMarkerStreamMaxMessageSize bytes).
+//   control    = start / stop / set-rate / get-descriptor as HID output report 0x02 or USB vendor
+//                control requests; device info as HID feature report 0x03 or a vendor IN request.
 //
 // Nothing here does I/O, allocates, locks or throws. Decoders and reassemblers are single-thread
 // objects (one per stream, used on that stream's driver thread); the free functions may be
@@ -19,6 +21,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <span>
+#include <string_view>
 
 #include "tetrig/marker_frame.hpp"
 
@@ -40,6 +43,21 @@ inline constexpr std::size_t kMarkerRecordSizePose = 32;
 inline constexpr std::size_t kMarkerStreamMaxFrameSize =
     kMarkerStreamMaxHeaderSize + kMarkerStreamMaxMarkers * kMarkerRecordSizePose + kMarkerStreamCrcSize;
 static_assert(kMarkerStreamMaxMarkers == static_cast<std::size_t>(tetrig::kMaxMarkers));
+
+// Descriptor message (docs/protocol.md, section 2a): labels for marker ids.
+inline constexpr std::array<std::uint8_t, 4> kMarkerStreamDescriptorMagic = {0x54, 0x4D, 0x53, 0x44};  // "TMSD"
+inline constexpr std::uint8_t kMarkerStreamDescriptorVersionMajor = 1;
+inline constexpr std::uint8_t kMarkerStreamDescriptorVersionMinor = 0;
+inline constexpr std::size_t kMarkerStreamDescriptorHeaderSize = 20;  // header_size written by v1.0 senders
+inline constexpr std::size_t kMarkerLabelMaxLength = 31;              // label bytes (UTF-8, no NUL)
+inline constexpr std::size_t kMarkerStreamDescriptorEntryHeaderSize = 3;  // id u16 + label_length u8
+// Largest descriptor a v1 decoder accepts: 64 + 256 * (3 + 31) + 4 = 8772 bytes.
+inline constexpr std::size_t kMarkerStreamMaxDescriptorSize =
+    kMarkerStreamMaxHeaderSize + kMarkerStreamMaxMarkers * (kMarkerStreamDescriptorEntryHeaderSize + kMarkerLabelMaxLength) +
+    kMarkerStreamCrcSize;
+// Largest message of either kind: what a USB IN transfer and the HID reassembly buffer must hold.
+inline constexpr std::size_t kMarkerStreamMaxMessageSize =
+    kMarkerStreamMaxDescriptorSize > kMarkerStreamMaxFrameSize ? kMarkerStreamMaxDescriptorSize : kMarkerStreamMaxFrameSize;
 
 // Largest |coordinate| a decoder accepts by default (100 m); larger values are "absurd".
 inline constexpr float kMarkerStreamDefaultMaxAbsCoordinateMm = 100000.0f;
@@ -65,19 +83,22 @@ inline constexpr std::uint8_t kMarkerStreamHidFeatureReportId = 0x03; // device 
 inline constexpr std::size_t kMarkerStreamFragmentHeaderSize = 6;
 inline constexpr std::size_t kMarkerStreamFragmentPayload = kMarkerStreamHidReportSize - kMarkerStreamFragmentHeaderSize;  // 58
 inline constexpr std::size_t kMarkerStreamMaxFragments =
-    (kMarkerStreamMaxFrameSize + kMarkerStreamFragmentPayload - 1) / kMarkerStreamFragmentPayload;  // 143
+    (kMarkerStreamMaxMessageSize + kMarkerStreamFragmentPayload - 1) / kMarkerStreamFragmentPayload;  // 152
 
 // ---------------------------------------------------------------------------------------------
 // Status codes (libusb style: 0 and positive = success kinds, negative = errors).
 
 enum class MarkerStreamStatus : int {
   kFrame = 0,                // a frame was decoded into the caller's MarkerFrame
-  kNeedMore = 1,             // fragment stored; the frame is not complete yet (not an error)
+  kNeedMore = 1,             // fragment stored; the message is not complete yet (not an error)
+  kDescriptor = 2,           // a descriptor was accepted: the label table changed hands (the
+                             // caller's MarkerFrame is not modified)
   kTruncated = -1,           // fewer bytes than the header / frame_length / fragment header says
-  kBadMagic = -2,            // first four bytes are not "TMSF"
+  kBadMagic = -2,            // first four bytes are neither "TMSF" (frame) nor "TMSD" (descriptor)
   kUnsupportedVersion = -3,  // version_major is not 1: nothing else in the frame is interpreted
   kBadHeader = -4,           // header_size, record_format or marker_count out of range
-  kBadLength = -5,           // frame_length disagrees with the header, or bytes follow the frame
+  kBadLength = -5,           // frame_length / descriptor_length disagrees with the header, or bytes
+                             // follow the message
   kBadCrc = -6,              // CRC-32C mismatch
   kDuplicate = -7,           // same frame counter as the last accepted frame: dropped
   kOutOfOrder = -8,          // frame counter behind the last accepted frame: dropped
@@ -85,6 +106,9 @@ enum class MarkerStreamStatus : int {
   kBadFragment = -10,        // fragment header inconsistent (index/count/length), or the frame's
                              // counter does not match the fragment tag
   kFragmentLost = -11,       // a fragment is missing or out of order: the partial frame was dropped
+  kBadDescriptor = -12,      // descriptor entries invalid (label length or bytes, ids not strictly
+                             // ascending, duplicate label, entries not filling the message exactly):
+                             // the whole descriptor is rejected and the previous label table kept
 };
 
 // Short stable name ("frame", "bad crc", ...). Any thread; returns a static string.
@@ -119,17 +143,81 @@ struct MarkerStreamHeader {
 [[nodiscard]] MarkerStreamStatus validateMarkerStreamFrame(std::span<const std::uint8_t> bytes,
                                                            MarkerStreamHeader& header) noexcept;
 
-// For byte streams (raw recordings): the frame_length announced by the header at the start of
-// `bytes`, or 0 when fewer than 12 bytes are given, the magic or major version is wrong, or the
-// length is outside [header minimum, kMarkerStreamMaxFrameSize]. Any thread; no allocation.
+// For byte streams (raw recordings): the length of the message at the start of `bytes` as its
+// header announces it (a frame's frame_length or a descriptor's descriptor_length), or 0 when
+// fewer than 12 bytes are given, the magic is neither "TMSF" nor "TMSD", the major version is not
+// 1, or the length is outside [header minimum, kMarkerStreamMaxFrameSize] for a frame or
+// [24, kMarkerStreamMaxDescriptorSize] for a descriptor. Any thread; no allocation.
 [[nodiscard]] std::size_t markerStreamPeekFrameLength(std::span<const std::uint8_t> bytes) noexcept;
 
 // ---------------------------------------------------------------------------------------------
-// Fragment reassembly (HID). Fixed 8.3 KB buffer inside the object; no allocation.
+// Labels: the descriptor message (docs/protocol.md, sections 2a and 4.4).
+
+// One named marker id. `text[0 .. length)` is the label (1..31 bytes of printable ASCII or UTF-8,
+// no NUL, not NUL-terminated); bytes after `length` are 0.
+struct MarkerLabelEntry {
+  std::uint16_t id = 0;
+  std::uint8_t length = 0;
+  char text[kMarkerLabelMaxLength] = {};
+  [[nodiscard]] std::string_view label() const noexcept { return {text, length}; }
+};
+
+// The label of each marker id a descriptor named: fixed capacity (256 entries, about 8.7 KB, no
+// heap), trivially copyable, entries sorted by strictly ascending id (binary search). Ids not in
+// the table are unnamed. Any thread may read a table no one writes; the decoder writes its own on
+// its driver thread.
+struct MarkerLabelTable {
+  std::uint16_t count = 0;       // entries[0 .. count) are meaningful
+  std::uint32_t generation = 0;  // 0: no descriptor accepted yet; +1 whenever an accepted
+                                 // descriptor's entries differ from the table's (or it is the first)
+  std::uint32_t table_id = 0;    // the last accepted descriptor's table_id field
+  std::array<MarkerLabelEntry, kMarkerStreamMaxMarkers> entries{};
+
+  // The entry for `id`, or nullptr if the table does not name it. O(log count); no allocation.
+  [[nodiscard]] const MarkerLabelEntry* find(std::uint16_t id) const noexcept;
+  // The label of `id`, or "" if it is unnamed. The view points into this table. No allocation.
+  [[nodiscard]] std::string_view label(std::uint16_t id) const noexcept;
+};
+
+// Validates one whole descriptor message (`bytes` = exactly the message, CRC included) and, on
+// success, replaces `table`'s entries and table_id with its contents and returns kDescriptor;
+// `table.generation` grows by one when the entries differ from the ones it held or it held none
+// (generation 0). On any other status (kTruncated, kBadMagic, kUnsupportedVersion, kBadHeader,
+// kBadLength, kBadCrc, kBadDescriptor; checks in the order of docs/protocol.md section 4.4)
+// `table` is not modified. Any thread (for `table`, the thread that owns it); no allocation.
+[[nodiscard]] MarkerStreamStatus decodeMarkerStreamDescriptor(std::span<const std::uint8_t> bytes,
+                                                              MarkerLabelTable& table) noexcept;
+
+// One (id, label) pair for the encoder.
+struct MarkerLabel {
+  std::uint16_t id = 0;
+  std::string_view label;
+};
+
+// Bytes a v1.0 descriptor of these labels occupies: 20 + sum(3 + label length) + 4.
+[[nodiscard]] std::size_t markerStreamDescriptorSize(std::span<const MarkerLabel> labels) noexcept;
+
+// Encodes a v1.0 descriptor (header_size 20) with `labels` in the order given and `table_id`
+// (also the HID fragment tag's source) into `out`. Writes what it is given: unsorted or
+// duplicate ids, empty or non-printable labels are encoded as they are (so tests and mock devices
+// can produce hostile descriptors; a conforming sender passes ids in strictly ascending order and
+// valid labels). Returns the message length, or 0 when there are more than 256 labels, a label is
+// longer than kMarkerLabelMaxLength bytes, or `out` is smaller than markerStreamDescriptorSize().
+// Any thread; no allocation.
+[[nodiscard]] std::size_t encodeMarkerStreamDescriptor(std::span<const MarkerLabel> labels, std::uint32_t table_id,
+                                                       std::span<std::uint8_t> out) noexcept;
+
+// True if `label` is a valid descriptor label: 1..31 bytes of well-formed UTF-8 (no overlong
+// forms, surrogates or code points above U+10FFFF) with no control character (U+0000..U+001F,
+// U+007F..U+009F). Any thread; no allocation.
+[[nodiscard]] bool isValidMarkerLabel(std::string_view label) noexcept;
+
+// ---------------------------------------------------------------------------------------------
+// Fragment reassembly (HID). Fixed 8.8 KB buffer inside the object; no allocation.
 
 struct MarkerStreamReassemblerStats {
   std::uint64_t reports = 0;                // reports pushed
-  std::uint64_t frames = 0;                 // frames completed
+  std::uint64_t frames = 0;                 // messages (frames or descriptors) completed
   std::uint64_t partial_frames_dropped = 0; // frames abandoned because a fragment was lost/out of order
   std::uint64_t orphan_fragments = 0;       // fragments with index > 0 and no frame in progress
   std::uint64_t bad_reports = 0;            // wrong report id, truncated or inconsistent fragment headers
@@ -139,15 +227,16 @@ class MarkerStreamReassembler {
  public:
   // Feeds one HID input report as hidapi's hid_read returns it: byte 0 is the report id (0x01),
   // then the fragment header and payload (bytes after 6 + payload_length are ignored).
-  // Returns kNeedMore (stored), kFrame (a whole frame is in frame()), or kTruncated, kBadReport,
-  // kBadFragment, kFragmentLost. Reassembly is strictly in order (docs/protocol.md): any
-  // missing, repeated or reordered fragment drops the frame in progress, and the reassembler
-  // waits for the next fragment with index 0. Driver thread; no allocation.
+  // Returns kNeedMore (stored), kFrame (a whole message, frame or descriptor, is in frame()), or
+  // kTruncated, kBadReport, kBadFragment, kFragmentLost. Reassembly is strictly in order
+  // (docs/protocol.md): any missing, repeated or reordered fragment drops the message in
+  // progress, and the reassembler waits for the next fragment with index 0. Driver thread; no
+  // allocation.
   [[nodiscard]] MarkerStreamStatus push(std::span<const std::uint8_t> report) noexcept;
 
-  // The completed frame's bytes (valid after push() returned kFrame, until the next push/reset).
+  // The completed message's bytes (valid after push() returned kFrame, until the next push/reset).
   [[nodiscard]] std::span<const std::uint8_t> frame() const noexcept { return {buffer_.data(), frame_size_}; }
-  // Fragment tag (frame counter low 16 bits) of the completed frame.
+  // Fragment tag of the completed message (a frame's counter or a descriptor's table_id, low 16 bits).
   [[nodiscard]] std::uint16_t frameTag() const noexcept { return tag_; }
 
   // Drops any partial frame (e.g. after a reconnect). Counters are kept.
@@ -190,13 +279,20 @@ struct MarkerStreamStats {
   std::uint64_t version_errors = 0;    // kUnsupportedVersion
   std::uint64_t fragment_errors = 0;   // kBadReport, kBadFragment, kFragmentLost from HID reports
   std::uint64_t rejected_markers = 0;  // markers invalidated for non-finite/absurd values
+  std::uint64_t descriptors_accepted = 0;  // descriptors returned as kDescriptor
+  std::uint64_t descriptors_rejected = 0;  // messages with the descriptor magic that were rejected
+                                           // (also counted in crc/format/version_errors when that
+                                           // was the reason; kBadDescriptor only here)
 };
 
 class MarkerStreamDecoder {
  public:
   explicit MarkerStreamDecoder(const MarkerStreamDecoderOptions& options = {}) noexcept : options_(options) {}
 
-  // Decodes one whole frame (a USB bulk transfer, or a frame cut from a recording).
+  // Decodes one whole message: a frame or a descriptor (a USB bulk transfer, or a message cut
+  // from a recording). A descriptor ("TMSD") that passes every check replaces labels() and
+  // returns kDescriptor; a rejected one leaves labels() as they were. Neither touches `out`
+  // or the sequence state (docs/protocol.md 4.4).
   // On kFrame `out` holds the frame: frame_counter is the device counter extended to 64 bits
   // (kept monotonic across device restarts), device_timestamp_ns from the frame,
   // receive_timestamp_ns = `receive_ns`, markers in wire order with ids, positions in mm;
@@ -208,14 +304,21 @@ class MarkerStreamDecoder {
                                                MarkerFrame& out) noexcept;
 
   // Feeds one 64-byte HID input report (see MarkerStreamReassembler::push). Returns kNeedMore
-  // while a frame is incomplete, then what decodeFrame returns for the reassembled frame (also
-  // kBadFragment when its counter does not match the fragment tag). Driver thread; no allocation.
+  // while a message is incomplete, then what decodeFrame returns for the reassembled message
+  // (also kBadFragment when its frame_counter / table_id does not match the fragment tag).
+  // Driver thread; no allocation.
   [[nodiscard]] MarkerStreamStatus decodeHidReport(std::span<const std::uint8_t> report, std::int64_t receive_ns,
                                                    MarkerFrame& out) noexcept;
 
   // Forgets the sequence state and any partial frame (next frame is accepted as a new stream).
+  // The label table is kept (a reconnected device re-sends its descriptor; see clearLabels()).
   void reset() noexcept;
+  // Empties the label table (count 0; generation and table_id are kept). Driver thread.
+  void clearLabels() noexcept { labels_.count = 0; }
 
+  // The current label table (empty, generation 0, until a descriptor is accepted). Valid until
+  // the next decode call; read it on the decoder's thread (copy it to hand it to another thread).
+  [[nodiscard]] const MarkerLabelTable& labels() const noexcept { return labels_; }
   [[nodiscard]] const MarkerStreamStats& stats() const noexcept { return stats_; }
   [[nodiscard]] const MarkerStreamReassembler& reassembler() const noexcept { return reassembler_; }
 
@@ -223,6 +326,7 @@ class MarkerStreamDecoder {
   MarkerStreamDecoderOptions options_;
   MarkerStreamStats stats_;
   MarkerStreamReassembler reassembler_;
+  MarkerLabelTable labels_;
   bool have_last_ = false;
   std::uint32_t last_counter_ = 0;   // device counter of the last accepted frame
   std::uint64_t last_extended_ = 0;  // its 64-bit extension
@@ -246,17 +350,19 @@ struct MarkerStreamEncodeOptions {
 [[nodiscard]] std::size_t encodeMarkerStreamFrame(const MarkerFrame& frame, const MarkerStreamEncodeOptions& options,
                                                   std::span<std::uint8_t> out) noexcept;
 
-// Number of 64-byte HID reports a frame of `frame_length` bytes needs (0 for 0 or oversize).
+// Number of 64-byte HID reports a message of `frame_length` bytes needs (0 for 0 or more than
+// kMarkerStreamMaxMessageSize).
 [[nodiscard]] constexpr std::size_t markerStreamFragmentCount(std::size_t frame_length) noexcept {
-  if (frame_length == 0 || frame_length > kMarkerStreamMaxFrameSize) return 0;
+  if (frame_length == 0 || frame_length > kMarkerStreamMaxMessageSize) return 0;
   return (frame_length + kMarkerStreamFragmentPayload - 1) / kMarkerStreamFragmentPayload;
 }
 
-// Writes HID report `index` (0-based) of the encoded frame `frame_bytes` into `report`
-// (kMarkerStreamHidReportSize bytes: report id 0x01, fragment header, payload, zero padding).
-// The tag is the frame counter's low 16 bits read from `frame_bytes`. Returns 64, or 0 when
-// `frame_bytes` is shorter than a header or longer than kMarkerStreamMaxFrameSize, index is out
-// of range, or `report` is too small. Any thread; no allocation.
+// Writes HID report `index` (0-based) of the encoded message `frame_bytes` (a frame or a
+// descriptor) into `report` (kMarkerStreamHidReportSize bytes: report id 0x01, fragment header,
+// payload, zero padding). The tag is the low 16 bits of the u32 at message offset 12 (a frame's
+// frame_counter, a descriptor's table_id). Returns 64, or 0 when `frame_bytes` is shorter than
+// 16 bytes or longer than kMarkerStreamMaxMessageSize, index is out of range, or `report` is too
+// small. Any thread; no allocation.
 [[nodiscard]] std::size_t encodeMarkerStreamFragment(std::span<const std::uint8_t> frame_bytes, std::size_t index,
                                                      std::span<std::uint8_t> report) noexcept;
 
@@ -268,6 +374,7 @@ enum class MarkerStreamCommand : std::uint8_t {
   kStop = 0x02,     // stop streaming; param 0
   kSetRate = 0x03,  // param: frame rate in Hz (1..65535); the device picks the nearest it supports
   kGetInfo = 0x04,  // USB only (vendor IN request); over HID read feature report 0x03 instead
+  kGetDescriptor = 0x05,  // param 0: the device sends its descriptor (on the data path, between frames)
 };
 
 // Writes the 64-byte HID output report for `command` into `report` (byte 0 = 0x02, byte 1 =
@@ -288,7 +395,8 @@ struct UsbControlSetup {
   std::uint16_t length = 0;       // wLength
 };
 // The vendor control request carrying `command` to interface `interface_number`:
-// kStart/kStop/kSetRate: bmRequestType 0x41 (host-to-device | vendor | interface), wLength 0;
+// kStart/kStop/kSetRate/kGetDescriptor: bmRequestType 0x41 (host-to-device | vendor |
+// interface), wValue = param, wLength 0;
 // kGetInfo: bmRequestType 0xC1 (device-to-host | vendor | interface), wLength 16.
 [[nodiscard]] UsbControlSetup markerStreamControlSetup(MarkerStreamCommand command, std::uint16_t param,
                                                        std::uint16_t interface_number) noexcept;

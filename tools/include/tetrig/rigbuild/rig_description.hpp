@@ -9,6 +9,7 @@
 // (e.g. "man.json: region_handles[2].select: unknown selection kind 'cube'").
 #pragma once
 
+#include "tetrig/rig_file.hpp"
 #include "tetrig/rigbuild/surface_mesh.hpp"
 
 #include <Eigen/Core>
@@ -65,6 +66,18 @@ struct MarkerOptions {
   double invisible_stiffness = 0.1;        // stiffness weight of invisible tets (body tets: 1)
 };
 
+// A pose sensor (e.g. "hydra1", one Razer Hydra controller) driving an oriented region handle of
+// the same description (runtime: tetrig/pose_sensor.hpp).
+struct PoseSensorSpec {
+  std::string sensor;                      // the marker label the source gives the sensor
+  std::string region;                      // name of a region handle of this description
+  std::int32_t region_index = -1;          // its index in region_handles (resolved by the parser)
+  PoseSensorMode mode = PoseSensorMode::kClutch;
+  std::uint8_t clutch_buttons = 0xFF;      // clutch engaged while any of these button bits is set (1..255)
+  double translation_scale = 1.0;          // controller motion (rig units) -> region motion, > 0
+  std::string where;                       // JSON path, for messages
+};
+
 struct RigDescription {
   std::filesystem::path source;            // the JSON file ("" when built from defaults)
   std::string name;
@@ -79,6 +92,7 @@ struct RigDescription {
   std::vector<NamedSelection> rigid_groups;
   std::vector<NamedSelection> stiffness;   // later entries override earlier ones
   MarkerOptions markers;
+  std::vector<PoseSensorSpec> pose_sensors;
   int rotation_steps = 2;
   double point_handle_weight = 1e3;
 };

@@ -1,0 +1,82 @@
+#!/usr/bin/env bash
+# The live path's latency harness (issue: the live runtime). Builds what it needs (release preset),
+# builds the SMPL rig from ../shared/data once (human_man.obj bound to the 41 markers of the HDM05
+# clip, the BM_RigFrame/smpl_hdm05 rig), then runs the clip at its own 120 Hz pace through
+# `tetrig run` (driver thread -> mailbox -> solver thread -> shared memory) with `tetrig-shm-cat`
+# reading the segment in another process. Writes build/release/latency.json (the keys of
+# `tetrig run --stats-json`, plus "consumer") and prints the table.
+#
+#   bash bench/latency.sh                 # SMPL + HDM05 (the figure of record)
+#   bash bench/latency.sh --synthetic     # the same rig driven by the synthetic source (10 s)
+#   bash bench/latency.sh --armadillo     # the Stanford Armadillo rig driven by the HDM05 clip
+#   extra arguments after -- go to `tetrig run` (e.g. -- --cpu 1 --fifo)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+data="${TETRIG_DATA_DIR:-../shared/data}"
+mode=smpl
+extra=()
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --synthetic) mode=synthetic ;;
+    --armadillo) mode=armadillo ;;
+    --) shift; extra=("$@"); break ;;
+    *) echo "latency.sh: unknown argument $1 (use --synthetic, --armadillo, or -- ARGS for tetrig run)" >&2; exit 2 ;;
+  esac
+  shift
+done
+clip="$data/mocap/hdm05/HDM_mm_01-02_03_120.c3d"
+for f in "$clip" "$data/meshes/odedstein-meshes/human_man.obj"; do
+  [ -f "$f" ] || { echo "latency.sh: $f not found (place ../shared/data beside the checkout or set TETRIG_DATA_DIR)" >&2; exit 1; }
+done
+if [ ! -x build/release/tetrig ] || [ ! -x build/release/tetrig-shm-cat ] || [ "${LATENCY_REBUILD:-1}" = 1 ]; then
+  cmake --preset release >/dev/null
+  cmake --build --preset release --target tetrig tetrig-shm-cat >/dev/null
+fi
+out=build/release
+case "$mode" in
+  smpl|synthetic)
+    rig="$out/latency_smpl_hdm05.rig"
+    [ -f "$rig" ] || build/release/tetrig build-rig --mesh "$data/meshes/odedstein-meshes/human_man.obj" --markers "$clip" \
+      --tet-vertices 1500 --max-marker-distance 0.15 --out "$rig" --quiet
+    ;;
+  armadillo)
+    rig="$out/latency_armadillo_hdm05.rig"
+    [ -f "$rig" ] || build/release/tetrig build-rig --mesh "$data/meshes/libigl-tutorial-data/armadillo.obj" --markers "$clip" \
+      --tet-vertices 1700 --max-marker-distance 1.0 --out "$rig" --quiet
+    ;;
+esac
+source="c3d:$clip"
+frames=()
+if [ "$mode" = synthetic ]; then source=synthetic; frames=(--frames 1200); fi
+name="tetrig-latency-$$"
+rm -f "$out/latency_producer.json" "$out/latency_consumer.json"
+build/release/tetrig-shm-cat "$name" --quiet --timeout-ms 20000 --json "$out/latency_consumer.json" &
+consumer=$!
+build/release/tetrig run --rig "$rig" --source "$source" --publish "$name" --iterations 3 \
+  --stats-json "$out/latency_producer.json" "${frames[@]}" "${extra[@]}"
+wait "$consumer" || { echo "latency.sh: the consumer failed" >&2; exit 1; }
+python3 - "$out/latency_producer.json" "$out/latency_consumer.json" "$out/latency.json" "$mode" <<'PY'
+import json, sys
+producer, consumer, out, mode = sys.argv[1:5]
+p = json.load(open(producer)); c = json.load(open(consumer))
+p["consumer"] = c
+p["harness"] = mode
+json.dump(p, open(out, "w"), indent=2)
+lat = p["latency_us"]
+rows = [("receive -> taken by the solver", lat["receive_to_taken"]),
+        ("receive -> step done", lat["receive_to_step_done"]),
+        ("receive -> pose transfer done", lat["receive_to_pose_done"]),
+        ("receive -> published", lat["receive_to_published"])]
+seen = c.get("latency_us", {}).get("receive_to_seen")
+if seen: rows.append(("receive -> seen by the consumer", seen))
+rows += [("step (3 iterations)", lat["step"]), ("pose transfer", lat["pose_transfer"]),
+         ("overhead (published - step - pose)", lat["overhead"])]
+print(f"\nlatency harness ({mode}): {p['frames']} frames of {p['source']['description']}")
+print(f"rig: {p['rig']['name']}: {p['rig']['tet_vertices']} tet vertices, {p['rig']['tets']} tets, {p['rig']['fine_vertices']} fine vertices")
+print("| phase | p50 (us) | p99 (us) | max (us) |\n|---|---|---|---|")
+for name, r in rows: print(f"| {name} | {r['p50']:.1f} | {r['p99']:.1f} | {r['max']:.1f} |")
+print(f"\nbudget misses {p['budget_misses']} (budget {p['budget_ms']:.2f} ms), frames dropped {p['dropped_frames']}, "
+      f"consumer saw {c.get('frames_seen', '?')} frames, missed {c.get('frames_missed', '?')}")
+print(f"solver thread: {p['solver_thread']}")
+print(f"wrote {out}")
+PY

@@ -1,0 +1,122 @@
+// The solver thread of the live path (DESIGN.md 6a):
+//
+//   driver thread --publish--> FrameMailbox --waitForFrame/tryAcquireLatest--> solver thread:
+//       LiveRig::processFrame (marker targets -> Deformer::step(budget) -> pose transfer straight
+//       into the shared-memory slot) -> ShmPublisher::commit -> engine(s)
+//
+// The solver wakes when a frame arrives (futex; no busy wait), always takes the NEWEST frame
+// (older unread ones are counted as dropped by the mailbox), and stamps every phase with the
+// runtime's clock (tetrig/clock.hpp): receive (by the driver) -> taken -> step done -> pose
+// transfer done -> published. The budget of a frame is a deadline at receive + budget_ns; the
+// step's own deadline is that minus the pose transfer's recent cost, so the frame as a whole
+// meets it; a frame published after its deadline is a budget miss. When no frame has come for
+// stale_after_ns the segment's state says "stale" (the last pose stays published) until frames
+// come again.
+//
+// Real-time hygiene, applied on the solver thread where the system permits and reported
+// (FrameLoop::hygiene()) where it does not: flush-to-zero and denormals-are-zero, memory locked
+// (mlockall), optional CPU pinning and SCHED_FIFO.
+//
+// Threads: construct, start(), requestStop(), join() and the accessors from one control thread;
+// snapshot() from any thread. The loop owns nothing: the mailbox, live rig and publisher must
+// outlive it, and while it runs only the solver thread touches the live rig and the publisher.
+#pragma once
+
+#include "tetrig/frame_mailbox.hpp"
+#include "tetrig/latency_histogram.hpp"
+
+#include <atomic>
+#include <cstdint>
+#include <string>
+#include <thread>
+
+namespace tetrig {
+
+class LiveRig;
+class ShmPublisher;
+
+struct FrameLoopOptions {
+  int max_iterations = 3;                        // per frame (the deadline may stop earlier)
+  std::int64_t budget_ns = 4'000'000;            // receive -> published deadline; <= 0: none
+  std::int64_t stale_after_ns = 250'000'000;     // no frame for this long: the segment says stale
+  std::uint64_t max_frames = 0;                  // stop after this many frames (0: until requestStop)
+  bool flush_denormals = true;                   // FTZ/DAZ on the solver thread
+  bool lock_memory = true;                       // mlockall(MCL_CURRENT | MCL_FUTURE)
+  int cpu = -1;                                  // pin the solver thread to this CPU (-1: no)
+  bool realtime_fifo = false;                    // SCHED_FIFO for the solver thread
+  int fifo_priority = 50;
+};
+
+// Latency of each phase, per frame (ns).
+struct FrameLoopLatency {
+  LatencyHistogram receive_to_taken;      // driver receive -> solver took the frame (wake-up + queueing)
+  LatencyHistogram step;                  // Deformer::step (targets, iterations)
+  LatencyHistogram pose_transfer;         // x_fine = B x_tet (+ normals) into the slot
+  LatencyHistogram receive_to_step_done;
+  LatencyHistogram receive_to_pose_done;
+  LatencyHistogram receive_to_published;  // the whole live path on this machine
+  LatencyHistogram overhead;              // receive_to_published - step - pose_transfer
+};
+
+struct FrameLoopCounters {
+  std::uint64_t frames = 0;                 // frames processed and published
+  std::uint64_t budget_misses = 0;          // published after receive + budget
+  std::uint64_t deadline_hits = 0;          // steps stopped by their deadline before max_iterations
+  std::uint64_t held_frames = 0;            // frames with no measured rig marker (pose held)
+  std::uint64_t occluded_marker_frames = 0; // sum over frames of the rig markers driven by prediction
+  std::uint64_t unknown_marker_frames = 0;  // sum over frames of markers whose id the rig does not know
+  std::uint64_t stale_periods = 0;          // times the source went stale
+  std::uint64_t iterations = 0;             // sum of iterations run
+  std::uint64_t mailbox_dropped = 0;        // frames overwritten in the mailbox before the solver took them
+};
+
+// What the status line shows (any thread; relaxed, not one consistent snapshot).
+struct FrameLoopSnapshot {
+  FrameLoopCounters counters;
+  std::int64_t last_receive_to_published_ns = 0;
+  std::int64_t recent_p50_ns = 0, recent_p99_ns = 0;  // receive -> published over the last ~second of frames
+  bool stale = false;
+  bool running = false;
+};
+
+class FrameLoop {
+ public:
+  FrameLoop(FrameMailbox& mailbox, LiveRig& live_rig, ShmPublisher& publisher, const FrameLoopOptions& options);
+  ~FrameLoop();  // requestStop() + join()
+  FrameLoop(const FrameLoop&) = delete;
+  FrameLoop& operator=(const FrameLoop&) = delete;
+
+  void start();           // spawns the solver thread; allocates
+  void requestStop() noexcept;
+  void join();
+  [[nodiscard]] bool finished() const noexcept { return done_.load(std::memory_order_acquire); }
+
+  [[nodiscard]] FrameLoopSnapshot snapshot() const noexcept;
+  // After join(): the per-phase histograms and counters of the whole run.
+  [[nodiscard]] const FrameLoopLatency& latency() const noexcept { return latency_; }
+  [[nodiscard]] FrameLoopCounters counters() const noexcept;
+  // After the solver thread started: what the real-time hygiene managed ("flush-to-zero on; memory
+  // locked; pinned to CPU 1; SCHED_FIFO refused: Operation not permitted").
+  [[nodiscard]] std::string hygiene() const;
+
+ private:
+  void run() noexcept;
+  void applyHygiene();
+
+  FrameMailbox& mailbox_;
+  LiveRig& live_;
+  ShmPublisher& publisher_;
+  FrameLoopOptions options_;
+  FrameLoopLatency latency_;
+  std::thread thread_;
+  std::atomic<bool> stop_{false}, done_{false}, started_{false}, stale_{false};
+  std::atomic<bool> hygiene_ready_{false};
+  std::string hygiene_;  // written by the solver thread before hygiene_ready_
+  // Live counters (solver thread writes, others read relaxed).
+  std::atomic<std::uint64_t> frames_{0}, budget_misses_{0}, deadline_hits_{0}, held_frames_{0},
+      occluded_marker_frames_{0}, unknown_marker_frames_{0}, stale_periods_{0}, iterations_{0};
+  std::atomic<std::int64_t> last_latency_ns_{0}, recent_p50_ns_{0}, recent_p99_ns_{0};
+  std::uint64_t mailbox_dropped_at_start_ = 0;
+};
+
+}  // namespace tetrig

@@ -1,0 +1,181 @@
+// The live rig (DESIGN.md 6a): one labelled marker frame in, one deformed fine mesh out.
+//
+//   LiveRig live(rig);                                   // load: Deformer (factorization), prediction data
+//   MarkerBindingReport r = live.bindLabels(labels);     // load: the source's label table -> rig markers
+//   std::vector<float> x(live.fineVertexCount() * 3);
+//   LiveFrameStats s = live.processFrame(frame, budget, x.data(), nullptr);   // per frame
+//
+// Per frame: every bound, valid, finite marker (device mm) -> rig units through rig.alignment ->
+// its vertex handle's target; every other rig marker (occluded, invalid, or named by no source)
+// is driven by its prediction (tetrig/marker_prediction.hpp: its rest offset carried by the
+// current rigid motion of the body it is bound to), blended in and out over
+// LiveRigOptions::occlusion_blend_s so nothing pops (docs/live.md, "Occlusion"); then
+// Deformer::step(budget); then x_fine = B x_tet (Stoll et al. 2007 eq. 2.12) from the deformer's
+// padded positions into the caller's buffer (and area-weighted vertex normals when asked for).
+// Occlusion never changes the factor: markers stay vertex handles, only their targets change.
+//
+// Blends (s(u) = u^2 (3 - 2u), u clamped to [0, 1], the smoothstep: zero slope at both ends; T =
+// occlusion_blend_s; p(t) the marker's prediction at time t):
+//   dropout at t0 (first frame without a measurement): o = (last target) - p(previous frame),
+//       target(t) = p(t) + (1 - s((t - t0) / T)) o        (continuous at t0, the offset fades out);
+//   return at t1 (first frame measured again): with P(t) the dropout target above,
+//       target(t) = P(t) + s((t - t1) / T) (m(t) - P(t))   (starts at the prediction, ends at m).
+// Time is the frames' own: device_timestamp_ns when non-zero, else receive_timestamp_ns (never the
+// wall clock, so a live run replays bit for bit offline from the same frames and iteration counts),
+// accumulated as an internal blend clock that never runs backwards (a timestamp earlier than the
+// previous frame's advances it by 0; a frame with neither timestamp by untimed_frame_period_s) and
+// that stands still on held frames (below): a blend progresses only in frames that are shown.
+// Measured markers of the first frame that steps are taken as they are (there is no earlier pose
+// to blend from). A frame with no measured rig marker holds the last pose (no step, kLivePoseHeld).
+//
+// Threads and ownership: `rig` is referenced, not copied: it must outlive the LiveRig. The
+// constructor and bindLabels() are load-time code (allocate, may throw). processFrame(),
+// writeLastPose() and the accessors belong to one thread at a time (the solver thread):
+// processFrame() allocates nothing, takes no lock, throws nothing and does no I/O.
+#pragma once
+
+#include "tetrig/deformer.hpp"
+#include "tetrig/marker_frame.hpp"
+#include "tetrig/marker_prediction.hpp"
+#include "tetrig/rig_file.hpp"
+
+#include <Eigen/Core>
+
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+namespace tetrig {
+
+struct LiveRigOptions {
+  double occlusion_blend_s = 0.15;   // blend time when a marker drops out and when it returns (0: no blend)
+  bool normals = false;              // also write per-vertex normals of the fine mesh
+  int prediction_rings = 3;          // anchor rings of the occlusion prediction (MarkerPredictionOptions::rings)
+  double untimed_frame_period_s = 1.0 / 120.0;  // clock advance of a frame with neither timestamp
+};
+
+enum LiveFrameFlags : std::uint32_t {
+  kLivePoseHeld = 1u << 0,          // no rig marker measured in this frame: the last pose was kept (no step)
+  kLiveMarkersPredicted = 1u << 1,  // some rig markers were driven by their prediction
+  kLiveMarkersBlending = 1u << 2,   // some markers are blending between prediction and measurement
+  kLiveDeadlineHit = 1u << 3,       // the step stopped at the deadline before max_iterations
+  kLiveTargetsRejected = 1u << 4,   // the deformer rejected the targets (kept the previous ones)
+  kLiveNonFinitePose = 1u << 5,     // the step produced a non-finite pose: the last pose was written
+                                    // and the deformer was reset to rest (should never happen)
+};
+
+struct LiveFrameStats {
+  StepStats step;                    // the deformer's own stats (iterations, energy, flags, phase times); zero when held
+  std::int64_t pose_transfer_ns = 0; // x_fine = B x_tet (+ normals), or the copy of the last pose when held
+  std::uint16_t measured_markers = 0;   // rig markers measured in this frame (blending back ones included)
+  std::uint16_t occluded_markers = 0;   // rig markers driven by their prediction (unbound ones included)
+  std::uint16_t blending_markers = 0;   // rig markers in a dropout fade or a return blend
+  std::uint16_t unknown_markers = 0;    // frame markers whose id names no rig marker (ignored)
+  std::uint32_t flags = 0;              // LiveFrameFlags
+};
+
+struct MarkerBindingReport {
+  std::int32_t matched = 0;               // rig markers bound to a source id
+  std::vector<std::string> missing;       // rig markers the source never names (always predicted), rig order
+  std::vector<std::string> unknown;       // source labels the rig does not know (ignored), id order
+  std::vector<std::string> duplicates;    // source labels naming a rig marker another id already took (ignored)
+};
+
+// Per-marker state of the occlusion blend.
+enum class MarkerTrackState : std::uint8_t {
+  kPredicted = 0,  // no measurement: prediction (+ fading dropout offset)
+  kReturning = 1,  // measured again: blending from the prediction to the measurement
+  kMeasured = 2,   // the measurement itself
+};
+
+class LiveRig {
+ public:
+  // Load time: copies rig.setup with padded positions on and builds the Deformer (factorization),
+  // the prediction anchors, the rest normals and every per-frame buffer. Throws what the Deformer
+  // and MarkerPredictor throw, and std::invalid_argument for a rig that fails validateRig or for
+  // negative options.
+  explicit LiveRig(const Rig& rig, const LiveRigOptions& options = {});
+
+  // Load time (allocates): binds the source's label table (labels_by_id[id] labels every Marker
+  // with that id; only ids < 65536 can occur) to the rig's markers. A label matches a rig marker
+  // when equal, or when the parts after their last ':' are equal ("meinard:LFHD" == "LFHD"); an
+  // exact match wins over a stripped one, then the lowest id. Empty labels name nothing. Replaces
+  // any earlier binding; marker blend states are kept. Not concurrently with processFrame().
+  MarkerBindingReport bindLabels(std::span<const std::string> labels_by_id);
+
+  // One frame: frame -> handle targets -> Deformer::step(budget) -> pose transfer into the caller's
+  // buffers. positions: fineVertexCount()*3 floats (rig units, x0 y0 z0 x1 ...), required;
+  // normals: fineVertexCount()*3 floats (unit vectors) or nullptr (ignored unless
+  // LiveRigOptions::normals). Never writes a non-finite value. No allocation, lock, exception, I/O.
+  LiveFrameStats processFrame(const MarkerFrame& frame, const StepBudget& budget, float* positions, float* normals) noexcept;
+
+  // The last pose again (the rest pose before the first frame): for a stale source or a held pose.
+  // Same buffers as processFrame (normals written only with LiveRigOptions::normals). No allocation.
+  void writeLastPose(float* positions, float* normals) const noexcept;
+
+  std::int32_t fineVertexCount() const noexcept { return static_cast<std::int32_t>(rest_positions_.size() / 3); }
+  std::span<const std::int32_t> fineTriangles() const noexcept;  // #F*3 vertex indices, outward (CCW from outside)
+  std::span<const float> restPositions() const noexcept { return rest_positions_; }   // #fine*3, rig units
+  std::span<const float> restNormals() const noexcept { return rest_normals_; }       // #fine*3 (empty unless normals)
+  const Rig& rig() const noexcept { return *rig_; }
+  const Deformer& deformer() const noexcept { return deformer_; }
+  const LiveRigOptions& options() const noexcept { return options_; }
+
+  // Region handles' targets, passed to every step (identity = rest unless something writes them,
+  // e.g. pose sensors, before processFrame on the same thread). One per rig.setup.region_handles.
+  std::span<RigidTransform> regionTargets() noexcept { return region_targets_; }
+
+  // For tests and tools, per rig marker (rig.markers order), as of the last processFrame:
+  std::span<const Eigen::Vector3d> markerTargets() const noexcept { return marker_target_; }      // the target it was driven with, rig units
+  std::span<const Eigen::Vector3d> markerPredictions() const noexcept { return prediction_; }    // its prediction, rig units
+  std::span<const std::uint8_t> markerMeasured() const noexcept { return measured_; }            // 1: measured in that frame
+  MarkerTrackState markerState(std::int32_t marker) const noexcept { return tracks_[static_cast<std::size_t>(marker)].state; }
+  // The rig marker bound to source id `id`, or -1.
+  std::int32_t markerOfId(std::uint16_t id) const noexcept {
+    return id < marker_of_id_.size() ? marker_of_id_[id] : -1;
+  }
+
+ private:
+  struct Track {
+    MarkerTrackState state = MarkerTrackState::kPredicted;
+    Eigen::Vector3d offset = Eigen::Vector3d::Zero();  // dropout offset o
+    std::int64_t dropout_ns = 0;                       // t0 (internal clock)
+    std::int64_t return_ns = 0;                        // t1 (internal clock)
+  };
+
+  double blendWeight(std::int64_t since_ns) const noexcept;  // s((now - event) / T)
+
+  const Rig* rig_ = nullptr;
+  LiveRigOptions options_;
+  Deformer deformer_;
+  MarkerPredictor predictor_;
+  std::int64_t blend_ns_ = 0;
+  std::int64_t untimed_ns_ = 0;
+  double max_abs_coordinate_ = 0.0;
+
+  // Binding: source id -> rig marker (-1: unknown).
+  std::vector<std::int32_t> marker_of_id_;
+
+  // Handle targets passed to step().
+  std::vector<Eigen::Vector3d> vertex_targets_;  // one per vertex handle (non-marker ones stay at rest)
+  std::vector<RigidTransform> region_targets_;
+  std::vector<Eigen::Vector3d> point_targets_;   // rest positions of the point handles
+
+  // Per rig marker.
+  std::vector<Track> tracks_;
+  std::vector<Eigen::Vector3d> measurement_, prediction_, previous_prediction_, marker_target_;
+  std::vector<std::uint8_t> measured_;
+
+  // Clock (internal, ns) and whether any frame has stepped yet.
+  bool have_time_ = false;
+  std::int64_t last_source_ns_ = 0;
+  std::int64_t now_ns_ = 0;
+  bool stepped_ = false;
+
+  // Output: rest and last pose (floats, #fine*3), normals accumulator.
+  std::vector<float> rest_positions_, last_positions_;
+  std::vector<float> rest_normals_, last_normals_, normal_sum_;
+};
+
+}  // namespace tetrig

@@ -1,0 +1,598 @@
+/* tetrig_shm.h: reader of the tetrig shared-memory segment (runtime -> game engine), layout
+ * version 1.0. The format is documented in docs/shm.md; the writer is tetrig::ShmPublisher
+ * (runtime/include/tetrig/shm_publisher.hpp).
+ *
+ * Implements: a POSIX shared-memory segment with a fixed header, static data written once before
+ * the segment becomes visible (magic stored last, release), and N >= 3 dynamic slots written
+ * round-robin under a per-slot sequence word (a seqlock: Lamport's "concurrent reading and writing"
+ * as analysed for the C/C++ memory model by Boehm, "Can seqlocks get along with programming
+ * language memory models?", MSPC 2012). Every access to a slot word is a relaxed atomic word
+ * access; the sequence word orders them with release/acquire fences, so a reader never returns a
+ * torn frame and there is no data race for ThreadSanitizer to find.
+ *
+ * Use: one C99 header, libc only (shm_open, mmap, fstat, kill, clock_gettime), no C++ and no
+ * library. Compiles as C99 (gcc -std=c99 -pedantic -Wall -Wextra -Werror) and as C++.
+ * Needs GCC or Clang (the __atomic builtins) on a little-endian host.
+ *
+ * POSIX feature macro: in strict ISO C mode (-std=c99, which hides POSIX declarations in glibc)
+ * this header defines _POSIX_C_SOURCE 200809L itself when no feature macro is set, which only
+ * works when it is included BEFORE any system header. Otherwise compile with
+ * -D_POSIX_C_SOURCE=200809L (or _GNU_SOURCE / _DEFAULT_SOURCE); the header stops with an #error
+ * naming this when POSIX.1-2008 is not visible. In -std=gnu99 and in C++ nothing is needed.
+ *
+ * Threads: a TetrigShmReader is used by one thread at a time; any number of readers (threads or
+ * processes), each with its own TetrigShmReader, may read one segment at once. Readers never
+ * write to the segment (read-only mapping) and never block the writer.
+ *
+ * Allocation: none. tetrig_shm_open() makes system calls (shm_open, fstat, mmap);
+ * tetrig_shm_read_latest() and the accessors make none; tetrig_shm_producer_status() calls
+ * kill(pid, 0) and on Linux reads /proc/<pid>/stat; tetrig_shm_name_status() calls shm_open and
+ * fstat. */
+#ifndef TETRIG_SHM_H
+#define TETRIG_SHM_H
+
+#if !defined(__cplusplus) && defined(__STRICT_ANSI__) && !defined(_POSIX_C_SOURCE) && \
+    !defined(_XOPEN_SOURCE) && !defined(_GNU_SOURCE) && !defined(_DEFAULT_SOURCE)
+#define _POSIX_C_SOURCE 200809L
+#endif
+
+#include <errno.h>
+#include <fcntl.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <string.h>
+#include <signal.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <sys/types.h>
+#include <time.h>
+#include <unistd.h>
+
+#if defined(__GLIBC__) && !defined(__USE_XOPEN2K8)
+#error "tetrig_shm.h needs POSIX.1-2008 declarations: include it before any system header, or compile with -D_POSIX_C_SOURCE=200809L"
+#endif
+#if !defined(__GNUC__) && !defined(__clang__)
+#error "tetrig_shm.h needs the GCC/Clang __atomic builtins"
+#endif
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ != __ORDER_LITTLE_ENDIAN__
+#error "tetrig_shm.h: the segment layout is little-endian (host order of the producer)"
+#endif
+
+#ifdef __cplusplus
+#define TETRIG_SHM_PTR(type, expr) (reinterpret_cast<type>(expr))
+#define TETRIG_SHM_CONV(type, expr) (static_cast<type>(expr))
+#define TETRIG_SHM_STATIC_ASSERT(cond, msg) static_assert(cond, msg)
+#else
+#define TETRIG_SHM_PTR(type, expr) ((type)(expr))
+#define TETRIG_SHM_CONV(type, expr) ((type)(expr))
+#if defined(__STDC_VERSION__) && __STDC_VERSION__ >= 201112L
+#define TETRIG_SHM_STATIC_ASSERT(cond, msg) _Static_assert(cond, msg)
+#else /* C99: a negative array size stops the compilation */
+#define TETRIG_SHM_JOIN2(a, b) a##b
+#define TETRIG_SHM_JOIN(a, b) TETRIG_SHM_JOIN2(a, b)
+#define TETRIG_SHM_STATIC_ASSERT(cond, msg) \
+  typedef char TETRIG_SHM_JOIN(tetrig_shm_static_assert_, __LINE__)[(cond) ? 1 : -1]
+#endif
+#endif
+
+/* ---- constants ---------------------------------------------------------------------------- */
+
+/* The bytes "TETRIGSM" read as a little-endian uint64. */
+#define TETRIG_SHM_MAGIC UINT64_C(0x4D53474952544554)
+#define TETRIG_SHM_VERSION_MAJOR 1u /* a reader refuses any other major version */
+#define TETRIG_SHM_VERSION_MINOR 0u /* newer minors only append fields in reserved space */
+#define TETRIG_SHM_HEADER_SIZE 256u
+#define TETRIG_SHM_ALIGNMENT 64u    /* every array starts on a 64-byte boundary */
+#define TETRIG_SHM_MIN_SLOTS 3u
+#define TETRIG_SHM_MAX_SLOTS 64u
+#define TETRIG_SHM_SLOT_HEADER_SIZE 128u /* sequence + frame info, before the positions */
+#define TETRIG_SHM_NAME_MAX 255u          /* longest segment name, '/' included */
+
+/* TetrigShmHeader.flags */
+#define TETRIG_SHM_HAS_NORMALS 0x1u
+
+/* TetrigShmHeader.state (the producer's state; 0 only before the first heartbeat) */
+#define TETRIG_SHM_STATE_RUNNING 1u      /* frames arrive from the source */
+#define TETRIG_SHM_STATE_STALE_SOURCE 2u /* producer alive, no new source frame: pose held */
+#define TETRIG_SHM_STATE_STOPPED 3u      /* clean shutdown: no more frames ever */
+
+/* TetrigShmFrameInfo.flags */
+#define TETRIG_SHM_FRAME_STALE_SOURCE 0x1u      /* no new source frame: previous markers reused */
+#define TETRIG_SHM_FRAME_POSE_HELD 0x2u         /* every marker occluded: pose held */
+#define TETRIG_SHM_FRAME_BUDGET_MISS 0x4u       /* iteration deadline hit before the count */
+#define TETRIG_SHM_FRAME_MARKERS_PREDICTED 0x8u /* some marker targets were predicted */
+#define TETRIG_SHM_FRAME_INPUT_REJECTED 0x10u   /* non-finite or absurd input was rejected */
+
+/* Return codes of tetrig_shm_open / tetrig_shm_attach / tetrig_shm_read_latest. */
+#define TETRIG_SHM_OK 0
+#define TETRIG_SHM_NO_FRAME 1        /* read: nothing published yet */
+#define TETRIG_SHM_BUSY 2            /* read: lapped by the writer max_attempts times in a row */
+#define TETRIG_SHM_E_NOT_FOUND (-1)  /* no segment of that name (yet) */
+#define TETRIG_SHM_E_NOT_READY (-2)  /* segment exists but is still being created (retry) */
+#define TETRIG_SHM_E_MAGIC (-3)      /* not a tetrig segment */
+#define TETRIG_SHM_E_VERSION (-4)    /* a major layout version this header does not know */
+#define TETRIG_SHM_E_SIZE (-5)       /* sizes, counts or offsets inconsistent with the file */
+#define TETRIG_SHM_E_ACCESS (-6)     /* permission denied (segments are 0600 by default) */
+#define TETRIG_SHM_E_SYSTEM (-7)     /* another system error: see TetrigShmReader.error */
+#define TETRIG_SHM_E_ARGUMENT (-8)   /* bad name, NULL reader or a buffer too small */
+
+/* tetrig_shm_producer_status() */
+#define TETRIG_SHM_PRODUCER_ALIVE 0   /* pid alive and heartbeat fresh */
+#define TETRIG_SHM_PRODUCER_STALE 1   /* pid alive, heartbeat older than the limit: hung/paused */
+#define TETRIG_SHM_PRODUCER_STOPPED 2 /* state says stopped (clean shutdown) */
+#define TETRIG_SHM_PRODUCER_DEAD 3    /* pid gone (or a zombie) without a clean stop: crashed */
+
+/* tetrig_shm_name_status() */
+#define TETRIG_SHM_NAME_SAME 0     /* the name still refers to the mapped segment */
+#define TETRIG_SHM_NAME_REPLACED 1 /* the name refers to another segment (a new producer) */
+#define TETRIG_SHM_NAME_GONE 2     /* the name was unlinked */
+
+/* ---- layout ------------------------------------------------------------------------------- */
+
+/* The segment header, at offset 0 (256 bytes). Bytes 0..95 (identity and live words) keep these
+ * offsets in every future major version, so any reader can tell whose segment it is and whether
+ * its producer lives. Fields are written once before `magic`, except the live words (state,
+ * heartbeat_ns, latest_frame_id), which the producer updates with atomic stores. */
+typedef struct TetrigShmHeader {
+  uint64_t magic;             /*   0 TETRIG_SHM_MAGIC; stored last at creation (release) */
+  uint16_t version_major;     /*   8 */
+  uint16_t version_minor;     /*  10 */
+  uint32_t header_size;       /*  12 bytes of this header (256 in 1.0) */
+  uint64_t total_size;        /*  16 bytes of the whole segment (= file size) */
+  uint64_t instance_id;       /*  24 random, non-zero, new for every producer run */
+  int64_t start_unix_ns;      /*  32 CLOCK_REALTIME at creation */
+  int64_t start_monotonic_ns; /*  40 CLOCK_MONOTONIC at creation */
+  int32_t producer_pid;       /*  48 written first at creation (before the static data) */
+  uint32_t flags;             /*  52 TETRIG_SHM_HAS_NORMALS */
+  uint64_t reserved0;         /*  56 */
+  /* live words (own cache line) */
+  uint32_t state;             /*  64 TETRIG_SHM_STATE_* (atomic) */
+  uint32_t reserved1;         /*  68 */
+  int64_t heartbeat_ns;       /*  72 CLOCK_MONOTONIC of the last commit or heartbeat (atomic) */
+  uint64_t latest_frame_id;   /*  80 newest complete frame, 0 = none yet (atomic, release) */
+  uint64_t reserved2[5];      /*  88 */
+  /* geometry */
+  uint32_t vertex_count;      /* 128 */
+  uint32_t triangle_count;    /* 132 */
+  uint32_t slot_count;        /* 136 3..64 */
+  uint32_t marker_count;      /* 140 number of marker labels (0 = none) */
+  uint32_t rig_name_length;   /* 144 bytes, without the terminating NUL */
+  uint32_t reserved3;         /* 148 */
+  uint64_t triangles_offset;      /* 152 uint32 x 3 per triangle */
+  uint64_t rest_positions_offset; /* 160 float x 3 per vertex */
+  uint64_t rig_name_offset;       /* 168 UTF-8, NUL-terminated */
+  uint64_t marker_labels_offset;  /* 176 marker_count NUL-terminated strings, back to back */
+  uint64_t marker_labels_size;    /* 184 bytes of the label block (NULs included) */
+  uint64_t slots_offset;          /* 192 first slot */
+  uint64_t slot_stride;           /* 200 bytes from one slot to the next (multiple of 64) */
+  uint64_t slot_positions_offset; /* 208 from the slot start: float x 3 per vertex */
+  uint64_t slot_normals_offset;   /* 216 from the slot start: float x 3 per vertex, 0 = none */
+  uint64_t reserved4[4];          /* 224 */
+} TetrigShmHeader;
+
+/* Per-frame information, inside each slot at offset 16 (80 bytes). Times are nanoseconds of
+ * CLOCK_MONOTONIC, except device_ns (the device's own clock, 0 when unknown); 0 = not stamped. */
+typedef struct TetrigShmFrameInfo {
+  uint64_t frame_id;         /*  0 1, 2, 3, ... per producer instance; slot = (id-1) % slots */
+  uint64_t source_frame;     /*  8 the source's frame counter */
+  int32_t iterations;        /* 16 solver iterations run */
+  uint32_t flags;            /* 20 TETRIG_SHM_FRAME_* */
+  uint16_t occluded_markers; /* 24 markers without a measurement this frame */
+  uint16_t reserved0;        /* 26 */
+  uint32_t reserved1;        /* 28 */
+  int64_t device_ns;         /* 32 capture time, device clock */
+  int64_t receive_ns;        /* 40 frame received by the driver */
+  int64_t taken_ns;          /* 48 frame taken by the solver */
+  int64_t step_done_ns;      /* 56 deformation step done */
+  int64_t pose_done_ns;      /* 64 pose transfer (fine positions) done */
+  int64_t publish_ns;        /* 72 slot published (stamped by the writer's commit) */
+} TetrigShmFrameInfo;
+
+/* Slot: uint64 sequence at 0 (odd while written), 8 reserved bytes, TetrigShmFrameInfo at 16,
+ * reserved to 128, then positions at slot_positions_offset and normals at slot_normals_offset. */
+#define TETRIG_SHM_SLOT_SEQUENCE_OFFSET 0u
+#define TETRIG_SHM_SLOT_INFO_OFFSET 16u
+
+TETRIG_SHM_STATIC_ASSERT(sizeof(TetrigShmHeader) == TETRIG_SHM_HEADER_SIZE, "header is 256 bytes");
+TETRIG_SHM_STATIC_ASSERT(offsetof(TetrigShmHeader, producer_pid) == 48, "pid at 48");
+TETRIG_SHM_STATIC_ASSERT(offsetof(TetrigShmHeader, state) == 64, "state at 64");
+TETRIG_SHM_STATIC_ASSERT(offsetof(TetrigShmHeader, heartbeat_ns) == 72, "heartbeat at 72");
+TETRIG_SHM_STATIC_ASSERT(offsetof(TetrigShmHeader, latest_frame_id) == 80, "latest at 80");
+TETRIG_SHM_STATIC_ASSERT(offsetof(TetrigShmHeader, vertex_count) == 128, "counts at 128");
+TETRIG_SHM_STATIC_ASSERT(offsetof(TetrigShmHeader, triangles_offset) == 152, "offsets at 152");
+TETRIG_SHM_STATIC_ASSERT(offsetof(TetrigShmHeader, slot_normals_offset) == 216, "normals at 216");
+TETRIG_SHM_STATIC_ASSERT(sizeof(TetrigShmFrameInfo) == 80, "frame info is 80 bytes");
+TETRIG_SHM_STATIC_ASSERT(offsetof(TetrigShmFrameInfo, device_ns) == 32, "device_ns at 32");
+TETRIG_SHM_STATIC_ASSERT(offsetof(TetrigShmFrameInfo, publish_ns) == 72, "publish_ns at 72");
+TETRIG_SHM_STATIC_ASSERT(TETRIG_SHM_SLOT_INFO_OFFSET + sizeof(TetrigShmFrameInfo) <= TETRIG_SHM_SLOT_HEADER_SIZE,
+                         "frame info fits the slot header");
+
+/* ---- reader ------------------------------------------------------------------------------- */
+
+typedef struct TetrigShmReader {
+  const unsigned char* base;      /* the segment (read-only) */
+  uint64_t size;                  /* bytes of the segment */
+  void* mapping;                  /* what tetrig_shm_open mapped (NULL when attached) */
+  const TetrigShmHeader* header;  /* == base */
+  int owns_mapping;               /* 1: opened by name (close unmaps); 0: attached */
+  int error;                      /* errno of the last TETRIG_SHM_E_SYSTEM / E_ACCESS */
+  uint64_t instance_id;           /* copied at open */
+  int32_t producer_pid;           /* copied at open */
+  uint64_t file_device;           /* st_dev / st_ino of the mapped object (name_status) */
+  uint64_t file_inode;
+  char name[TETRIG_SHM_NAME_MAX + 1];
+  int max_attempts;               /* read_latest tries before TETRIG_SHM_BUSY (default 64) */
+  uint64_t last_frame_id;         /* frame id of the last successful read (0 = none) */
+  uint64_t reads;                 /* successful reads */
+  uint64_t retries;               /* attempts discarded: slot being written or overwritten */
+  uint64_t busy;                  /* reads that gave up (TETRIG_SHM_BUSY) */
+} TetrigShmReader;
+
+/* Text for a TETRIG_SHM_* return code. */
+static inline const char* tetrig_shm_status_string(int code) {
+  switch (code) {
+    case TETRIG_SHM_OK: return "ok";
+    case TETRIG_SHM_NO_FRAME: return "no frame published yet";
+    case TETRIG_SHM_BUSY: return "writer lapped the reader on every attempt";
+    case TETRIG_SHM_E_NOT_FOUND: return "no such shared-memory segment";
+    case TETRIG_SHM_E_NOT_READY: return "segment is still being created";
+    case TETRIG_SHM_E_MAGIC: return "not a tetrig segment (bad magic)";
+    case TETRIG_SHM_E_VERSION: return "unsupported layout major version";
+    case TETRIG_SHM_E_SIZE: return "segment sizes or offsets are inconsistent";
+    case TETRIG_SHM_E_ACCESS: return "permission denied";
+    case TETRIG_SHM_E_SYSTEM: return "system error";
+    case TETRIG_SHM_E_ARGUMENT: return "invalid argument";
+    default: return "unknown status";
+  }
+}
+
+/* CLOCK_MONOTONIC in nanoseconds: the clock of every TetrigShmFrameInfo time but device_ns. */
+static inline int64_t tetrig_shm_now_ns(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return TETRIG_SHM_CONV(int64_t, ts.tv_sec) * INT64_C(1000000000) + TETRIG_SHM_CONV(int64_t, ts.tv_nsec);
+}
+
+/* Copies `bytes` (a multiple of 4) from the 8-byte aligned segment address `src` into `dst` (any
+ * alignment) with relaxed atomic 8-byte loads (4-byte for the tail). */
+static inline void tetrig_shm_load_words(void* dst, const void* src, uint64_t bytes) {
+  const uint64_t* s = TETRIG_SHM_PTR(const uint64_t*, src);
+  unsigned char* d = TETRIG_SHM_PTR(unsigned char*, dst);
+  const uint64_t n = bytes / 8u;
+  uint64_t i;
+  for (i = 0; i < n; ++i) {
+    const uint64_t w = __atomic_load_n(s + i, __ATOMIC_RELAXED);
+    memcpy(d + 8u * i, &w, 8u);
+  }
+  if ((bytes & 7u) != 0u) {
+    const uint32_t w = __atomic_load_n(TETRIG_SHM_PTR(const uint32_t*, s + n), __ATOMIC_RELAXED);
+    memcpy(d + 8u * n, &w, 4u);
+  }
+}
+
+static inline int tetrig_shm_internal_range_ok(uint64_t offset, uint64_t bytes, uint64_t total, int aligned) {
+  if (aligned && (offset % TETRIG_SHM_ALIGNMENT) != 0u) return 0;
+  return offset >= TETRIG_SHM_HEADER_SIZE && offset <= total && bytes <= total - offset;
+}
+
+/* Validates a mapping of `size` bytes that holds a segment and fills `reader` (no copy: the
+ * reader points into the mapping, which must stay mapped until tetrig_shm_close). Used by
+ * tetrig_shm_open; also for callers that map the segment themselves. Checks: magic (0 means
+ * still being created), major version, header and total size against `size`, counts, every
+ * offset, alignment and range, the strings' terminators and every triangle index < vertex count.
+ * The mapping must be 64-byte aligned (mmap gives page alignment). */
+static inline int tetrig_shm_attach(TetrigShmReader* reader, const void* base, uint64_t size) {
+  const TetrigShmHeader* h;
+  uint64_t magic, v, slot_end, label_bytes;
+  uint32_t labels_found;
+  const unsigned char* bytes = TETRIG_SHM_PTR(const unsigned char*, base);
+  if (reader == NULL || base == NULL) return TETRIG_SHM_E_ARGUMENT;
+  memset(reader, 0, sizeof *reader);
+  if (size < TETRIG_SHM_HEADER_SIZE) return TETRIG_SHM_E_NOT_READY;
+  h = TETRIG_SHM_PTR(const TetrigShmHeader*, base);
+  magic = __atomic_load_n(&h->magic, __ATOMIC_ACQUIRE); /* pairs with the producer's release */
+  if (magic == 0u) return TETRIG_SHM_E_NOT_READY;
+  if (magic != TETRIG_SHM_MAGIC) return TETRIG_SHM_E_MAGIC;
+  if (h->version_major != TETRIG_SHM_VERSION_MAJOR) return TETRIG_SHM_E_VERSION;
+  if (h->header_size < TETRIG_SHM_HEADER_SIZE || h->header_size % TETRIG_SHM_ALIGNMENT != 0u ||
+      h->total_size != size || h->total_size < h->header_size) {
+    return TETRIG_SHM_E_SIZE;
+  }
+  if (h->vertex_count == 0u || h->slot_count < TETRIG_SHM_MIN_SLOTS || h->slot_count > TETRIG_SHM_MAX_SLOTS) {
+    return TETRIG_SHM_E_SIZE;
+  }
+  v = h->vertex_count;
+  if (!tetrig_shm_internal_range_ok(h->triangles_offset, TETRIG_SHM_CONV(uint64_t, h->triangle_count) * 12u, size, 1) ||
+      !tetrig_shm_internal_range_ok(h->rest_positions_offset, v * 12u, size, 1) ||
+      !tetrig_shm_internal_range_ok(h->rig_name_offset, TETRIG_SHM_CONV(uint64_t, h->rig_name_length) + 1u, size, 1) ||
+      !tetrig_shm_internal_range_ok(h->marker_labels_offset, h->marker_labels_size, size, 1)) {
+    return TETRIG_SHM_E_SIZE;
+  }
+  if (bytes[h->rig_name_offset + h->rig_name_length] != 0u) return TETRIG_SHM_E_SIZE;
+  /* labels: exactly marker_count NUL-terminated strings */
+  labels_found = 0u;
+  for (label_bytes = 0; label_bytes < h->marker_labels_size; ++label_bytes) {
+    if (bytes[h->marker_labels_offset + label_bytes] == 0u) ++labels_found;
+  }
+  if (labels_found != h->marker_count ||
+      (h->marker_labels_size > 0u && bytes[h->marker_labels_offset + h->marker_labels_size - 1u] != 0u)) {
+    return TETRIG_SHM_E_SIZE;
+  }
+  /* slots */
+  if (h->slot_stride % TETRIG_SHM_ALIGNMENT != 0u || h->slot_positions_offset % TETRIG_SHM_ALIGNMENT != 0u ||
+      h->slot_positions_offset < TETRIG_SHM_SLOT_HEADER_SIZE || h->slot_positions_offset > h->slot_stride ||
+      v * 12u > h->slot_stride - h->slot_positions_offset) {
+    return TETRIG_SHM_E_SIZE;
+  }
+  if ((h->flags & TETRIG_SHM_HAS_NORMALS) != 0u) {
+    if (h->slot_normals_offset % TETRIG_SHM_ALIGNMENT != 0u || h->slot_normals_offset < TETRIG_SHM_SLOT_HEADER_SIZE ||
+        h->slot_normals_offset > h->slot_stride || v * 12u > h->slot_stride - h->slot_normals_offset) {
+      return TETRIG_SHM_E_SIZE;
+    }
+  } else if (h->slot_normals_offset != 0u) {
+    return TETRIG_SHM_E_SIZE;
+  }
+  if (h->slot_stride == 0u || h->slot_stride > size / h->slot_count) return TETRIG_SHM_E_SIZE;
+  slot_end = h->slot_stride * h->slot_count;
+  if (!tetrig_shm_internal_range_ok(h->slots_offset, slot_end, size, 1)) return TETRIG_SHM_E_SIZE;
+  /* triangle indices */
+  {
+    const uint32_t* tri = TETRIG_SHM_PTR(const uint32_t*, bytes + h->triangles_offset);
+    const uint64_t n = TETRIG_SHM_CONV(uint64_t, h->triangle_count) * 3u;
+    uint64_t i;
+    for (i = 0; i < n; ++i) {
+      if (tri[i] >= h->vertex_count) return TETRIG_SHM_E_SIZE;
+    }
+  }
+  reader->base = bytes;
+  reader->size = size;
+  reader->header = h;
+  reader->instance_id = h->instance_id;
+  reader->producer_pid = h->producer_pid;
+  reader->max_attempts = 64;
+  reader->last_frame_id = 0u;
+  reader->reads = 0u;
+  reader->retries = 0u;
+  reader->busy = 0u;
+  return TETRIG_SHM_OK;
+}
+
+/* Opens the segment `name` ("/name", at most 255 bytes) read-only: shm_open + fstat + mmap, then
+ * tetrig_shm_attach. On failure nothing stays open and the reader is zeroed (safe to close).
+ * TETRIG_SHM_E_NOT_FOUND / E_NOT_READY are normal while the producer starts: retry. */
+static inline int tetrig_shm_open(TetrigShmReader* reader, const char* name) {
+  int fd, rc;
+  struct stat st;
+  void* map;
+  size_t len;
+  if (reader == NULL) return TETRIG_SHM_E_ARGUMENT;
+  memset(reader, 0, sizeof *reader);
+  if (name == NULL || name[0] != '/' || strlen(name) > TETRIG_SHM_NAME_MAX) return TETRIG_SHM_E_ARGUMENT;
+  fd = shm_open(name, O_RDONLY | O_CLOEXEC, 0);
+  if (fd < 0) {
+    reader->error = errno;
+    if (errno == ENOENT) return TETRIG_SHM_E_NOT_FOUND;
+    if (errno == EACCES || errno == EPERM) return TETRIG_SHM_E_ACCESS;
+    if (errno == EINVAL || errno == ENAMETOOLONG) return TETRIG_SHM_E_ARGUMENT;
+    return TETRIG_SHM_E_SYSTEM;
+  }
+  if (fstat(fd, &st) != 0) {
+    reader->error = errno;
+    close(fd);
+    return TETRIG_SHM_E_SYSTEM;
+  }
+  if (st.st_size < TETRIG_SHM_CONV(off_t, TETRIG_SHM_HEADER_SIZE)) {
+    close(fd);
+    return TETRIG_SHM_E_NOT_READY; /* created, not yet sized */
+  }
+  len = TETRIG_SHM_CONV(size_t, st.st_size);
+  map = mmap(NULL, len, PROT_READ, MAP_SHARED, fd, 0);
+  close(fd);
+  if (map == MAP_FAILED) {
+    reader->error = errno;
+    return TETRIG_SHM_E_SYSTEM;
+  }
+  rc = tetrig_shm_attach(reader, map, TETRIG_SHM_CONV(uint64_t, len));
+  if (rc != TETRIG_SHM_OK) {
+    munmap(map, len);
+    memset(reader, 0, sizeof *reader);
+    return rc;
+  }
+  reader->owns_mapping = 1;
+  reader->mapping = map;
+  reader->file_device = TETRIG_SHM_CONV(uint64_t, st.st_dev);
+  reader->file_inode = TETRIG_SHM_CONV(uint64_t, st.st_ino);
+  memcpy(reader->name, name, strlen(name) + 1u);
+  return TETRIG_SHM_OK;
+}
+
+/* Unmaps (when opened by name) and zeroes the reader. Safe on a zeroed or failed reader. */
+static inline void tetrig_shm_close(TetrigShmReader* reader) {
+  if (reader == NULL) return;
+  if (reader->owns_mapping && reader->mapping != NULL) munmap(reader->mapping, TETRIG_SHM_CONV(size_t, reader->size));
+  memset(reader, 0, sizeof *reader);
+}
+
+/* ---- static data (valid while open; never changes) ---- */
+static inline uint32_t tetrig_shm_vertex_count(const TetrigShmReader* r) { return r->header->vertex_count; }
+static inline uint32_t tetrig_shm_triangle_count(const TetrigShmReader* r) { return r->header->triangle_count; }
+static inline uint32_t tetrig_shm_slot_count(const TetrigShmReader* r) { return r->header->slot_count; }
+static inline int tetrig_shm_has_normals(const TetrigShmReader* r) {
+  return (r->header->flags & TETRIG_SHM_HAS_NORMALS) != 0u;
+}
+/* triangle_count x 3 vertex indices (counter-clockwise seen from outside). */
+static inline const uint32_t* tetrig_shm_triangles(const TetrigShmReader* r) {
+  return TETRIG_SHM_PTR(const uint32_t*, r->base + r->header->triangles_offset);
+}
+/* vertex_count x 3 floats: the rest pose, rig units. */
+static inline const float* tetrig_shm_rest_positions(const TetrigShmReader* r) {
+  return TETRIG_SHM_PTR(const float*, r->base + r->header->rest_positions_offset);
+}
+static inline const char* tetrig_shm_rig_name(const TetrigShmReader* r) {
+  return TETRIG_SHM_PTR(const char*, r->base + r->header->rig_name_offset);
+}
+static inline uint32_t tetrig_shm_marker_count(const TetrigShmReader* r) { return r->header->marker_count; }
+/* Label of marker `index` (< marker_count), or NULL. Walks the label block: O(label bytes). */
+static inline const char* tetrig_shm_marker_label(const TetrigShmReader* r, uint32_t index) {
+  const char* p = TETRIG_SHM_PTR(const char*, r->base + r->header->marker_labels_offset);
+  uint32_t i;
+  if (index >= r->header->marker_count) return NULL;
+  for (i = 0; i < index; ++i) p += strlen(p) + 1u;
+  return p;
+}
+
+/* ---- live words ---- */
+static inline uint32_t tetrig_shm_state(const TetrigShmReader* r) {
+  return __atomic_load_n(&r->header->state, __ATOMIC_ACQUIRE);
+}
+static inline int64_t tetrig_shm_heartbeat_ns(const TetrigShmReader* r) {
+  return __atomic_load_n(&r->header->heartbeat_ns, __ATOMIC_ACQUIRE);
+}
+/* Newest complete frame id (0 = none yet): a cheap "is there a new frame?" poll. */
+static inline uint64_t tetrig_shm_latest_frame_id(const TetrigShmReader* r) {
+  return __atomic_load_n(&r->header->latest_frame_id, __ATOMIC_ACQUIRE);
+}
+
+/* Copies the newest complete frame: positions (vertex_count x 3 floats into `positions`, which
+ * holds `positions_len` floats; NULL to skip), normals (same, only when the segment has normals;
+ * otherwise `normals` is left untouched; NULL to skip) and its info (NULL to skip). Seqlock read:
+ * load latest_frame_id, load the slot's sequence (acquire; odd = being written: retry), copy with
+ * relaxed word loads, acquire fence, reload the sequence: unchanged means no write overlapped the
+ * copy. Retries (counted in reader->retries) at most reader->max_attempts times in all; returns
+ * TETRIG_SHM_OK, TETRIG_SHM_NO_FRAME, TETRIG_SHM_BUSY (buffers then hold garbage) or
+ * TETRIG_SHM_E_ARGUMENT. The frame returned can be newer than the latest id read before the call
+ * and its id never goes below a previous read's. Wait-free apart from the bounded retries; no
+ * system call, no allocation. */
+static inline int tetrig_shm_read_latest(TetrigShmReader* r, float* positions, size_t positions_len,
+                                         float* normals, size_t normals_len, TetrigShmFrameInfo* info) {
+  const TetrigShmHeader* h;
+  uint64_t float_bytes, need;
+  int attempt, with_normals;
+  if (r == NULL || r->header == NULL) return TETRIG_SHM_E_ARGUMENT;
+  h = r->header;
+  need = TETRIG_SHM_CONV(uint64_t, h->vertex_count) * 3u;
+  float_bytes = need * 4u;
+  with_normals = normals != NULL && (h->flags & TETRIG_SHM_HAS_NORMALS) != 0u;
+  if ((positions != NULL && positions_len < need) || (with_normals && normals_len < need)) return TETRIG_SHM_E_ARGUMENT;
+  for (attempt = 0; attempt < r->max_attempts; ++attempt) {
+    TetrigShmFrameInfo tmp;
+    uint64_t seq1, seq2, slot_index;
+    const unsigned char* slot;
+    const uint64_t* seq;
+    const uint64_t latest = __atomic_load_n(&h->latest_frame_id, __ATOMIC_ACQUIRE);
+    if (latest == 0u) return TETRIG_SHM_NO_FRAME;
+    slot_index = (latest - 1u) % h->slot_count;
+    slot = r->base + h->slots_offset + slot_index * h->slot_stride;
+    seq = TETRIG_SHM_PTR(const uint64_t*, slot + TETRIG_SHM_SLOT_SEQUENCE_OFFSET);
+    seq1 = __atomic_load_n(seq, __ATOMIC_ACQUIRE);
+    if ((seq1 & 1u) != 0u) {
+      ++r->retries;
+      continue;
+    }
+    tetrig_shm_load_words(&tmp, slot + TETRIG_SHM_SLOT_INFO_OFFSET, sizeof tmp);
+    if (positions != NULL) tetrig_shm_load_words(positions, slot + h->slot_positions_offset, float_bytes);
+    if (with_normals) tetrig_shm_load_words(normals, slot + h->slot_normals_offset, float_bytes);
+    __atomic_thread_fence(__ATOMIC_ACQUIRE);
+    seq2 = __atomic_load_n(seq, __ATOMIC_RELAXED);
+    if (seq1 != seq2 || tmp.frame_id < latest || (tmp.frame_id - 1u) % h->slot_count != slot_index) {
+      ++r->retries;
+      continue;
+    }
+    if (info != NULL) *info = tmp;
+    r->last_frame_id = tmp.frame_id;
+    ++r->reads;
+    return TETRIG_SHM_OK;
+  }
+  ++r->busy;
+  return TETRIG_SHM_BUSY;
+}
+
+/* ---- producer liveness ---- */
+
+/* 1 when process `pid` exists and is not a zombie, else 0. kill(pid, 0) (EPERM counts as alive:
+ * the process exists under another user); on Linux also /proc/<pid>/stat, because a killed
+ * producer whose parent has not reaped it yet is a zombie that kill() still finds. A pid is
+ * only meaningful inside the producer's pid namespace. */
+static inline int tetrig_shm_pid_alive(int32_t pid) {
+  if (pid <= 0) return 0;
+  if (kill(TETRIG_SHM_CONV(pid_t, pid), 0) != 0 && errno != EPERM) return 0;
+#if defined(__linux__)
+  {
+    char path[64];
+    char buf[512];
+    ssize_t got;
+    int fd;
+    snprintf(path, sizeof path, "/proc/%ld/stat", TETRIG_SHM_CONV(long, pid));
+    fd = open(path, O_RDONLY | O_CLOEXEC);
+    if (fd >= 0) {
+      got = read(fd, buf, sizeof buf - 1u);
+      close(fd);
+      if (got > 0) {
+        const char* paren;
+        buf[got] = '\0';
+        paren = strrchr(buf, ')'); /* "pid (comm) S ..." ; comm may hold ')' */
+        if (paren != NULL && paren[1] == ' ' && (paren[2] == 'Z' || paren[2] == 'X')) return 0;
+      }
+    } else if (errno == ENOENT) {
+      return 0;
+    }
+  }
+#endif
+  return 1;
+}
+
+/* Age of the producer's heartbeat at `now_ns` (CLOCK_MONOTONIC), nanoseconds. */
+static inline int64_t tetrig_shm_heartbeat_age_ns(const TetrigShmReader* r, int64_t now_ns) {
+  return now_ns - tetrig_shm_heartbeat_ns(r);
+}
+
+/* Tells a dead producer from a slow one: TETRIG_SHM_PRODUCER_STOPPED when the state says a clean
+ * stop, DEAD when its pid is gone (or a zombie), STALE when the pid lives but the heartbeat is
+ * older than `stale_after_ns` (hung, stopped by a debugger or SIGSTOP, starved), else ALIVE. A
+ * producer whose source is stale still heartbeats (state TETRIG_SHM_STATE_STALE_SOURCE) and is
+ * ALIVE here. The producer heartbeats with every frame and at least every few hundred ms while
+ * idle, so a limit of about 1 s suits. */
+static inline int tetrig_shm_producer_status(const TetrigShmReader* r, int64_t stale_after_ns) {
+  if (tetrig_shm_state(r) == TETRIG_SHM_STATE_STOPPED) return TETRIG_SHM_PRODUCER_STOPPED;
+  if (!tetrig_shm_pid_alive(r->producer_pid)) return TETRIG_SHM_PRODUCER_DEAD;
+  if (tetrig_shm_heartbeat_age_ns(r, tetrig_shm_now_ns()) > stale_after_ns) return TETRIG_SHM_PRODUCER_STALE;
+  return TETRIG_SHM_PRODUCER_ALIVE;
+}
+
+/* Whether the reader's name still refers to the segment it mapped: TETRIG_SHM_NAME_SAME,
+ * _REPLACED (a new producer created a new segment under the name: close and open again, then
+ * compare instance_id) or _GONE (unlinked: clean stop). Only for readers opened by name
+ * (returns TETRIG_SHM_E_ARGUMENT otherwise). */
+static inline int tetrig_shm_name_status(const TetrigShmReader* r) {
+  struct stat st;
+  int fd, rc;
+  if (r == NULL || !r->owns_mapping) return TETRIG_SHM_E_ARGUMENT;
+  fd = shm_open(r->name, O_RDONLY | O_CLOEXEC, 0);
+  if (fd < 0) return errno == ENOENT ? TETRIG_SHM_NAME_GONE : TETRIG_SHM_E_SYSTEM;
+  rc = fstat(fd, &st);
+  close(fd);
+  if (rc != 0) return TETRIG_SHM_E_SYSTEM;
+  return (TETRIG_SHM_CONV(uint64_t, st.st_dev) == r->file_device && TETRIG_SHM_CONV(uint64_t, st.st_ino) == r->file_inode)
+             ? TETRIG_SHM_NAME_SAME
+             : TETRIG_SHM_NAME_REPLACED;
+}
+
+/* ---- latency helpers (nanoseconds; -1 when a time is unknown or the order is wrong) ---- */
+static inline int64_t tetrig_shm_interval_ns(int64_t from_ns, int64_t to_ns) {
+  return (from_ns > 0 && to_ns > 0 && to_ns >= from_ns) ? to_ns - from_ns : -1;
+}
+/* Driver receive -> publish: the runtime's whole latency for this frame. */
+static inline int64_t tetrig_shm_receive_to_publish_ns(const TetrigShmFrameInfo* info) {
+  return tetrig_shm_interval_ns(info->receive_ns, info->publish_ns);
+}
+/* Solver take -> publish: step plus pose transfer plus commit. */
+static inline int64_t tetrig_shm_taken_to_publish_ns(const TetrigShmFrameInfo* info) {
+  return tetrig_shm_interval_ns(info->taken_ns, info->publish_ns);
+}
+/* Publish -> `now_ns` (e.g. tetrig_shm_now_ns() right after the read): the consumer's delay. */
+static inline int64_t tetrig_shm_publish_age_ns(const TetrigShmFrameInfo* info, int64_t now_ns) {
+  return tetrig_shm_interval_ns(info->publish_ns, now_ns);
+}
+
+#endif /* TETRIG_SHM_H */

@@ -1,0 +1,683 @@
+// The live rig (runtime/include/tetrig/live_rig.hpp) and the occlusion prediction
+// (marker_prediction.hpp) on a small rig made here: a 2x2x8 bar, its boundary as the fine mesh
+// (B = identity rows), twelve markers outside its sides joined to their three nearest boundary
+// faces by invisible tets (stiffness 0.1) and driven as vertex handles, device millimetres mapped
+// to rig units by a similarity (rotation, 1e-3 scale, shift).
+#include "counting_allocator.hpp"
+#include "scenes.hpp"
+#include "tetrig/live_rig.hpp"
+#include "tetrig/marker_prediction.hpp"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstring>
+#include <functional>
+#include <map>
+#include <string>
+#include <vector>
+
+namespace tetrig {
+namespace {
+
+constexpr std::int64_t kPeriodNs = 8'333'333;  // 120 Hz
+constexpr int kMarkers = 12;
+
+struct Face {
+  std::array<std::int32_t, 3> v{};  // outward (counter-clockwise seen from outside)
+};
+
+// Boundary faces of a tet mesh, oriented away from the tet they bound.
+std::vector<Face> boundaryFaces(const TetMesh& mesh) {
+  std::map<std::array<std::int32_t, 3>, std::pair<int, Face>> faces;
+  for (std::int32_t t = 0; t < mesh.tetCount(); ++t) {
+    for (int skip = 0; skip < 4; ++skip) {
+      Face f;
+      int n = 0;
+      for (int c = 0; c < 4; ++c)
+        if (c != skip) f.v[static_cast<std::size_t>(n++)] = mesh.tets(t, c);
+      const Eigen::Vector3d a = mesh.vertices.row(f.v[0]).transpose(), b = mesh.vertices.row(f.v[1]).transpose(),
+                            c = mesh.vertices.row(f.v[2]).transpose(), opposite = mesh.vertices.row(mesh.tets(t, skip)).transpose();
+      if ((b - a).cross(c - a).dot(opposite - a) > 0.0) std::swap(f.v[1], f.v[2]);
+      std::array<std::int32_t, 3> key = f.v;
+      std::sort(key.begin(), key.end());
+      auto& entry = faces[key];
+      ++entry.first;
+      entry.second = f;
+    }
+  }
+  std::vector<Face> out;
+  for (const auto& [key, entry] : faces)
+    if (entry.first == 1) out.push_back(entry.second);
+  return out;
+}
+
+// Rest positions of the twelve markers: four around each of z = 0.5, 4, 7.5, 0.3 off the sides.
+std::vector<Eigen::Vector3d> barMarkerPositions() {
+  std::vector<Eigen::Vector3d> m;
+  for (const double z : {0.5, 4.0, 7.5}) {
+    m.emplace_back(-0.3, 1.0, z);
+    m.emplace_back(2.3, 1.0, z);
+    m.emplace_back(1.0, -0.3, z);
+    m.emplace_back(1.0, 2.3, z);
+  }
+  return m;
+}
+
+// The bar rig. `extra_degenerate_triangle` adds three fine vertices at one tet vertex joined by one
+// (zero-area) triangle of their own.
+Rig makeBarRig(bool extra_degenerate_triangle = false) {
+  const TetMesh body = scenes::makeBar(2, 2, 8);
+  const std::vector<Face> faces = boundaryFaces(body);
+  const std::vector<Eigen::Vector3d> markers = barMarkerPositions();
+  Rig rig;
+  rig.name = "bar 2x2x8";
+  rig.body_vertex_count = body.vertexCount();
+  rig.body_tet_count = body.tetCount();
+  const std::int32_t nv = body.vertexCount() + static_cast<std::int32_t>(markers.size());
+  rig.tet_mesh.vertices.resize(nv, 3);
+  rig.tet_mesh.vertices.topRows(body.vertexCount()) = body.vertices;
+  std::vector<std::array<std::int32_t, 4>> invisible;
+  for (std::size_t k = 0; k < markers.size(); ++k) {
+    const auto mv = static_cast<std::int32_t>(body.vertexCount() + static_cast<std::int32_t>(k));
+    rig.tet_mesh.vertices.row(mv) = markers[k].transpose();
+    // The three boundary faces with the nearest centres that the marker is not coplanar with.
+    std::vector<std::pair<double, std::size_t>> order;
+    for (std::size_t f = 0; f < faces.size(); ++f) {
+      Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+      for (const std::int32_t v : faces[f].v) centre += body.vertices.row(v).transpose() / 3.0;
+      order.emplace_back((centre - markers[k]).norm(), f);
+    }
+    std::sort(order.begin(), order.end());
+    int bound = 0;
+    for (const auto& [d, f] : order) {
+      std::array<std::int32_t, 4> tet{faces[f].v[0], faces[f].v[1], faces[f].v[2], mv};
+      const Eigen::Vector3d a = rig.tet_mesh.vertices.row(tet[0]).transpose(), b = rig.tet_mesh.vertices.row(tet[1]).transpose(),
+                            c = rig.tet_mesh.vertices.row(tet[2]).transpose();
+      const double volume = (b - a).cross(c - a).dot(markers[k] - a) / 6.0;
+      if (std::abs(volume) < 0.02) continue;
+      if (volume < 0.0) std::swap(tet[0], tet[1]);
+      invisible.push_back(tet);
+      if (++bound == 3) break;
+    }
+    RigMarker marker;
+    marker.label = "M" + std::to_string(k);
+    marker.tet_vertex = mv;
+    marker.vertex_handle = static_cast<std::int32_t>(k);
+    marker.rest_position = markers[k];
+    marker.bound_faces = bound;
+    marker.surface_distance = 0.3;
+    rig.markers.push_back(marker);
+    rig.setup.vertex_handles.push_back(mv);
+    rig.vertex_handle_names.push_back(marker.label);
+  }
+  rig.tet_mesh.tets.resize(body.tetCount() + static_cast<Eigen::Index>(invisible.size()), 4);
+  rig.tet_mesh.tets.topRows(body.tetCount()) = body.tets;
+  for (std::size_t i = 0; i < invisible.size(); ++i)
+    for (int c = 0; c < 4; ++c) rig.tet_mesh.tets(body.tetCount() + static_cast<Eigen::Index>(i), c) = invisible[i][static_cast<std::size_t>(c)];
+  rig.setup.stiffness.assign(static_cast<std::size_t>(rig.tet_mesh.tetCount()), 1.0);
+  for (std::int32_t t = body.tetCount(); t < rig.tet_mesh.tetCount(); ++t) rig.setup.stiffness[static_cast<std::size_t>(t)] = 0.1;
+
+  // Fine mesh: the boundary vertices (ascending tet vertex order), B = identity rows.
+  std::vector<std::int32_t> fine_of(static_cast<std::size_t>(body.vertexCount()), -1), tet_of;
+  for (const Face& f : faces)
+    for (const std::int32_t v : f.v) fine_of[static_cast<std::size_t>(v)] = 0;
+  for (std::int32_t v = 0; v < body.vertexCount(); ++v) {
+    if (fine_of[static_cast<std::size_t>(v)] < 0) continue;
+    fine_of[static_cast<std::size_t>(v)] = static_cast<std::int32_t>(tet_of.size());
+    tet_of.push_back(v);
+  }
+  std::vector<std::array<std::int32_t, 3>> triangles;
+  for (const Face& f : faces)
+    triangles.push_back({fine_of[static_cast<std::size_t>(f.v[0])], fine_of[static_cast<std::size_t>(f.v[1])], fine_of[static_cast<std::size_t>(f.v[2])]});
+  if (extra_degenerate_triangle) {
+    const auto first = static_cast<std::int32_t>(tet_of.size());
+    for (int i = 0; i < 3; ++i) tet_of.push_back(tet_of.front());
+    triangles.push_back({first, first + 1, first + 2});
+  }
+  rig.fine_vertices.resize(static_cast<Eigen::Index>(tet_of.size()), 3);
+  rig.pose_transfer.rows = static_cast<std::int32_t>(tet_of.size());
+  rig.pose_transfer.cols = nv;
+  rig.pose_transfer.row_offsets.push_back(0);
+  for (std::size_t i = 0; i < tet_of.size(); ++i) {
+    rig.fine_vertices.row(static_cast<Eigen::Index>(i)) = body.vertices.row(tet_of[i]);
+    rig.pose_transfer.columns.push_back(tet_of[i]);
+    rig.pose_transfer.weights.push_back(1.0);
+    rig.pose_transfer.row_offsets.push_back(static_cast<std::int32_t>(i + 1));
+  }
+  rig.fine_triangles.resize(static_cast<Eigen::Index>(triangles.size()), 3);
+  for (std::size_t f = 0; f < triangles.size(); ++f)
+    for (int c = 0; c < 3; ++c) rig.fine_triangles(static_cast<Eigen::Index>(f), c) = triangles[f][static_cast<std::size_t>(c)];
+
+  // Device mm -> rig units: Z-up to Y-up rotation, 1e-3 scale, a shift.
+  rig.alignment.linear = 1e-3 * Eigen::AngleAxisd(-0.5 * M_PI, Eigen::Vector3d::UnitX()).toRotationMatrix();
+  rig.alignment.translation = Eigen::Vector3d(0.25, -0.5, 1.0);
+  rig.alignment.rig_units_per_mm = 1e-3;
+  return rig;
+}
+
+// One frame from rig-unit marker positions (nullopt-like: `valid[k] == false` leaves marker k out
+// as invalid). Marker k gets id k + 1 (id 0 is the table's unknown "X").
+MarkerFrame makeFrame(const Rig& rig, const std::vector<Eigen::Vector3d>& rig_positions, const std::vector<bool>& valid,
+                      std::uint64_t counter) {
+  MarkerFrame frame;
+  frame.frame_counter = counter;
+  frame.device_timestamp_ns = 1'000'000'000 + static_cast<std::int64_t>(counter) * kPeriodNs;
+  frame.receive_timestamp_ns = 77'000'000'000 + static_cast<std::int64_t>(counter) * 9'000'001;  // another clock
+  const Eigen::Matrix3d inverse = rig.alignment.linear.inverse();
+  frame.marker_count = static_cast<std::uint16_t>(rig_positions.size());
+  for (std::size_t k = 0; k < rig_positions.size(); ++k) {
+    // Reverse order in the frame: the position in the frame does not matter, the id does.
+    Marker& m = frame.markers[rig_positions.size() - 1 - k];
+    m.id = static_cast<std::uint16_t>(k + 1);
+    m.valid = valid[k] ? 1 : 0;
+    const Eigen::Vector3d mm = inverse * (rig_positions[k] - rig.alignment.translation);
+    for (int c = 0; c < 3; ++c) m.position_mm[c] = valid[k] ? static_cast<float>(mm[c]) : 0.0f;
+  }
+  return frame;
+}
+
+std::vector<std::string> labelTable() {
+  std::vector<std::string> labels{"X"};
+  for (int k = 0; k < kMarkers; ++k) labels.push_back("subject:M" + std::to_string(k));
+  return labels;
+}
+
+// A smooth non-rigid motion: twist about the bar's axis growing along z (up to `twist` radians at
+// z = 8) plus a global rigid motion (rotation about x, shift).
+Eigen::Vector3d moved(const Eigen::Vector3d& p, double twist, double tilt, const Eigen::Vector3d& shift) {
+  const Eigen::Vector3d axis(1.0, 1.0, 0.0);
+  const Eigen::Vector3d local = Eigen::AngleAxisd(twist * p.z() / 8.0, Eigen::Vector3d::UnitZ()) * (p - axis) + axis;
+  return Eigen::AngleAxisd(tilt, Eigen::Vector3d::UnitX()) * local + shift;
+}
+
+std::vector<Eigen::Vector3d> movedMarkers(const Rig& rig, double twist, double tilt, const Eigen::Vector3d& shift) {
+  std::vector<Eigen::Vector3d> out;
+  for (const RigMarker& m : rig.markers) out.push_back(moved(m.rest_position, twist, tilt, shift));
+  return out;
+}
+
+double maxDistance(const std::vector<float>& a, const std::vector<float>& b) {
+  double worst = 0.0;
+  for (std::size_t v = 0; v + 2 < a.size(); v += 3) {
+    const double dx = a[v] - b[v], dy = a[v + 1] - b[v + 1], dz = a[v + 2] - b[v + 2];
+    worst = std::max(worst, std::sqrt(dx * dx + dy * dy + dz * dz));
+  }
+  return worst;
+}
+
+double smoothstep(double u) { return u * u * (3.0 - 2.0 * u); }
+
+// ---------------------------------------------------------------------------------------------
+
+TEST(LiveRig, TheHandMadeRigIsValid) {
+  const Rig rig = makeBarRig();
+  EXPECT_EQ(validateRig(rig), "");
+  for (const RigMarker& m : rig.markers) EXPECT_EQ(m.bound_faces, 3) << m.label;
+  EXPECT_EQ(checkTetMesh(rig.tet_mesh).inverted_tets, 0);
+}
+
+TEST(LiveRigBinding, ExactPrefixedMissingUnknownAndDuplicates) {
+  const Rig rig = makeBarRig();
+  LiveRig live(rig);
+  const std::vector<std::string> labels{"M0", "subject:M1", "X", "", "other:M3", "M1", "pre:M0", "M11"};
+  const MarkerBindingReport report = live.bindLabels(labels);
+  EXPECT_EQ(report.matched, 4);
+  EXPECT_EQ(live.markerOfId(0), 0);   // exact
+  EXPECT_EQ(live.markerOfId(5), 1);   // exact "M1" wins over the prefixed id 1
+  EXPECT_EQ(live.markerOfId(1), -1);
+  EXPECT_EQ(live.markerOfId(4), 3);   // "other:M3" == "M3"
+  EXPECT_EQ(live.markerOfId(7), 11);
+  EXPECT_EQ(live.markerOfId(2), -1);
+  EXPECT_EQ(live.markerOfId(3), -1);
+  EXPECT_EQ(live.markerOfId(6), -1);
+  EXPECT_EQ(live.markerOfId(999), -1);  // beyond the table
+  const std::vector<std::string> missing{"M2", "M4", "M5", "M6", "M7", "M8", "M9", "M10"};
+  EXPECT_EQ(report.missing, missing);
+  EXPECT_EQ(report.unknown, std::vector<std::string>{"X"});
+  const std::vector<std::string> duplicates{"subject:M1", "pre:M0"};
+  EXPECT_EQ(report.duplicates, duplicates);
+  // "M1" must not match "M11" or "subject:M11" by prefix.
+  const MarkerBindingReport second = live.bindLabels(std::vector<std::string>{"subject:M11", "M1x"});
+  EXPECT_EQ(second.matched, 1);
+  EXPECT_EQ(live.markerOfId(0), 11);
+  EXPECT_EQ(second.unknown, std::vector<std::string>{"M1x"});
+}
+
+TEST(LiveRig, UnknownIdsAreCountedAndIgnored) {
+  const Rig rig = makeBarRig();
+  LiveRig with_unknown(rig), without(rig);
+  with_unknown.bindLabels(labelTable());
+  without.bindLabels(labelTable());
+  std::vector<float> a(static_cast<std::size_t>(with_unknown.fineVertexCount()) * 3), b(a.size());
+  const std::vector<bool> all(kMarkers, true);
+  for (int f = 0; f < 10; ++f) {
+    const auto markers = movedMarkers(rig, 0.05 * f, 0.0, Eigen::Vector3d(0.01 * f, 0, 0));
+    MarkerFrame frame = makeFrame(rig, markers, all, static_cast<std::uint64_t>(f));
+    const MarkerFrame clean = frame;
+    // id 0 ("X", not a rig marker), an id past the table, an invalid unbound one: absurd positions.
+    for (const std::uint16_t id : {std::uint16_t{0}, std::uint16_t{500}, std::uint16_t{kMarkers + 1}}) {
+      Marker& m = frame.markers[frame.marker_count++];
+      m.id = id;
+      m.valid = id == kMarkers + 1 ? 0 : 1;
+      m.position_mm[0] = 1e9f;
+    }
+    const LiveFrameStats s = with_unknown.processFrame(frame, StepBudget{3}, a.data(), nullptr);
+    const LiveFrameStats t = without.processFrame(clean, StepBudget{3}, b.data(), nullptr);
+    EXPECT_EQ(s.unknown_markers, 3);
+    EXPECT_EQ(t.unknown_markers, 0);
+    EXPECT_EQ(s.measured_markers, kMarkers);
+    EXPECT_EQ(s.occluded_markers, 0);
+    EXPECT_EQ(s.flags & kLiveMarkersPredicted, 0u);
+    ASSERT_EQ(std::memcmp(a.data(), b.data(), a.size() * sizeof(float)), 0) << "frame " << f;
+  }
+}
+
+TEST(MarkerPrediction, ExactForARigidMotionOfTheWholeMesh) {
+  const Rig rig = makeBarRig();
+  std::vector<std::int32_t> marker_vertices;
+  for (const RigMarker& m : rig.markers) marker_vertices.push_back(m.tet_vertex);
+  for (const int rings : {0, 1, 2}) {
+    MarkerPredictor predictor(rig.tet_mesh, rig.body_vertex_count, rig.body_tet_count, marker_vertices, MarkerPredictionOptions{rings});
+    // Anchors: body vertices only, the bound faces' corners at least, more with more rings.
+    for (std::int32_t k = 0; k < predictor.markerCount(); ++k) {
+      const auto anchor = predictor.anchorVertices(k);
+      EXPECT_GE(anchor.size(), 4u);
+      for (const std::int32_t v : anchor) EXPECT_LT(v, rig.body_vertex_count);
+      if (rings > 0) {
+        MarkerPredictor smaller(rig.tet_mesh, rig.body_vertex_count, rig.body_tet_count, marker_vertices, MarkerPredictionOptions{rings - 1});
+        EXPECT_GT(anchor.size(), smaller.anchorVertices(k).size());
+      }
+    }
+    const Eigen::Isometry3d motion = Eigen::Translation3d(0.3, -2.0, 5.0) * Eigen::AngleAxisd(2.5, Eigen::Vector3d(1, 2, -0.5).normalized());
+    std::vector<double> x(static_cast<std::size_t>(rig.tet_mesh.vertexCount()) * 3);
+    for (std::int32_t v = 0; v < rig.tet_mesh.vertexCount(); ++v) {
+      // Markers far off their rigid place: they must not influence their own prediction.
+      const Eigen::Vector3d p = v < rig.body_vertex_count ? Eigen::Vector3d(motion * Eigen::Vector3d(rig.tet_mesh.vertices.row(v).transpose()))
+                                                          : Eigen::Vector3d(100.0, 100.0, 100.0);
+      for (int c = 0; c < 3; ++c) x[static_cast<std::size_t>(v) * 3 + static_cast<std::size_t>(c)] = p[c];
+    }
+    std::vector<Eigen::Vector3d> prediction(rig.markers.size());
+    ASSERT_TRUE(predictor.predict(x, prediction));
+    for (std::size_t k = 0; k < rig.markers.size(); ++k) {
+      EXPECT_LT((prediction[k] - motion * rig.markers[k].rest_position).norm(), 1e-12) << "rings " << rings << " marker " << k;
+    }
+  }
+}
+
+TEST(MarkerPrediction, FollowsTheLocalMotionNotTheGlobalOne) {
+  // The bar's vertices twisted by 90 degrees at z = 8 (0 at z = 0). The markers near the ends
+  // (z = 0.5: turned by 6 degrees; z = 7.5: by 84) are predicted from their anchors' motion, far
+  // better than from the best rigid fit of the whole bar (rings = 20 covers it: ~45 degrees).
+  const Rig rig = makeBarRig();
+  std::vector<std::int32_t> marker_vertices;
+  for (const RigMarker& m : rig.markers) marker_vertices.push_back(m.tet_vertex);
+  MarkerPredictor local(rig.tet_mesh, rig.body_vertex_count, rig.body_tet_count, marker_vertices);
+  MarkerPredictor global(rig.tet_mesh, rig.body_vertex_count, rig.body_tet_count, marker_vertices, MarkerPredictionOptions{20});
+  ASSERT_EQ(global.anchorVertices(0).size(), static_cast<std::size_t>(rig.body_vertex_count));
+  std::vector<double> x(static_cast<std::size_t>(rig.tet_mesh.vertexCount()) * 3);
+  for (std::int32_t v = 0; v < rig.tet_mesh.vertexCount(); ++v) {
+    const Eigen::Vector3d p = moved(rig.tet_mesh.vertices.row(v).transpose(), 0.5 * M_PI, 0.0, Eigen::Vector3d::Zero());
+    for (int c = 0; c < 3; ++c) x[static_cast<std::size_t>(v) * 3 + static_cast<std::size_t>(c)] = p[c];
+  }
+  std::vector<Eigen::Vector3d> by_local(rig.markers.size()), by_global(rig.markers.size());
+  ASSERT_TRUE(local.predict(x, by_local));
+  ASSERT_TRUE(global.predict(x, by_global));
+  for (const std::size_t k : {0u, 1u, 2u, 3u, 8u, 9u, 10u, 11u}) {
+    const Eigen::Vector3d truth = moved(rig.markers[k].rest_position, 0.5 * M_PI, 0.0, Eigen::Vector3d::Zero());
+    const double local_error = (by_local[k] - truth).norm(), global_error = (by_global[k] - truth).norm();
+    EXPECT_LT(local_error, 0.2 * global_error) << "marker " << k;
+    EXPECT_LT(local_error, 0.15) << "marker " << k;  // 0.3 off the side: 0.15 is ~30 degrees there
+  }
+}
+
+TEST(LiveRig, OccludedMarkerFollowsARigidMotionOfTheBody) {
+  const Rig rig = makeBarRig();
+  LiveRig live(rig);
+  std::vector<std::string> labels = labelTable();
+  labels[6] = "";  // marker M5 (id 6) is never named: always predicted
+  const MarkerBindingReport report = live.bindLabels(labels);
+  ASSERT_EQ(report.missing, std::vector<std::string>{"M5"});
+  std::vector<float> x(static_cast<std::size_t>(live.fineVertexCount()) * 3);
+  std::vector<bool> valid(kMarkers, true);
+  valid[7] = false;  // M7 is also invalid in every frame
+  const Eigen::Vector3d shift(0.4, -0.3, 0.7);
+  const double tilt = 0.6;
+  const Eigen::Isometry3d final_motion = Eigen::Translation3d(shift) * Eigen::AngleAxisd(tilt, Eigen::Vector3d::UnitX());
+  LiveFrameStats s;
+  for (int f = 0; f < 200; ++f) {
+    const double u = std::min(1.0, f / 60.0);  // ramp over 0.5 s, then hold
+    const auto markers = movedMarkers(rig, 0.0, u * tilt, u * shift);
+    s = live.processFrame(makeFrame(rig, markers, valid, static_cast<std::uint64_t>(f)), StepBudget{3}, x.data(), nullptr);
+    EXPECT_EQ(s.occluded_markers, 2);
+    EXPECT_EQ(s.measured_markers, kMarkers - 2);
+    EXPECT_TRUE(s.flags & kLiveMarkersPredicted);
+  }
+  EXPECT_EQ(live.markerState(5), MarkerTrackState::kPredicted);
+  EXPECT_EQ(live.markerMeasured()[5], 0);
+  EXPECT_EQ(live.markerMeasured()[4], 1);
+  // The predicted markers' targets: where the rigid motion takes them (float mm in the frames:
+  // measurement rounding ~1e-6).
+  for (const int k : {5, 7}) {
+    const Eigen::Vector3d truth = final_motion * rig.markers[static_cast<std::size_t>(k)].rest_position;
+    EXPECT_LT((live.markerTargets()[static_cast<std::size_t>(k)] - truth).norm(), 1e-4) << "marker " << k;
+    // Had the marker stayed at its rest position (no prediction), the error would be large.
+    EXPECT_GT((rig.markers[static_cast<std::size_t>(k)].rest_position - truth).norm(), 0.5);
+  }
+  // The fine mesh moved rigidly too.
+  double worst = 0.0;
+  const auto rest = live.restPositions();
+  for (std::size_t v = 0; v < rest.size(); v += 3) {
+    const Eigen::Vector3d r(rest[v], rest[v + 1], rest[v + 2]);
+    worst = std::max(worst, (Eigen::Vector3d(x[v], x[v + 1], x[v + 2]) - final_motion * r).norm());
+  }
+  EXPECT_LT(worst, 1e-4);
+}
+
+// Runs a twisting, moving bar for `frames` frames; marker M5's measurement slides 0.3 along the bar
+// (skin sliding over the body), M5 is occluded in [drop, back). Returns the fine positions per frame.
+std::vector<std::vector<float>> runTwist(const Rig& rig, const LiveRigOptions& options, int frames, int drop, int back,
+                                         std::vector<LiveFrameStats>* stats = nullptr) {
+  LiveRig live(rig, options);
+  live.bindLabels(labelTable());
+  std::vector<std::vector<float>> out;
+  std::vector<float> x(static_cast<std::size_t>(live.fineVertexCount()) * 3);
+  for (int f = 0; f < frames; ++f) {
+    const double u = static_cast<double>(f) / frames;
+    auto markers = movedMarkers(rig, 1.2 * u, 0.3 * u, Eigen::Vector3d(0.0, 0.5 * u, 0.0));
+    markers[5] += Eigen::Vector3d(0.0, 0.0, 0.3) * std::min(1.0, f / 20.0);
+    std::vector<bool> valid(kMarkers, true);
+    valid[5] = f < drop || f >= back;
+    const LiveFrameStats s = live.processFrame(makeFrame(rig, markers, valid, static_cast<std::uint64_t>(f)), StepBudget{3}, x.data(), nullptr);
+    if (stats) stats->push_back(s);
+    out.push_back(x);
+  }
+  return out;
+}
+
+double largestStep(const std::vector<std::vector<float>>& run, int from, int to) {
+  double worst = 0.0;
+  for (int f = std::max(from, 1); f < to; ++f) worst = std::max(worst, maxDistance(run[static_cast<std::size_t>(f)], run[static_cast<std::size_t>(f) - 1]));
+  return worst;
+}
+
+TEST(LiveRig, NoPopAtDropoutOrReturn) {
+  const Rig rig = makeBarRig();
+  constexpr int kFrames = 240, kDrop = 80, kBack = 160;
+  const auto reference = runTwist(rig, LiveRigOptions{}, kFrames, kFrames, kFrames);  // never occluded
+  std::vector<LiveFrameStats> stats;
+  const auto occluded = runTwist(rig, LiveRigOptions{}, kFrames, kDrop, kBack, &stats);
+  LiveRigOptions no_blend;
+  no_blend.occlusion_blend_s = 0.0;
+  const auto popping = runTwist(rig, no_blend, kFrames, kDrop, kBack);
+  // The reference's own largest per-frame motion of any fine vertex, after the slide ramp.
+  const double motion = largestStep(reference, 30, kFrames);
+  const double blended = largestStep(occluded, 30, kFrames);
+  const double unblended = largestStep(popping, 30, kFrames);
+  std::printf("[ measured ] bar: largest per-frame fine-vertex step: unoccluded %.5f, occluded with 0.15 s blends %.5f, "
+              "without blends %.5f\n", motion, blended, unblended);
+  EXPECT_LE(blended, 1.5 * motion);
+  EXPECT_GT(unblended, 3.0 * motion) << "the slid marker must pop without blends, or this test proves nothing";
+  // Flags and counts through the occlusion: predicted while occluded, blending for 0.15 s after
+  // each edge (frame 18 after the edge is 149.99999 ms later: still blending; frame 19 is not).
+  EXPECT_EQ(stats[kDrop - 1].flags & (kLiveMarkersPredicted | kLiveMarkersBlending), 0u);
+  EXPECT_TRUE(stats[kDrop].flags & kLiveMarkersPredicted);
+  EXPECT_TRUE(stats[kDrop].flags & kLiveMarkersBlending);
+  EXPECT_EQ(stats[kDrop].blending_markers, 1);
+  EXPECT_EQ(stats[kDrop].occluded_markers, 1);
+  EXPECT_TRUE(stats[kDrop + 18].flags & kLiveMarkersBlending);
+  EXPECT_FALSE(stats[kDrop + 19].flags & kLiveMarkersBlending);
+  EXPECT_TRUE(stats[kDrop + 19].flags & kLiveMarkersPredicted);
+  EXPECT_EQ(stats[kBack].occluded_markers, 0);
+  EXPECT_TRUE(stats[kBack].flags & kLiveMarkersBlending);
+  EXPECT_TRUE(stats[kBack + 18].flags & kLiveMarkersBlending);
+  EXPECT_EQ(stats[kBack + 19].flags & kLiveMarkersBlending, 0u);
+  // After the return blend the run is back on the reference (within the deformer's lag).
+  EXPECT_LT(maxDistance(occluded[kFrames - 1], reference[kFrames - 1]), 0.1 * maxDistance(popping[kDrop + 40], reference[kDrop + 40]));
+}
+
+TEST(LiveRig, BlendsFollowTheSmoothstepInFrameTime) {
+  const Rig rig = makeBarRig();
+  LiveRig live(rig);  // T = 0.15 s
+  live.bindLabels(labelTable());
+  std::vector<float> x(static_cast<std::size_t>(live.fineVertexCount()) * 3);
+  // Frames at irregular times (device clock), the receive clock elsewhere and running backwards:
+  // only device time may count.
+  std::int64_t t = 5'000'000'000;
+  auto frameAt = [&](std::int64_t time_ns, bool m0_valid, std::uint64_t counter) {
+    auto markers = movedMarkers(rig, 0.2, 0.0, Eigen::Vector3d::Zero());
+    markers[0] += Eigen::Vector3d(0.2, 0.0, 0.0);
+    std::vector<bool> valid(kMarkers, true);
+    valid[0] = m0_valid;
+    MarkerFrame frame = makeFrame(rig, markers, valid, counter);
+    frame.device_timestamp_ns = time_ns;
+    frame.receive_timestamp_ns = 1'000'000'000'000 - static_cast<std::int64_t>(counter) * 50'000'000;
+    return frame;
+  };
+  std::uint64_t counter = 0;
+  for (int f = 0; f < 30; ++f) live.processFrame(frameAt(t += 10'000'000, true, counter++), StepBudget{3}, x.data(), nullptr);
+  ASSERT_EQ(live.markerState(0), MarkerTrackState::kMeasured);
+  // Dropout: the offset o = target - prediction at the first occluded frame fades as 1 - s(u).
+  live.processFrame(frameAt(t += 10'000'000, false, counter++), StepBudget{3}, x.data(), nullptr);
+  const Eigen::Vector3d offset = live.markerTargets()[0] - live.markerPredictions()[0];
+  ASSERT_GT(offset.norm(), 0.05);
+  const std::int64_t dropout = t;
+  for (const std::int64_t dt : {20'000'000, 37'500'000, 75'000'000, 112'500'000, 149'000'000, 150'000'000, 300'000'000}) {
+    live.processFrame(frameAt(t = dropout + dt, false, counter++), StepBudget{3}, x.data(), nullptr);
+    const double fade = 1.0 - smoothstep(std::min(1.0, static_cast<double>(dt) / 150e6));
+    const Eigen::Vector3d expected = live.markerPredictions()[0] + fade * offset;
+    EXPECT_LT((live.markerTargets()[0] - expected).norm(), 1e-12) << "dt " << dt;
+  }
+  // Return: from the prediction (offset long gone) to the measurement as s(u).
+  const std::int64_t back = t + 10'000'000;
+  const Eigen::Vector3d measured = moved(rig.markers[0].rest_position, 0.2, 0.0, Eigen::Vector3d::Zero()) + Eigen::Vector3d(0.2, 0, 0);
+  for (const std::int64_t dt : {0, 30'000'000, 75'000'000, 120'000'000, 150'000'000}) {
+    live.processFrame(frameAt(t = back + dt, true, counter++), StepBudget{3}, x.data(), nullptr);
+    const double s = smoothstep(static_cast<double>(dt) / 150e6);
+    const Eigen::Vector3d p = live.markerPredictions()[0];
+    const Eigen::Vector3d expected = p + s * (measured - p);
+    EXPECT_LT((live.markerTargets()[0] - expected).norm(), 1e-5) << "dt " << dt;  // float mm round trip
+    EXPECT_EQ(live.markerState(0), dt < 150'000'000 ? MarkerTrackState::kReturning : MarkerTrackState::kMeasured) << "dt " << dt;
+  }
+}
+
+TEST(LiveRig, AllOccludedHoldsThePoseBitIdentically) {
+  const Rig rig = makeBarRig();
+  LiveRigOptions options;
+  options.normals = true;
+  LiveRig live(rig, options);
+  live.bindLabels(labelTable());
+  const std::size_t n = static_cast<std::size_t>(live.fineVertexCount()) * 3;
+  std::vector<float> x(n), nrm(n), held(n), held_normals(n);
+  const std::vector<bool> all(kMarkers, true), none(kMarkers, false);
+  int f = 0;
+  double largest_step = 0.0;
+  std::vector<float> previous = x;
+  for (; f < 40; ++f) {
+    live.processFrame(makeFrame(rig, movedMarkers(rig, 0.02 * f, 0.01 * f, Eigen::Vector3d::Zero()), all, static_cast<std::uint64_t>(f)), StepBudget{3}, x.data(), nrm.data());
+    if (f > 0) largest_step = std::max(largest_step, maxDistance(x, previous));
+    previous = x;
+  }
+  const std::vector<float> last = x, last_normals = nrm;
+  const std::vector<double> tets(live.deformer().positions().begin(), live.deformer().positions().end());
+  for (int g = 0; g < 50; ++g, ++f) {
+    MarkerFrame frame = makeFrame(rig, movedMarkers(rig, 0.02 * f, 0.01 * f, Eigen::Vector3d::Zero()), none, static_cast<std::uint64_t>(f));
+    if (g % 2) frame.marker_count = 0;  // also frames with no markers at all
+    std::fill(held.begin(), held.end(), -1.0f);
+    std::fill(held_normals.begin(), held_normals.end(), -1.0f);
+    const LiveFrameStats s = live.processFrame(frame, StepBudget{3}, held.data(), held_normals.data());
+    EXPECT_TRUE(s.flags & kLivePoseHeld);
+    EXPECT_EQ(s.step.iterations, 0);
+    EXPECT_EQ(s.measured_markers, 0);
+    EXPECT_EQ(s.occluded_markers, kMarkers);
+    ASSERT_EQ(std::memcmp(held.data(), last.data(), n * sizeof(float)), 0) << "held frame " << g;
+    ASSERT_EQ(std::memcmp(held_normals.data(), last_normals.data(), n * sizeof(float)), 0) << "held frame " << g;
+  }
+  EXPECT_TRUE(std::equal(tets.begin(), tets.end(), live.deformer().positions().begin()));
+  std::fill(held.begin(), held.end(), 0.0f);
+  live.writeLastPose(held.data(), held_normals.data());
+  EXPECT_EQ(std::memcmp(held.data(), last.data(), n * sizeof(float)), 0);
+  // The markers return 50 frames of motion further on: blended back from the held pose, so the
+  // first frame moves no more than one frame of the motion did (the blend clock stood still while
+  // held); without the blend the mesh would jump by the 50 frames at once.
+  const auto returned = movedMarkers(rig, 0.02 * f, 0.01 * f, Eigen::Vector3d::Zero());
+  const LiveFrameStats back = live.processFrame(makeFrame(rig, returned, all, static_cast<std::uint64_t>(f)), StepBudget{3}, x.data(), nrm.data());
+  EXPECT_FALSE(back.flags & kLivePoseHeld);
+  EXPECT_EQ(back.blending_markers, kMarkers);
+  std::printf("[ measured ] bar: first frame after a 50-frame hold moved %.5f (largest step while moving %.5f)\n",
+              maxDistance(x, last), largest_step);
+  EXPECT_LT(maxDistance(x, last), 1.5 * largest_step);
+  double marker_jump = 0.0;
+  for (std::size_t k = 0; k < returned.size(); ++k) marker_jump = std::max(marker_jump, (returned[k] - live.markerPredictions()[k]).norm());
+  EXPECT_GT(marker_jump, 5.0 * largest_step) << "the markers must have moved on during the hold";
+}
+
+TEST(LiveRig, SameFramesGiveBitIdenticalOutputs) {
+  const Rig rig = makeBarRig();
+  LiveRigOptions options;
+  options.normals = true;
+  LiveRig a(rig, options), b(rig, options), c(rig, options);
+  for (LiveRig* live : {&a, &b, &c}) live->bindLabels(labelTable());
+  const std::size_t n = static_cast<std::size_t>(a.fineVertexCount()) * 3;
+  std::vector<float> xa(n), xb(n), xc(n), na(n), nb(n), nc(n);
+  for (int f = 0; f < 150; ++f) {
+    std::vector<bool> valid(kMarkers, true);
+    valid[3] = f < 30 || f > 60;
+    valid[8] = f % 7 != 0;
+    if (f >= 90 && f < 100) valid.assign(kMarkers, false);
+    const MarkerFrame frame = makeFrame(rig, movedMarkers(rig, 0.01 * f, -0.004 * f, Eigen::Vector3d(0, 0.003 * f, 0)), valid, static_cast<std::uint64_t>(f));
+    // c gets the same frames with the device time moved to the receive field: the same clock.
+    MarkerFrame receive_only = frame;
+    receive_only.receive_timestamp_ns = frame.device_timestamp_ns;
+    receive_only.device_timestamp_ns = 0;
+    const LiveFrameStats sa = a.processFrame(frame, StepBudget{2}, xa.data(), na.data());
+    const LiveFrameStats sb = b.processFrame(frame, StepBudget{2}, xb.data(), nb.data());
+    c.processFrame(receive_only, StepBudget{2}, xc.data(), nc.data());
+    ASSERT_EQ(sa.flags, sb.flags);
+    ASSERT_EQ(std::memcmp(xa.data(), xb.data(), n * sizeof(float)), 0) << "frame " << f;
+    ASSERT_EQ(std::memcmp(na.data(), nb.data(), n * sizeof(float)), 0) << "frame " << f;
+    ASSERT_EQ(std::memcmp(xa.data(), xc.data(), n * sizeof(float)), 0) << "frame " << f;
+  }
+}
+
+TEST(LiveRig, NoAllocationPerFrameAfterWarmUp) {
+  const Rig rig = makeBarRig();
+  LiveRigOptions options;
+  options.normals = true;
+  LiveRig live(rig, options);
+  std::vector<std::string> labels = labelTable();
+  labels[6] = "";  // one rig marker never named
+  live.bindLabels(labels);
+  const std::size_t n = static_cast<std::size_t>(live.fineVertexCount()) * 3;
+  std::vector<float> x(n), nrm(n);
+  // Frames made up front: dropouts, returns, a held stretch, unknown ids.
+  std::vector<MarkerFrame> frames;
+  for (int f = 0; f < 120; ++f) {
+    std::vector<bool> valid(kMarkers, true);
+    valid[2] = f < 20 || f > 50;
+    if (f >= 70 && f < 80) valid.assign(kMarkers, false);
+    frames.push_back(makeFrame(rig, movedMarkers(rig, 0.01 * f, 0.005 * f, Eigen::Vector3d::Zero()), valid, static_cast<std::uint64_t>(f)));
+    Marker& unknown = frames.back().markers[frames.back().marker_count++];
+    unknown.id = 4000;
+    unknown.valid = 1;
+  }
+  live.processFrame(frames[0], StepBudget{3}, x.data(), nrm.data());  // warm-up
+  std::uint32_t flags = 0;
+  Eigen::internal::set_is_malloc_allowed(false);
+  const std::uint64_t before = test::allocationCount();
+  for (std::size_t f = 1; f < frames.size(); ++f) flags |= live.processFrame(frames[f], StepBudget{3}, x.data(), nrm.data()).flags;
+  live.writeLastPose(x.data(), nrm.data());
+  const std::uint64_t after = test::allocationCount();
+  Eigen::internal::set_is_malloc_allowed(true);
+  EXPECT_EQ(after - before, 0u);
+  // Every path ran.
+  EXPECT_TRUE(flags & kLivePoseHeld);
+  EXPECT_TRUE(flags & kLiveMarkersPredicted);
+  EXPECT_TRUE(flags & kLiveMarkersBlending);
+}
+
+TEST(LiveRig, NormalsAreUnitAndOutward) {
+  const Rig rig = makeBarRig();
+  LiveRigOptions options;
+  options.normals = true;
+  LiveRig live(rig, options);
+  live.bindLabels(labelTable());
+  const std::size_t n = static_cast<std::size_t>(live.fineVertexCount()) * 3;
+  const auto rest = live.restPositions();
+  auto check = [&](std::span<const float> x, std::span<const float> normals, const char* what) {
+    Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+    for (std::size_t v = 0; v < n; v += 3) centroid += Eigen::Vector3d(x[v], x[v + 1], x[v + 2]) / static_cast<double>(n / 3);
+    for (std::size_t v = 0; v < n; v += 3) {
+      const Eigen::Vector3d nv(normals[v], normals[v + 1], normals[v + 2]);
+      ASSERT_NEAR(nv.norm(), 1.0, 1e-6) << what << " vertex " << v / 3;
+      const Eigen::Vector3d r(rest[v], rest[v + 1], rest[v + 2]);
+      // A vertex inside the x = 0 or x = 2 side (not on an edge of the box) keeps the side's
+      // normal (-x or +x): the motions below turn about z near the x sides only a little and about
+      // x not at all.
+      const bool inside_y = r.y() > 0.5 && r.y() < 1.5, inside_z = r.z() > 0.5 && r.z() < 7.5;
+      if (inside_y && inside_z && r.x() < 0.5) {
+        EXPECT_LT(nv.x(), -0.9) << what << " vertex " << v / 3;
+      }
+      if (inside_y && inside_z && r.x() > 1.5) {
+        EXPECT_GT(nv.x(), 0.9) << what << " vertex " << v / 3;
+      }
+    }
+  };
+  // At rest (the box is convex: every normal points away from the centroid).
+  check(rest, live.restNormals(), "rest");
+  for (std::size_t v = 0; v < n; v += 3) {
+    const Eigen::Vector3d d = Eigen::Vector3d(rest[v], rest[v + 1], rest[v + 2]) - Eigen::Vector3d(1, 1, 4);
+    EXPECT_GT(d.dot(Eigen::Vector3d(live.restNormals()[v], live.restNormals()[v + 1], live.restNormals()[v + 2])), 0.0);
+  }
+  // Deformed: a mild twist and tilt.
+  std::vector<float> x(n), nrm(n);
+  const std::vector<bool> all(kMarkers, true);
+  for (int f = 0; f < 30; ++f)
+    live.processFrame(makeFrame(rig, movedMarkers(rig, 0.01 * f, 0.0, Eigen::Vector3d(0.01 * f, 0, 0)), all, static_cast<std::uint64_t>(f)), StepBudget{3}, x.data(), nrm.data());
+  check(x, nrm, "deformed");
+  // The area-weighted sum over a closed mesh: sum_v |n_v| A_v n_v is not zero, but the volume
+  // from the published triangles stays positive (outward orientation kept).
+  double volume = 0.0;
+  const auto tri = live.fineTriangles();
+  for (std::size_t f = 0; f < tri.size(); f += 3) {
+    const auto p = [&](std::int32_t v) { return Eigen::Vector3d(x[static_cast<std::size_t>(v) * 3], x[static_cast<std::size_t>(v) * 3 + 1], x[static_cast<std::size_t>(v) * 3 + 2]); };
+    volume += p(tri[f]).dot(p(tri[f + 1]).cross(p(tri[f + 2]))) / 6.0;
+  }
+  EXPECT_NEAR(volume, 2.0 * 2.0 * 8.0, 0.5);
+}
+
+TEST(LiveRig, DegenerateNeighbourhoodGivesAFiniteUnitNormal) {
+  const Rig rig = makeBarRig(/*extra_degenerate_triangle=*/true);
+  LiveRigOptions options;
+  options.normals = true;
+  LiveRig live(rig, options);
+  live.bindLabels(labelTable());
+  const std::size_t n = static_cast<std::size_t>(live.fineVertexCount()) * 3;
+  std::vector<float> x(n), nrm(n);
+  const std::vector<bool> all(kMarkers, true);
+  std::vector<float> previous;
+  for (int f = 0; f < 10; ++f) {
+    live.processFrame(makeFrame(rig, movedMarkers(rig, 0.05 * f, 0.0, Eigen::Vector3d::Zero()), all, static_cast<std::uint64_t>(f)), StepBudget{3}, x.data(), nrm.data());
+    for (std::size_t v = n - 9; v < n; v += 3) {
+      const Eigen::Vector3d nv(nrm[v], nrm[v + 1], nrm[v + 2]);
+      ASSERT_TRUE(nv.allFinite());
+      EXPECT_NEAR(nv.norm(), 1.0, 1e-6);
+      // The three coincident vertices have only a zero-area triangle: they keep their rest normal.
+      EXPECT_EQ(nrm[v], live.restNormals()[v]);
+    }
+  }
+}
+
+TEST(LiveRig, RejectsInvalidRigsAndOptions) {
+  Rig rig = makeBarRig();
+  LiveRigOptions bad;
+  bad.occlusion_blend_s = -1.0;
+  EXPECT_THROW(LiveRig(rig, bad), std::invalid_argument);
+  rig.markers[0].vertex_handle = 5;  // not the handle of its vertex
+  EXPECT_THROW(LiveRig{rig}, std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace tetrig

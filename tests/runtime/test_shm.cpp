@@ -1,0 +1,1278 @@
+// Tests for the shared-memory segment: the C++ writer (runtime/src/shm_publisher.cpp), the C99
+// reader header (runtime/include/tetrig_shm.h, used here as C++) and the C consumer
+// tools/tetrig_shm_cat.c. Round trip, refusal of bad segments, the seqlock under concurrent
+// readers (no torn frame, ids never go backwards, the retry path exercised), processes (killed
+// reader, killed writer seen dead, replacement by a new producer, live producer refused),
+// permissions, no allocation on the frame path, and the consumer's output and --dump.
+// Also built with -fsanitize=thread (test_shm_tsan, fewer stress frames).
+#include "tetrig/shm_publisher.hpp"
+
+#include <fcntl.h>
+#include <poll.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <iostream>
+#include <set>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "counting_allocator.hpp"
+#include "tetrig/clock.hpp"
+#include "tetrig_shm.h"
+
+extern char** environ;
+
+namespace {
+
+using tetrig::ShmError;
+using tetrig::ShmFrameInfo;
+using tetrig::ShmPublisher;
+using tetrig::ShmPublisherOptions;
+using tetrig::ShmStaticData;
+using tetrig::ShmState;
+
+#ifndef TETRIG_SHM_STRESS_FRAMES
+#define TETRIG_SHM_STRESS_FRAMES 2000000
+#endif
+
+// ---------------------------------------------------------------------------------------------
+// Helpers
+
+std::string uniqueName(const std::string& tag) {
+  static std::atomic<int> counter{0};
+  return "/tetrig_test_" + std::to_string(getpid()) + "_" + std::to_string(counter.fetch_add(1)) + "_" + tag;
+}
+
+// Unlinks the name at scope exit (a failed test must not leave segments behind).
+struct NameGuard {
+  std::string name;
+  ~NameGuard() { shm_unlink(name.c_str()); }
+};
+
+// Every published float is a function of (frame id, index): a torn copy mixes frames and fails.
+float positionValue(std::uint64_t frame_id, std::size_t i) {
+  std::uint64_t x = frame_id * 0x9E3779B97F4A7C15ull + static_cast<std::uint64_t>(i) * 0xBF58476D1CE4E5B9ull;
+  x ^= x >> 29;
+  return static_cast<float>(x & 0xFFFFFFu);  // 24 bits: exact in float
+}
+float normalValue(std::uint64_t frame_id, std::size_t i) { return -positionValue(frame_id, i) - 0.5f; }
+
+ShmFrameInfo infoFor(std::uint64_t frame_id) {
+  ShmFrameInfo info;
+  info.source_frame = frame_id * 3 + 1;
+  info.iterations = static_cast<std::int32_t>(frame_id % 17);
+  info.flags = static_cast<std::uint32_t>(frame_id & 0x1Fu);
+  info.occluded_markers = static_cast<std::uint16_t>(frame_id & 0xFFFFu);
+  info.device_ns = static_cast<std::int64_t>(frame_id * 11);
+  info.receive_ns = static_cast<std::int64_t>(frame_id * 13);
+  info.taken_ns = static_cast<std::int64_t>(frame_id * 17);
+  info.step_done_ns = static_cast<std::int64_t>(frame_id * 19);
+  info.pose_done_ns = static_cast<std::int64_t>(frame_id * 23);
+  return info;
+}
+
+// Stages the pattern of the publisher's next frame and commits it; returns the frame id.
+std::uint64_t publishPattern(ShmPublisher& pub) {
+  const std::uint64_t id = pub.framesPublished() + 1;
+  const std::size_t n = static_cast<std::size_t>(pub.vertexCount()) * 3;
+  float* p = pub.beginPositions();
+  for (std::size_t i = 0; i < n; ++i) p[i] = positionValue(id, i);
+  if (float* q = pub.beginNormals()) {
+    for (std::size_t i = 0; i < n; ++i) q[i] = normalValue(id, i);
+  }
+  const std::uint64_t got = pub.commit(infoFor(id));
+  return got;
+}
+
+// True when positions, normals (if given) and info all belong to info.frame_id.
+bool consistent(const std::vector<float>& positions, const std::vector<float>* normals, const TetrigShmFrameInfo& info) {
+  const std::uint64_t id = info.frame_id;
+  const ShmFrameInfo want = infoFor(id);
+  if (id == 0 || info.source_frame != want.source_frame || info.iterations != want.iterations ||
+      info.flags != want.flags || info.occluded_markers != want.occluded_markers || info.device_ns != want.device_ns ||
+      info.receive_ns != want.receive_ns || info.taken_ns != want.taken_ns || info.step_done_ns != want.step_done_ns ||
+      info.pose_done_ns != want.pose_done_ns || info.publish_ns <= 0) {
+    return false;
+  }
+  for (std::size_t i = 0; i < positions.size(); ++i) {
+    if (positions[i] != positionValue(id, i)) return false;
+  }
+  if (normals != nullptr) {
+    for (std::size_t i = 0; i < normals->size(); ++i) {
+      if ((*normals)[i] != normalValue(id, i)) return false;
+    }
+  }
+  return true;
+}
+
+// A small static mesh: a strip of triangles over `v` vertices.
+struct Mesh {
+  std::vector<std::int32_t> triangles;
+  std::vector<float> rest;
+  std::vector<std::string> labels{"LFHD", "RFHD", "C7"};
+  std::string rig_name = "test rig";
+  explicit Mesh(int v) {
+    for (int i = 0; i + 2 < v; ++i) {
+      triangles.insert(triangles.end(), {i, i + 1, i + 2});
+    }
+    for (int i = 0; i < v; ++i) {
+      rest.insert(rest.end(), {0.5f * static_cast<float>(i), static_cast<float>(i), 1.5f * static_cast<float>(i)});
+    }
+  }
+  [[nodiscard]] ShmStaticData data() const { return ShmStaticData{triangles, rest, rig_name, labels}; }
+};
+
+ShmPublisherOptions optionsFor(const std::string& name, int slots = 4, bool normals = false) {
+  ShmPublisherOptions o;
+  o.name = name;
+  o.slot_count = slots;
+  o.normals = normals;
+  return o;
+}
+
+bool waitUntil(const std::function<bool()>& done, std::chrono::milliseconds timeout) {
+  const auto end = std::chrono::steady_clock::now() + timeout;
+  while (!done()) {
+    if (std::chrono::steady_clock::now() > end) return false;
+    std::this_thread::sleep_for(std::chrono::microseconds(200));
+  }
+  return true;
+}
+
+// Maps an existing segment read-write, for tests that corrupt or inspect it.
+struct RawMapping {
+  void* base = MAP_FAILED;
+  std::size_t size = 0;
+  explicit RawMapping(const std::string& name) {
+    const int fd = shm_open(name.c_str(), O_RDWR, 0);
+    if (fd < 0) return;
+    struct stat st{};
+    fstat(fd, &st);
+    size = static_cast<std::size_t>(st.st_size);
+    base = mmap(nullptr, size, PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0);
+    close(fd);
+  }
+  ~RawMapping() {
+    if (base != MAP_FAILED) munmap(base, size);
+  }
+  [[nodiscard]] bool ok() const { return base != MAP_FAILED; }
+  TetrigShmHeader& header() { return *static_cast<TetrigShmHeader*>(base); }
+  unsigned char* bytes() { return static_cast<unsigned char*>(base); }
+};
+
+// Creates a raw shared-memory object (not made by the publisher) of `size` bytes.
+bool makeRawSegment(const std::string& name, std::size_t size, const std::function<void(unsigned char*)>& fill) {
+  const int fd = shm_open(name.c_str(), O_RDWR | O_CREAT | O_EXCL, 0600);
+  if (fd < 0) return false;
+  bool ok = ftruncate(fd, static_cast<off_t>(size)) == 0;
+  if (ok && size > 0) {
+    void* m = mmap(nullptr, size, PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0);
+    ok = m != MAP_FAILED;
+    if (ok) {
+      fill(static_cast<unsigned char*>(m));
+      munmap(m, size);
+    }
+  }
+  close(fd);
+  return ok;
+}
+
+// The pid of a process that has exited and been reaped.
+pid_t deadPid() {
+  const pid_t pid = fork();
+  if (pid == 0) _exit(0);
+  int status = 0;
+  waitpid(pid, &status, 0);
+  return pid;
+}
+
+// Reads one byte from `fd` within `timeout_ms`; -1 on timeout or EOF.
+int readByte(int fd, int timeout_ms) {
+  pollfd p{fd, POLLIN, 0};
+  if (poll(&p, 1, timeout_ms) <= 0) return -1;
+  unsigned char c = 0;
+  return read(fd, &c, 1) == 1 ? c : -1;
+}
+
+// A producer in a child process: creates the segment, reports through `ready_fd` ('r' + its
+// 8-byte instance id, or 'e' on failure), then publishes `frames` frames (0 = forever) every
+// `period_us`, heartbeating while idle, until killed. Never returns.
+[[noreturn]] void runChildWriter(const std::string& name, int vertices, int ready_fd, std::uint64_t frames, int period_us) {
+  try {
+    const Mesh mesh(vertices);
+    ShmPublisher pub(optionsFor(name), vertices, mesh.data());
+    const std::uint64_t id = pub.instanceId();
+    unsigned char msg[9];
+    msg[0] = 'r';
+    std::memcpy(msg + 1, &id, 8);
+    if (write(ready_fd, msg, sizeof msg) != static_cast<ssize_t>(sizeof msg)) _exit(3);
+    for (;;) {
+      if (frames == 0 || pub.framesPublished() < frames) {
+        publishPattern(pub);
+      } else {
+        pub.heartbeat(ShmState::stale_source);
+      }
+      usleep(static_cast<useconds_t>(period_us));
+    }
+  } catch (...) {
+    const unsigned char e = 'e';
+    (void)!write(ready_fd, &e, 1);
+    _exit(2);
+  }
+}
+
+struct ChildWriter {
+  pid_t pid = -1;
+  std::uint64_t instance_id = 0;
+  ~ChildWriter() {
+    if (pid > 0) {
+      kill(pid, SIGKILL);
+      waitpid(pid, nullptr, 0);
+    }
+  }
+};
+
+// Forks a child writer and waits until its segment exists.
+::testing::AssertionResult startChildWriter(ChildWriter& child, const std::string& name, int vertices,
+                                            std::uint64_t frames = 0, int period_us = 200) {
+  int fds[2];
+  if (pipe2(fds, O_CLOEXEC) != 0) return ::testing::AssertionFailure() << "pipe2 failed";
+  const pid_t pid = fork();
+  if (pid < 0) return ::testing::AssertionFailure() << "fork failed";
+  if (pid == 0) {
+    close(fds[0]);
+    runChildWriter(name, vertices, fds[1], frames, period_us);
+  }
+  close(fds[1]);
+  child.pid = pid;
+  unsigned char msg[9];
+  std::size_t got = 0;
+  pollfd p{fds[0], POLLIN, 0};
+  while (got < sizeof msg && poll(&p, 1, 10000) > 0) {
+    const ssize_t n = read(fds[0], msg + got, sizeof msg - got);
+    if (n <= 0) break;
+    got += static_cast<std::size_t>(n);
+    if (msg[0] != 'r') break;
+  }
+  close(fds[0]);
+  if (got != sizeof msg || msg[0] != 'r') return ::testing::AssertionFailure() << "child writer did not start";
+  std::memcpy(&child.instance_id, msg + 1, 8);
+  return ::testing::AssertionSuccess();
+}
+
+// ---------------------------------------------------------------------------------------------
+// Round trip
+
+TEST(Shm, RoundTripOfStaticDataAndFrames) {
+  const std::string name = uniqueName("roundtrip");
+  NameGuard guard{name};
+  const int v = 5;
+  const Mesh mesh(v);
+  ShmPublisher pub(optionsFor(name, 4, true), v, mesh.data());
+  EXPECT_EQ(pub.name(), name);
+  EXPECT_NE(pub.instanceId(), 0u);
+
+  TetrigShmReader r;
+  ASSERT_EQ(tetrig_shm_open(&r, name.c_str()), TETRIG_SHM_OK);
+  EXPECT_EQ(tetrig_shm_vertex_count(&r), 5u);
+  EXPECT_EQ(tetrig_shm_triangle_count(&r), 3u);
+  EXPECT_EQ(tetrig_shm_slot_count(&r), 4u);
+  EXPECT_TRUE(tetrig_shm_has_normals(&r));
+  EXPECT_EQ(r.instance_id, pub.instanceId());
+  EXPECT_EQ(r.producer_pid, getpid());
+  EXPECT_EQ(tetrig_shm_state(&r), TETRIG_SHM_STATE_RUNNING);
+  EXPECT_EQ(r.header->version_major, TETRIG_SHM_VERSION_MAJOR);
+  EXPECT_EQ(r.header->total_size, pub.segmentSize());
+  for (std::size_t i = 0; i < mesh.triangles.size(); ++i) {
+    EXPECT_EQ(tetrig_shm_triangles(&r)[i], static_cast<std::uint32_t>(mesh.triangles[i]));
+  }
+  EXPECT_EQ(std::memcmp(tetrig_shm_rest_positions(&r), mesh.rest.data(), mesh.rest.size() * sizeof(float)), 0);
+  EXPECT_STREQ(tetrig_shm_rig_name(&r), "test rig");
+  ASSERT_EQ(tetrig_shm_marker_count(&r), 3u);
+  EXPECT_STREQ(tetrig_shm_marker_label(&r, 0), "LFHD");
+  EXPECT_STREQ(tetrig_shm_marker_label(&r, 1), "RFHD");
+  EXPECT_STREQ(tetrig_shm_marker_label(&r, 2), "C7");
+  EXPECT_EQ(tetrig_shm_marker_label(&r, 3), nullptr);
+  // every array on a 64-byte boundary
+  EXPECT_EQ(r.header->triangles_offset % 64, 0u);
+  EXPECT_EQ(r.header->rest_positions_offset % 64, 0u);
+  EXPECT_EQ(r.header->slots_offset % 64, 0u);
+  EXPECT_EQ(r.header->slot_stride % 64, 0u);
+  EXPECT_EQ(r.header->slot_normals_offset % 64, 0u);
+
+  std::vector<float> pos(15), nrm(15);
+  TetrigShmFrameInfo info{};
+  EXPECT_EQ(tetrig_shm_read_latest(&r, pos.data(), pos.size(), nrm.data(), nrm.size(), &info), TETRIG_SHM_NO_FRAME);
+  EXPECT_EQ(tetrig_shm_latest_frame_id(&r), 0u);
+
+  for (std::uint64_t k = 1; k <= 10; ++k) {  // more frames than slots: every slot reused
+    const std::int64_t before = tetrig::monotonicNowNs();
+    ASSERT_EQ(publishPattern(pub), k);
+    const std::int64_t after = tetrig::monotonicNowNs();
+    ASSERT_EQ(tetrig_shm_read_latest(&r, pos.data(), pos.size(), nrm.data(), nrm.size(), &info), TETRIG_SHM_OK);
+    EXPECT_EQ(info.frame_id, k);
+    EXPECT_TRUE(consistent(pos, &nrm, info)) << "frame " << k;
+    EXPECT_GE(info.publish_ns, before);
+    EXPECT_LE(info.publish_ns, after);
+    EXPECT_EQ(tetrig_shm_heartbeat_ns(&r), info.publish_ns);
+    EXPECT_EQ(r.last_frame_id, k);
+  }
+  EXPECT_EQ(tetrig_shm_latest_frame_id(&r), 10u);
+  EXPECT_EQ(pub.framesPublished(), 10u);
+  EXPECT_EQ(r.reads, 10u);
+
+  // attaching to the producer's own mapping reads the same frame
+  TetrigShmReader attached;
+  ASSERT_EQ(tetrig_shm_attach(&attached, pub.segmentData(), pub.segmentSize()), TETRIG_SHM_OK);
+  std::vector<float> pos2(15);
+  ASSERT_EQ(tetrig_shm_read_latest(&attached, pos2.data(), pos2.size(), nullptr, 0, &info), TETRIG_SHM_OK);
+  EXPECT_EQ(info.frame_id, 10u);
+  EXPECT_EQ(pos2, pos);
+  tetrig_shm_close(&attached);
+
+  // a buffer too small is refused, untouched
+  std::vector<float> small(14, 7.0f);
+  EXPECT_EQ(tetrig_shm_read_latest(&r, small.data(), small.size(), nullptr, 0, nullptr), TETRIG_SHM_E_ARGUMENT);
+  EXPECT_EQ(small, std::vector<float>(14, 7.0f));
+  tetrig_shm_close(&r);
+}
+
+TEST(Shm, WithoutNormalsTheNormalsBufferIsLeftAlone) {
+  const std::string name = uniqueName("nonormals");
+  NameGuard guard{name};
+  const Mesh mesh(4);
+  ShmPublisher pub(optionsFor(name, 3, false), 4, mesh.data());
+  EXPECT_EQ(pub.beginNormals(), nullptr);
+  EXPECT_FALSE(pub.hasNormals());
+  publishPattern(pub);
+  TetrigShmReader r;
+  ASSERT_EQ(tetrig_shm_open(&r, name.c_str()), TETRIG_SHM_OK);
+  EXPECT_FALSE(tetrig_shm_has_normals(&r));
+  EXPECT_EQ(r.header->slot_normals_offset, 0u);
+  std::vector<float> pos(12), nrm(12, 42.0f);
+  TetrigShmFrameInfo info{};
+  ASSERT_EQ(tetrig_shm_read_latest(&r, pos.data(), pos.size(), nrm.data(), nrm.size(), &info), TETRIG_SHM_OK);
+  EXPECT_TRUE(consistent(pos, nullptr, info));
+  EXPECT_EQ(nrm, std::vector<float>(12, 42.0f));
+  tetrig_shm_close(&r);
+}
+
+TEST(Shm, FirstFrameDefaultsToRestPoseAndOddVertexCountsCopyExactly) {
+  const std::string name = uniqueName("odd");
+  NameGuard guard{name};
+  const int v = 7;  // 84 bytes: the copy ends with a 4-byte word
+  const Mesh mesh(v);
+  ShmPublisher pub(optionsFor(name, 3, true), v, mesh.data());
+  // staged positions start as the rest pose
+  EXPECT_EQ(std::memcmp(pub.beginPositions(), mesh.rest.data(), mesh.rest.size() * sizeof(float)), 0);
+  pub.commit(ShmFrameInfo{});
+  TetrigShmReader r;
+  ASSERT_EQ(tetrig_shm_open(&r, name.c_str()), TETRIG_SHM_OK);
+  std::vector<float> pos(22, -1.0f);  // one sentinel float past the 21 the frame has
+  ASSERT_EQ(tetrig_shm_read_latest(&r, pos.data(), 21, nullptr, 0, nullptr), TETRIG_SHM_OK);
+  EXPECT_EQ(std::memcmp(pos.data(), mesh.rest.data(), 21 * sizeof(float)), 0);
+  EXPECT_EQ(pos[21], -1.0f);
+  publishPattern(pub);
+  std::vector<float> exact(21), nrm(22, -1.0f);
+  TetrigShmFrameInfo info{};
+  ASSERT_EQ(tetrig_shm_read_latest(&r, exact.data(), 21, nrm.data(), 21, &info), TETRIG_SHM_OK);
+  EXPECT_EQ(nrm[21], -1.0f);
+  nrm.resize(21);
+  EXPECT_TRUE(consistent(exact, &nrm, info));
+  tetrig_shm_close(&r);
+}
+
+TEST(Shm, HeartbeatAndStateReachReaders) {
+  const std::string name = uniqueName("heartbeat");
+  NameGuard guard{name};
+  const Mesh mesh(3);
+  ShmPublisher pub(optionsFor(name), 3, mesh.data());
+  TetrigShmReader r;
+  ASSERT_EQ(tetrig_shm_open(&r, name.c_str()), TETRIG_SHM_OK);
+  const std::int64_t h0 = tetrig_shm_heartbeat_ns(&r);
+  EXPECT_GT(h0, 0);
+  EXPECT_EQ(tetrig_shm_producer_status(&r, 1'000'000'000), TETRIG_SHM_PRODUCER_ALIVE);
+  std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  pub.heartbeat(ShmState::stale_source);
+  EXPECT_EQ(tetrig_shm_state(&r), TETRIG_SHM_STATE_STALE_SOURCE);
+  EXPECT_GT(tetrig_shm_heartbeat_ns(&r), h0);
+  EXPECT_EQ(tetrig_shm_producer_status(&r, 1'000'000'000), TETRIG_SHM_PRODUCER_ALIVE);
+  // a heartbeat older than the limit: stale, although the pid lives
+  std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  EXPECT_EQ(tetrig_shm_producer_status(&r, 1'000'000), TETRIG_SHM_PRODUCER_STALE);
+  pub.heartbeat(static_cast<ShmState>(9));  // not a state: heartbeat only
+  EXPECT_EQ(tetrig_shm_state(&r), TETRIG_SHM_STATE_STALE_SOURCE);
+  publishPattern(pub);  // a frame means running again
+  EXPECT_EQ(tetrig_shm_state(&r), TETRIG_SHM_STATE_RUNNING);
+  tetrig_shm_close(&r);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Reader refusals
+
+TEST(Shm, ReaderRefusesBadMagicVersionAndSizes) {
+  const std::string name = uniqueName("refuse");
+  NameGuard guard{name};
+  const Mesh mesh(6);
+  ShmPublisher pub(optionsFor(name, 3, true), 6, mesh.data());
+  publishPattern(pub);
+  RawMapping raw(name);
+  ASSERT_TRUE(raw.ok());
+  TetrigShmHeader& h = raw.header();
+  TetrigShmReader r;
+  ASSERT_EQ(tetrig_shm_open(&r, name.c_str()), TETRIG_SHM_OK);
+  tetrig_shm_close(&r);
+
+  // Applies `change`, expects `code` from open (and from attach on the same bytes), restores.
+  auto expectOpen = [&](const char* what, const std::function<void()>& change, const std::function<void()>& undo, int code) {
+    change();
+    TetrigShmReader rr;
+    EXPECT_EQ(tetrig_shm_open(&rr, name.c_str()), code) << what;
+    EXPECT_EQ(rr.header, nullptr) << what;  // nothing stays open on failure
+    tetrig_shm_close(&rr);
+    undo();
+    ASSERT_EQ(tetrig_shm_open(&rr, name.c_str()), TETRIG_SHM_OK) << what << " (restored)";
+    tetrig_shm_close(&rr);
+  };
+  const std::uint64_t magic = h.magic;
+  expectOpen("magic", [&] { h.magic = 0x1234; }, [&] { h.magic = magic; }, TETRIG_SHM_E_MAGIC);
+  expectOpen("magic 0", [&] { h.magic = 0; }, [&] { h.magic = magic; }, TETRIG_SHM_E_NOT_READY);
+  expectOpen("major", [&] { h.version_major = 2; }, [&] { h.version_major = 1; }, TETRIG_SHM_E_VERSION);
+  expectOpen("major 0", [&] { h.version_major = 0; }, [&] { h.version_major = 1; }, TETRIG_SHM_E_VERSION);
+  expectOpen("total size", [&] { h.total_size += 64; }, [&] { h.total_size -= 64; }, TETRIG_SHM_E_SIZE);
+  expectOpen("header size", [&] { h.header_size = 128; }, [&] { h.header_size = 256; }, TETRIG_SHM_E_SIZE);
+  expectOpen("slot count 2", [&] { h.slot_count = 2; }, [&] { h.slot_count = 3; }, TETRIG_SHM_E_SIZE);
+  expectOpen("slot count 4", [&] { h.slot_count = 4; }, [&] { h.slot_count = 3; }, TETRIG_SHM_E_SIZE);
+  expectOpen("vertex count", [&] { h.vertex_count = 1000; }, [&] { h.vertex_count = 6; }, TETRIG_SHM_E_SIZE);
+  expectOpen("vertex count 0", [&] { h.vertex_count = 0; }, [&] { h.vertex_count = 6; }, TETRIG_SHM_E_SIZE);
+  const std::uint64_t tri_off = h.triangles_offset;
+  expectOpen("triangles offset", [&] { h.triangles_offset = h.total_size; }, [&] { h.triangles_offset = tri_off; },
+             TETRIG_SHM_E_SIZE);
+  expectOpen("triangles misaligned", [&] { h.triangles_offset += 4; }, [&] { h.triangles_offset = tri_off; },
+             TETRIG_SHM_E_SIZE);
+  auto* tri = reinterpret_cast<std::uint32_t*>(raw.bytes() + tri_off);
+  expectOpen("triangle index", [&] { tri[4] = 6; }, [&] { tri[4] = static_cast<std::uint32_t>(mesh.triangles[4]); },
+             TETRIG_SHM_E_SIZE);
+  unsigned char* name_end = raw.bytes() + h.rig_name_offset + h.rig_name_length;
+  expectOpen("rig name terminator", [&] { *name_end = 'x'; }, [&] { *name_end = 0; }, TETRIG_SHM_E_SIZE);
+  expectOpen("marker count", [&] { h.marker_count = 4; }, [&] { h.marker_count = 3; }, TETRIG_SHM_E_SIZE);
+  const std::uint64_t stride = h.slot_stride;
+  expectOpen("slot stride", [&] { h.slot_stride = stride + 8; }, [&] { h.slot_stride = stride; }, TETRIG_SHM_E_SIZE);
+  expectOpen("slot stride large", [&] { h.slot_stride = stride * 2; }, [&] { h.slot_stride = stride; }, TETRIG_SHM_E_SIZE);
+  expectOpen("normals flag", [&] { h.flags = 0; }, [&] { h.flags = TETRIG_SHM_HAS_NORMALS; }, TETRIG_SHM_E_SIZE);
+  const std::uint64_t normals_offset = h.slot_normals_offset;
+  expectOpen("normals offset", [&] { h.slot_normals_offset = stride; }, [&] { h.slot_normals_offset = normals_offset; },
+             TETRIG_SHM_E_SIZE);
+  // file larger than the header says
+  const int fd = shm_open(name.c_str(), O_RDWR, 0);
+  ASSERT_GE(fd, 0);
+  expectOpen("file size", [&] { ASSERT_EQ(ftruncate(fd, static_cast<off_t>(h.total_size + 4096)), 0); },
+             [&] { ASSERT_EQ(ftruncate(fd, static_cast<off_t>(h.total_size)), 0); }, TETRIG_SHM_E_SIZE);
+  close(fd);
+  // a newer minor version is accepted
+  h.version_minor = 7;
+  ASSERT_EQ(tetrig_shm_open(&r, name.c_str()), TETRIG_SHM_OK);
+  tetrig_shm_close(&r);
+  h.version_minor = 0;
+
+  EXPECT_EQ(tetrig_shm_open(&r, uniqueName("absent").c_str()), TETRIG_SHM_E_NOT_FOUND);
+  EXPECT_EQ(tetrig_shm_open(&r, "no_slash"), TETRIG_SHM_E_ARGUMENT);
+  EXPECT_EQ(tetrig_shm_open(&r, std::string(300, 'a').insert(0, "/").c_str()), TETRIG_SHM_E_ARGUMENT);
+  EXPECT_EQ(tetrig_shm_open(nullptr, name.c_str()), TETRIG_SHM_E_ARGUMENT);
+  // an object smaller than the header: still being created
+  const std::string tiny = uniqueName("tiny");
+  NameGuard tiny_guard{tiny};
+  ASSERT_TRUE(makeRawSegment(tiny, 100, [](unsigned char*) {}));
+  EXPECT_EQ(tetrig_shm_open(&r, tiny.c_str()), TETRIG_SHM_E_NOT_READY);
+}
+
+TEST(Shm, PublisherRejectsBadArgumentsWithOneLine) {
+  const Mesh mesh(4);
+  const std::string name = uniqueName("bad");
+  NameGuard guard{name};
+  auto expectError = [&](const ShmPublisherOptions& o, std::int32_t v, const ShmStaticData& d, const char* needle) {
+    try {
+      ShmPublisher pub(o, v, d);
+      ADD_FAILURE() << "no error for " << needle;
+    } catch (const ShmError& e) {
+      const std::string msg = e.what();
+      EXPECT_NE(msg.find(needle), std::string::npos) << msg;
+      EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
+    }
+    if (o.name == name) {
+      TetrigShmReader r;
+      EXPECT_EQ(tetrig_shm_open(&r, o.name.c_str()), TETRIG_SHM_E_NOT_FOUND) << "left behind: " << o.name;
+    }
+  };
+  expectError(optionsFor("no_slash"), 4, mesh.data(), "'/'");
+  expectError(optionsFor("/a/b"), 4, mesh.data(), "'/'");
+  expectError(optionsFor("/"), 4, mesh.data(), "'/'");
+  expectError(optionsFor(name, 2), 4, mesh.data(), "slot count");
+  expectError(optionsFor(name, 65), 4, mesh.data(), "slot count");
+  expectError(optionsFor(name), 0, mesh.data(), "vertex count");
+  expectError(optionsFor(name), 5, mesh.data(), "rest positions");
+  ShmPublisherOptions perms = optionsFor(name);
+  perms.permissions = 0755;
+  expectError(perms, 4, mesh.data(), "permissions");
+  perms.permissions = 0400;
+  expectError(perms, 4, mesh.data(), "permissions");
+  Mesh bad = mesh;
+  bad.triangles[5] = 4;
+  expectError(optionsFor(name), 4, bad.data(), "triangle 1");
+  bad.triangles[5] = -1;
+  expectError(optionsFor(name), 4, bad.data(), "triangle 1");
+  bad = mesh;
+  bad.triangles.pop_back();
+  expectError(optionsFor(name), 4, bad.data(), "multiple of 3");
+  bad = mesh;
+  bad.labels[1] = std::string("a\0b", 3);
+  expectError(optionsFor(name), 4, bad.data(), "marker label");
+  // the name is usable afterwards
+  ShmPublisher ok(optionsFor(name), 4, mesh.data());
+  EXPECT_EQ(ok.vertexCount(), 4);
+}
+
+// ---------------------------------------------------------------------------------------------
+// The seqlock
+
+TEST(Shm, AReadOfASlotBeingWrittenRetriesBoundedAndCounts) {
+  const std::string name = uniqueName("odd_sequence");
+  NameGuard guard{name};
+  const Mesh mesh(4);
+  ShmPublisher pub(optionsFor(name, 3), 4, mesh.data());
+  publishPattern(pub);
+  RawMapping raw(name);
+  ASSERT_TRUE(raw.ok());
+  auto& seq = *reinterpret_cast<std::uint64_t*>(raw.bytes() + raw.header().slots_offset);  // frame 1's slot
+  ASSERT_EQ(seq, 2u);  // one complete write: 0 -> 1 -> 2
+  TetrigShmReader r;
+  ASSERT_EQ(tetrig_shm_open(&r, name.c_str()), TETRIG_SHM_OK);
+  r.max_attempts = 5;
+  std::vector<float> pos(12);
+  seq = 3;  // the writer is (as if) inside this slot
+  EXPECT_EQ(tetrig_shm_read_latest(&r, pos.data(), pos.size(), nullptr, 0, nullptr), TETRIG_SHM_BUSY);
+  EXPECT_EQ(r.retries, 5u);
+  EXPECT_EQ(r.busy, 1u);
+  EXPECT_EQ(r.reads, 0u);
+  seq = 4;  // complete again: read succeeds
+  TetrigShmFrameInfo info{};
+  EXPECT_EQ(tetrig_shm_read_latest(&r, pos.data(), pos.size(), nullptr, 0, &info), TETRIG_SHM_OK);
+  EXPECT_TRUE(consistent(pos, nullptr, info));
+  // a slot whose frame id does not belong to it (corrupt) is never returned
+  auto* slot_info = reinterpret_cast<TetrigShmFrameInfo*>(raw.bytes() + raw.header().slots_offset + TETRIG_SHM_SLOT_INFO_OFFSET);
+  slot_info->frame_id = 2;
+  EXPECT_EQ(tetrig_shm_read_latest(&r, pos.data(), pos.size(), nullptr, 0, &info), TETRIG_SHM_BUSY);
+  tetrig_shm_close(&r);
+}
+
+// One writer at full speed, four readers (two on the producer's own mapping, so ThreadSanitizer
+// sees the same addresses; two on their own mappings by name): every frame a reader gets is
+// consistent, ids never go backwards, readers see many distinct frames, and retries happen. The
+// writer publishes at least TETRIG_SHM_STRESS_FRAMES frames and goes on (up to 10x) until every
+// reader has seen kMinDistinct frames and some read was retried, so a starved reader thread on a
+// loaded machine does not fail the test while a broken reader or a never-taken retry path does.
+TEST(Shm, ConcurrentReadersNeverSeeTornFrames) {
+  const std::string name = uniqueName("stress");
+  NameGuard guard{name};
+  const int v = 96;
+  const Mesh mesh(v);
+  ShmPublisher pub(optionsFor(name, 3, true), v, mesh.data());  // 3 slots: lapped as soon as possible
+  const std::uint64_t min_frames = TETRIG_SHM_STRESS_FRAMES;
+  const std::uint64_t max_frames = 10 * min_frames;
+  constexpr int kReaders = 4;
+  constexpr std::uint64_t kMinDistinct = 1000;
+  struct Stats {
+    std::uint64_t reads = 0, torn = 0, backwards = 0, busy = 0, last = 0;
+    std::atomic<std::uint64_t> distinct{0}, retries{0};  // read by the writer while running
+    bool open_failed = false;
+  };
+  std::vector<Stats> stats(kReaders);
+  std::atomic<bool> done{false};
+  std::atomic<int> started{0};
+  std::vector<std::thread> readers;
+  for (int t = 0; t < kReaders; ++t) {
+    readers.emplace_back([&, t] {
+      Stats& s = stats[static_cast<std::size_t>(t)];
+      TetrigShmReader r;
+      const int rc = t % 2 == 0 ? tetrig_shm_attach(&r, pub.segmentData(), pub.segmentSize())
+                                : tetrig_shm_open(&r, name.c_str());
+      if (rc != TETRIG_SHM_OK) s.open_failed = true;
+      started.fetch_add(1);
+      if (rc != TETRIG_SHM_OK) return;
+      std::vector<float> pos(static_cast<std::size_t>(v) * 3), nrm(static_cast<std::size_t>(v) * 3);
+      TetrigShmFrameInfo info{};
+      for (;;) {
+        const bool finished = done.load(std::memory_order_acquire);
+        const std::uint64_t latest = tetrig_shm_latest_frame_id(&r);
+        if (latest > s.last) {
+          const int got = tetrig_shm_read_latest(&r, pos.data(), pos.size(), nrm.data(), nrm.size(), &info);
+          if (got == TETRIG_SHM_OK) {
+            ++s.reads;
+            if (!consistent(pos, &nrm, info)) ++s.torn;
+            if (info.frame_id < s.last) ++s.backwards;
+            if (info.frame_id > s.last) s.distinct.fetch_add(1, std::memory_order_relaxed);
+            s.last = info.frame_id;
+          }
+          s.retries.store(r.retries, std::memory_order_relaxed);
+        } else if (finished) {
+          break;
+        } else {
+          std::this_thread::yield();
+        }
+      }
+      s.busy = r.busy;
+      tetrig_shm_close(&r);
+    });
+  }
+  while (started.load() < kReaders) std::this_thread::yield();
+  auto enough = [&] {
+    std::uint64_t retries = 0;
+    for (const Stats& s : stats) {
+      if (!s.open_failed && s.distinct.load(std::memory_order_relaxed) < kMinDistinct) return false;
+      retries += s.retries.load(std::memory_order_relaxed);
+    }
+    return retries > 0;
+  };
+  const auto t0 = std::chrono::steady_clock::now();
+  std::uint64_t frames = 0;
+  while (frames < max_frames && (frames < min_frames || (frames % 1024 != 0 || !enough()))) {
+    publishPattern(pub);
+    ++frames;
+  }
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  done.store(true, std::memory_order_release);
+  for (auto& th : readers) th.join();
+
+  std::uint64_t retries = 0, busy = 0;
+  for (int t = 0; t < kReaders; ++t) {
+    const Stats& s = stats[static_cast<std::size_t>(t)];
+    ASSERT_FALSE(s.open_failed) << "reader " << t;
+    EXPECT_EQ(s.torn, 0u) << "reader " << t << " got inconsistent frames";
+    EXPECT_EQ(s.backwards, 0u) << "reader " << t << " saw frame ids go backwards";
+    EXPECT_EQ(s.last, frames) << "reader " << t << " did not end on the last frame";
+    EXPECT_GE(s.distinct.load(), kMinDistinct) << "reader " << t;
+    retries += s.retries.load();
+    busy += s.busy;
+    std::cout << "[ stress   ] reader " << t << (t % 2 == 0 ? " (attached)" : " (by name) ") << ": " << s.reads
+              << " reads, " << s.distinct.load() << " distinct frames, " << s.retries.load() << " retries, " << s.busy
+              << " busy\n";
+  }
+  std::cout << "[ stress   ] writer: " << frames << " frames of " << v << " vertices + normals in " << seconds << " s ("
+            << static_cast<double>(frames) / seconds * 1e-6 << " M frames/s); " << retries << " retries, " << busy
+            << " busy in all\n";
+  EXPECT_GT(retries, 0u) << "the torn-read path was never exercised";
+}
+
+TEST(Shm, CommitAndHeartbeatDoNotAllocate) {
+  const std::string name = uniqueName("alloc");
+  NameGuard guard{name};
+  const Mesh mesh(64);
+  ShmPublisher pub(optionsFor(name, 4, true), 64, mesh.data());
+  publishPattern(pub);  // warm-up
+  const std::uint64_t before = tetrig::test::allocationCount();
+  for (int i = 0; i < 1000; ++i) {
+    float* p = pub.beginPositions();
+    float* n = pub.beginNormals();
+    p[i % 192] = static_cast<float>(i);
+    n[i % 192] = static_cast<float>(-i);
+    pub.commit(infoFor(static_cast<std::uint64_t>(i)));
+    pub.heartbeat(i % 2 ? ShmState::stale_source : ShmState::running);
+  }
+  EXPECT_EQ(tetrig::test::allocationCount(), before);
+  EXPECT_EQ(pub.framesPublished(), 1001u);
+  // readers do not allocate either
+  TetrigShmReader r;
+  ASSERT_EQ(tetrig_shm_attach(&r, pub.segmentData(), pub.segmentSize()), TETRIG_SHM_OK);
+  std::vector<float> pos(192), nrm(192);
+  TetrigShmFrameInfo info{};
+  const std::uint64_t before_read = tetrig::test::allocationCount();
+  for (int i = 0; i < 100; ++i) {
+    ASSERT_EQ(tetrig_shm_read_latest(&r, pos.data(), pos.size(), nrm.data(), nrm.size(), &info), TETRIG_SHM_OK);
+  }
+  EXPECT_EQ(tetrig::test::allocationCount(), before_read);
+  EXPECT_EQ(info.frame_id, 1001u);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Lifetime, permissions, replacement
+
+TEST(Shm, CleanShutdownMarksStoppedAndUnlinks) {
+  const std::string name = uniqueName("shutdown");
+  NameGuard guard{name};
+  const Mesh mesh(3);
+  TetrigShmReader r;
+  {
+    ShmPublisher pub(optionsFor(name), 3, mesh.data());
+    publishPattern(pub);
+    ASSERT_EQ(tetrig_shm_open(&r, name.c_str()), TETRIG_SHM_OK);
+    EXPECT_EQ(tetrig_shm_name_status(&r), TETRIG_SHM_NAME_SAME);
+    EXPECT_EQ(tetrig_shm_producer_status(&r, 1'000'000'000), TETRIG_SHM_PRODUCER_ALIVE);
+  }
+  EXPECT_EQ(tetrig_shm_state(&r), TETRIG_SHM_STATE_STOPPED);
+  EXPECT_EQ(tetrig_shm_producer_status(&r, 1'000'000'000), TETRIG_SHM_PRODUCER_STOPPED);
+  EXPECT_EQ(tetrig_shm_name_status(&r), TETRIG_SHM_NAME_GONE);
+  TetrigShmReader again;
+  EXPECT_EQ(tetrig_shm_open(&again, name.c_str()), TETRIG_SHM_E_NOT_FOUND);
+  // the last frame stays readable through the old mapping
+  std::vector<float> pos(9);
+  TetrigShmFrameInfo info{};
+  EXPECT_EQ(tetrig_shm_read_latest(&r, pos.data(), pos.size(), nullptr, 0, &info), TETRIG_SHM_OK);
+  EXPECT_TRUE(consistent(pos, nullptr, info));
+  tetrig_shm_close(&r);
+}
+
+mode_t segmentMode(const std::string& name) {
+  const int fd = shm_open(name.c_str(), O_RDONLY, 0);
+  if (fd < 0) return 0;
+  struct stat st{};
+  fstat(fd, &st);
+  close(fd);
+  return st.st_mode & 0777;
+}
+
+TEST(Shm, PermissionsAreOwnerOnlyByDefaultAndWidenedOnlyOnRequest) {
+  const Mesh mesh(3);
+  const std::string a = uniqueName("perm_default");
+  NameGuard ga{a};
+  const mode_t old_mask = umask(0);  // a permissive umask must not widen the default
+  {
+    ShmPublisher pub(optionsFor(a), 3, mesh.data());
+    EXPECT_EQ(segmentMode(a), 0600u);
+  }
+  umask(0077);  // a strict umask must not narrow an explicit request
+  const std::string b = uniqueName("perm_wide");
+  NameGuard gb{b};
+  {
+    ShmPublisherOptions o = optionsFor(b);
+    o.permissions = 0644;
+    ShmPublisher pub(o, 3, mesh.data());
+    EXPECT_EQ(segmentMode(b), 0644u);
+  }
+  umask(old_mask);
+}
+
+TEST(Shm, LiveProducerNameIsRefusedWithItsPid) {
+  const std::string name = uniqueName("live");
+  NameGuard guard{name};
+  const Mesh mesh(3);
+  ShmPublisher first(optionsFor(name), 3, mesh.data());
+  publishPattern(first);
+  try {
+    ShmPublisher second(optionsFor(name), 3, mesh.data());
+    FAIL() << "a running producer's name was taken over";
+  } catch (const ShmError& e) {
+    const std::string msg = e.what();
+    EXPECT_NE(msg.find("pid " + std::to_string(getpid())), std::string::npos) << msg;
+    EXPECT_NE(msg.find(name), std::string::npos) << msg;
+    EXPECT_NE(msg.find("running"), std::string::npos) << msg;
+  }
+  // the first producer is untouched
+  TetrigShmReader r;
+  ASSERT_EQ(tetrig_shm_open(&r, name.c_str()), TETRIG_SHM_OK);
+  EXPECT_EQ(r.instance_id, first.instanceId());
+  publishPattern(first);
+  std::vector<float> pos(9);
+  TetrigShmFrameInfo info{};
+  ASSERT_EQ(tetrig_shm_read_latest(&r, pos.data(), pos.size(), nullptr, 0, &info), TETRIG_SHM_OK);
+  EXPECT_EQ(info.frame_id, 2u);
+  EXPECT_TRUE(consistent(pos, nullptr, info));
+  tetrig_shm_close(&r);
+}
+
+TEST(Shm, StoppedSegmentIsReplacedAndTheOldProducerDoesNotUnlinkTheNewOne) {
+  const std::string name = uniqueName("stopped");
+  NameGuard guard{name};
+  const Mesh mesh(3);
+  auto old_pub = std::make_unique<ShmPublisher>(optionsFor(name), 3, mesh.data());
+  TetrigShmReader old_reader;
+  ASSERT_EQ(tetrig_shm_open(&old_reader, name.c_str()), TETRIG_SHM_OK);
+  old_pub->heartbeat(ShmState::stopped);  // alive, but says it stopped
+  ShmPublisher fresh(optionsFor(name), 3, mesh.data());
+  EXPECT_NE(fresh.instanceId(), old_pub->instanceId());
+  EXPECT_EQ(tetrig_shm_name_status(&old_reader), TETRIG_SHM_NAME_REPLACED);
+  old_pub.reset();  // must leave the new segment's name alone
+  TetrigShmReader r;
+  ASSERT_EQ(tetrig_shm_open(&r, name.c_str()), TETRIG_SHM_OK);
+  EXPECT_EQ(r.instance_id, fresh.instanceId());
+  tetrig_shm_close(&r);
+  tetrig_shm_close(&old_reader);
+}
+
+TEST(Shm, LeftoversOfACrashedCreationAreReplacedButForeignObjectsAreNot) {
+  const Mesh mesh(3);
+  // sized, magic 0, the pid of a dead process: a creator that crashed mid-way
+  const std::string half = uniqueName("half");
+  NameGuard gh{half};
+  const pid_t dead = deadPid();
+  ASSERT_TRUE(makeRawSegment(half, 4096, [&](unsigned char* m) {
+    reinterpret_cast<TetrigShmHeader*>(m)->producer_pid = static_cast<std::int32_t>(dead);
+  }));
+  {
+    ShmPublisher pub(optionsFor(half), 3, mesh.data());
+    TetrigShmReader r;
+    ASSERT_EQ(tetrig_shm_open(&r, half.c_str()), TETRIG_SHM_OK);
+    EXPECT_EQ(r.instance_id, pub.instanceId());
+    tetrig_shm_close(&r);
+  }
+  // magic 0 and the pid of a live process: being created, refused
+  const std::string busy = uniqueName("creating");
+  NameGuard gb{busy};
+  ASSERT_TRUE(makeRawSegment(busy, 4096, [&](unsigned char* m) {
+    reinterpret_cast<TetrigShmHeader*>(m)->producer_pid = static_cast<std::int32_t>(getpid());
+  }));
+  try {
+    ShmPublisher pub(optionsFor(busy), 3, mesh.data());
+    ADD_FAILURE() << "a segment being created was replaced";
+  } catch (const ShmError& e) {
+    EXPECT_NE(std::string(e.what()).find("being created by another producer (pid " + std::to_string(getpid())),
+              std::string::npos)
+        << e.what();
+  }
+  // size 0 (created, never sized) for longer than the grace period: abandoned, replaced
+  const std::string empty = uniqueName("empty");
+  NameGuard ge{empty};
+  ASSERT_TRUE(makeRawSegment(empty, 0, [](unsigned char*) {}));
+  { ShmPublisher pub(optionsFor(empty), 3, mesh.data()); }
+  // somebody else's object under the name: refused and left in place
+  const std::string foreign = uniqueName("foreign");
+  NameGuard gf{foreign};
+  ASSERT_TRUE(makeRawSegment(foreign, 4096, [](unsigned char* m) { std::memset(m, 0xAB, 4096); }));
+  try {
+    ShmPublisher pub(optionsFor(foreign), 3, mesh.data());
+    ADD_FAILURE() << "a foreign object was replaced";
+  } catch (const ShmError& e) {
+    EXPECT_NE(std::string(e.what()).find("not a tetrig segment"), std::string::npos) << e.what();
+  }
+  RawMapping still(foreign);
+  ASSERT_TRUE(still.ok());
+  EXPECT_EQ(still.bytes()[100], 0xAB);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Processes
+
+TEST(ShmProcess, KilledWriterIsSeenDeadAndANewProducerReplacesIt) {
+  const std::string name = uniqueName("killed_writer");
+  NameGuard guard{name};
+  ChildWriter child;
+  ASSERT_TRUE(startChildWriter(child, name, 10));
+  TetrigShmReader r;
+  ASSERT_EQ(tetrig_shm_open(&r, name.c_str()), TETRIG_SHM_OK);
+  EXPECT_EQ(r.producer_pid, child.pid);
+  EXPECT_EQ(r.instance_id, child.instance_id);
+  ASSERT_TRUE(waitUntil([&] { return tetrig_shm_latest_frame_id(&r) >= 10; }, std::chrono::seconds(10)));
+  std::vector<float> pos(30);
+  TetrigShmFrameInfo info{};
+  ASSERT_EQ(tetrig_shm_read_latest(&r, pos.data(), pos.size(), nullptr, 0, &info), TETRIG_SHM_OK);
+  EXPECT_TRUE(consistent(pos, nullptr, info));
+  EXPECT_EQ(tetrig_shm_producer_status(&r, 1'000'000'000), TETRIG_SHM_PRODUCER_ALIVE);
+
+  // a live producer in another process: its name is refused, naming its pid
+  const Mesh mesh(10);
+  try {
+    ShmPublisher intruder(optionsFor(name), 10, mesh.data());
+    ADD_FAILURE() << "the live child's name was taken over";
+  } catch (const ShmError& e) {
+    EXPECT_NE(std::string(e.what()).find("pid " + std::to_string(child.pid)), std::string::npos) << e.what();
+  }
+
+  // slow, not dead: a stopped (SIGSTOP) producer is stale, then alive again
+  constexpr std::int64_t kStaleNs = 100'000'000;
+  ASSERT_EQ(kill(child.pid, SIGSTOP), 0);
+  auto t0 = std::chrono::steady_clock::now();
+  EXPECT_TRUE(waitUntil([&] { return tetrig_shm_producer_status(&r, kStaleNs) == TETRIG_SHM_PRODUCER_STALE; },
+                        std::chrono::seconds(10)));
+  const double stale_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_NE(tetrig_shm_producer_status(&r, kStaleNs), TETRIG_SHM_PRODUCER_DEAD);
+  ASSERT_EQ(kill(child.pid, SIGCONT), 0);
+  EXPECT_TRUE(waitUntil([&] { return tetrig_shm_producer_status(&r, kStaleNs) == TETRIG_SHM_PRODUCER_ALIVE; },
+                        std::chrono::seconds(10)));
+
+  // SIGKILL: dead (a zombie until reaped counts as dead)
+  const std::uint64_t frames_before = tetrig_shm_latest_frame_id(&r);
+  ASSERT_EQ(kill(child.pid, SIGKILL), 0);
+  t0 = std::chrono::steady_clock::now();
+  EXPECT_TRUE(waitUntil([&] { return tetrig_shm_producer_status(&r, 1'000'000'000) == TETRIG_SHM_PRODUCER_DEAD; },
+                        std::chrono::seconds(5)));
+  const double dead_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  int status = 0;
+  ASSERT_EQ(waitpid(child.pid, &status, 0), child.pid);
+  EXPECT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL);
+  const pid_t old_pid = child.pid;
+  child.pid = -1;
+  EXPECT_EQ(tetrig_shm_producer_status(&r, 1'000'000'000), TETRIG_SHM_PRODUCER_DEAD);
+  EXPECT_NE(tetrig_shm_state(&r), TETRIG_SHM_STATE_STOPPED);  // it never stopped cleanly
+  EXPECT_GE(tetrig_shm_latest_frame_id(&r), frames_before);
+  EXPECT_EQ(tetrig_shm_name_status(&r), TETRIG_SHM_NAME_SAME);  // the crashed segment is still there
+  std::cout << "[ process  ] SIGSTOP seen stale (100 ms limit) after " << stale_ms << " ms; SIGKILL seen dead after "
+            << dead_ms << " ms\n";
+
+  // a new producer replaces the crashed one's segment
+  ShmPublisher fresh(optionsFor(name), 10, mesh.data());
+  EXPECT_EQ(tetrig_shm_name_status(&r), TETRIG_SHM_NAME_REPLACED);
+  TetrigShmReader r2;
+  ASSERT_EQ(tetrig_shm_open(&r2, name.c_str()), TETRIG_SHM_OK);
+  EXPECT_NE(r2.instance_id, r.instance_id);
+  EXPECT_EQ(r2.instance_id, fresh.instanceId());
+  EXPECT_EQ(r2.producer_pid, getpid());
+  EXPECT_NE(r2.producer_pid, old_pid);
+  EXPECT_EQ(tetrig_shm_latest_frame_id(&r2), 0u);  // frame ids restart with the instance
+  // the old mapping still holds the crashed producer's last frame, consistent
+  ASSERT_EQ(tetrig_shm_read_latest(&r, pos.data(), pos.size(), nullptr, 0, &info), TETRIG_SHM_OK);
+  EXPECT_TRUE(consistent(pos, nullptr, info));
+  tetrig_shm_close(&r2);
+  tetrig_shm_close(&r);
+}
+
+TEST(ShmProcess, ReaderKilledMidReadLeavesTheWriterUnaffected) {
+  const std::string name = uniqueName("killed_reader");
+  NameGuard guard{name};
+  const int v = 256;
+  const Mesh mesh(v);
+  ShmPublisher pub(optionsFor(name, 3, true), v, mesh.data());
+  publishPattern(pub);
+  int fds[2];
+  ASSERT_EQ(pipe2(fds, O_CLOEXEC), 0);
+  const pid_t pid = fork();  // no other thread runs at this point
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    close(fds[0]);
+    TetrigShmReader r;
+    if (tetrig_shm_open(&r, name.c_str()) != TETRIG_SHM_OK) _exit(2);
+    std::vector<float> pos(static_cast<std::size_t>(v) * 3), nrm(pos.size());
+    TetrigShmFrameInfo info{};
+    std::uint64_t good = 0;
+    for (;;) {  // reads as fast as it can until killed
+      if (tetrig_shm_read_latest(&r, pos.data(), pos.size(), nrm.data(), nrm.size(), &info) == TETRIG_SHM_OK) {
+        const unsigned char verdict = consistent(pos, &nrm, info) ? 'k' : 'x';
+        if (verdict == 'x' || ++good == 2000) (void)!write(fds[1], &verdict, 1);
+      }
+    }
+  }
+  close(fds[1]);
+  std::atomic<bool> stop{false};
+  std::thread writer([&] {
+    while (!stop.load(std::memory_order_relaxed)) publishPattern(pub);
+  });
+  const int verdict = readByte(fds[0], 20000);
+  EXPECT_EQ(verdict, 'k') << "the reader child did not report 2000 consistent reads";
+  std::this_thread::sleep_for(std::chrono::milliseconds(20));  // it keeps looping
+  ASSERT_EQ(kill(pid, SIGKILL), 0);
+  int status = 0;
+  ASSERT_EQ(waitpid(pid, &status, 0), pid);
+  EXPECT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL);
+  close(fds[0]);
+  // the writer goes on; its frames stay complete and readable
+  TetrigShmReader r;
+  ASSERT_EQ(tetrig_shm_attach(&r, pub.segmentData(), pub.segmentSize()), TETRIG_SHM_OK);
+  const std::uint64_t at_kill = tetrig_shm_latest_frame_id(&r);
+  EXPECT_TRUE(waitUntil([&] { return tetrig_shm_latest_frame_id(&r) > at_kill + 1000; }, std::chrono::seconds(20)));
+  stop.store(true);
+  writer.join();
+  std::vector<float> pos(static_cast<std::size_t>(v) * 3), nrm(pos.size());
+  TetrigShmFrameInfo info{};
+  ASSERT_EQ(tetrig_shm_read_latest(&r, pos.data(), pos.size(), nrm.data(), nrm.size(), &info), TETRIG_SHM_OK);
+  EXPECT_EQ(info.frame_id, pub.framesPublished());
+  EXPECT_TRUE(consistent(pos, &nrm, info));
+  EXPECT_EQ(tetrig_shm_state(&r), TETRIG_SHM_STATE_RUNNING);
+  std::cout << "[ process  ] writer at frame " << at_kill << " when the reader was killed, " << pub.framesPublished()
+            << " at the end\n";
+  tetrig_shm_close(&r);
+}
+
+// ---------------------------------------------------------------------------------------------
+// The C consumer (tools/tetrig_shm_cat.c)
+
+#ifdef TETRIG_SHM_CAT_PATH
+
+struct CatRun {
+  pid_t pid = -1;
+  std::filesystem::path dir;
+  int exit_code = -1;
+  ~CatRun() {
+    if (pid > 0) {
+      kill(pid, SIGKILL);
+      waitpid(pid, nullptr, 0);
+    }
+    if (!dir.empty()) std::filesystem::remove_all(dir);
+  }
+  [[nodiscard]] std::filesystem::path file(const std::string& f) const { return dir / f; }
+  [[nodiscard]] std::string read(const std::string& f) const {
+    std::ifstream in(file(f), std::ios::binary);
+    std::stringstream ss;
+    ss << in.rdbuf();
+    return ss.str();
+  }
+  // Non-blocking: true once the consumer has exited (exit_code set).
+  bool exited() {
+    if (pid <= 0) return true;
+    int status = 0;
+    if (waitpid(pid, &status, WNOHANG) != pid) return false;
+    exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+    pid = -1;
+    return true;
+  }
+  int frameLines() const {
+    std::istringstream in(read("out.txt"));
+    std::string line;
+    int n = 0;
+    while (std::getline(in, line)) n += line.rfind("frame ", 0) == 0 ? 1 : 0;
+    return n;
+  }
+};
+
+::testing::AssertionResult spawnCat(CatRun& run, const std::vector<std::string>& args) {
+  static std::atomic<int> counter{0};
+  run.dir = std::filesystem::temp_directory_path() /
+            ("tetrig_shm_cat_" + std::to_string(getpid()) + "_" + std::to_string(counter.fetch_add(1)));
+  std::filesystem::create_directories(run.dir);
+  std::vector<std::string> all{TETRIG_SHM_CAT_PATH};
+  for (const auto& a : args) all.push_back(a == "@dump" ? run.file("dump.bin").string() : a == "@json" ? run.file("out.json").string() : a);
+  std::vector<char*> argv;
+  for (auto& a : all) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  const std::string out = run.file("out.txt").string(), err = run.file("err.txt").string();
+  posix_spawn_file_actions_addopen(&actions, 1, out.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0600);
+  posix_spawn_file_actions_addopen(&actions, 2, err.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0600);
+  const int rc = posix_spawn(&run.pid, all[0].c_str(), &actions, nullptr, argv.data(), environ);
+  posix_spawn_file_actions_destroy(&actions);
+  if (rc != 0) return ::testing::AssertionFailure() << "posix_spawn " << all[0] << ": " << std::strerror(rc);
+  return ::testing::AssertionSuccess();
+}
+
+// Parses the --dump file: (instance, frame id, positions) per record.
+struct DumpRecord {
+  std::uint64_t instance = 0, frame_id = 0;
+  std::vector<float> positions;
+};
+std::vector<DumpRecord> parseDump(const std::string& bytes, bool& ok) {
+  std::vector<DumpRecord> out;
+  ok = bytes.size() >= 8 && bytes.compare(0, 8, "TSHMDMP1") == 0;
+  std::size_t at = 8;
+  while (ok && at < bytes.size()) {
+    if (bytes.size() - at < 24) {
+      ok = false;
+      break;
+    }
+    DumpRecord rec;
+    std::uint32_t vc = 0, reserved = 1;
+    std::memcpy(&rec.instance, bytes.data() + at, 8);
+    std::memcpy(&rec.frame_id, bytes.data() + at + 8, 8);
+    std::memcpy(&vc, bytes.data() + at + 16, 4);
+    std::memcpy(&reserved, bytes.data() + at + 20, 4);
+    at += 24;
+    if (reserved != 0 || bytes.size() - at < static_cast<std::size_t>(vc) * 12) {
+      ok = false;
+      break;
+    }
+    rec.positions.resize(static_cast<std::size_t>(vc) * 3);
+    std::memcpy(rec.positions.data(), bytes.data() + at, rec.positions.size() * sizeof(float));
+    at += rec.positions.size() * sizeof(float);
+    out.push_back(std::move(rec));
+  }
+  return out;
+}
+
+// The number after "key": in the consumer's JSON (first occurrence), or NaN.
+double jsonNumber(const std::string& json, const std::string& key) {
+  const std::size_t at = json.find("\"" + key + "\":");
+  if (at == std::string::npos) return std::nan("");
+  return std::strtod(json.c_str() + at + key.size() + 3, nullptr);
+}
+std::string jsonObject(const std::string& json, const std::string& key) {
+  const std::size_t at = json.find("\"" + key + "\":");
+  if (at == std::string::npos) return {};
+  return json.substr(at, json.find('}', at) - at + 1);
+}
+
+bool exactPattern(const DumpRecord& rec) {
+  for (std::size_t i = 0; i < rec.positions.size(); ++i) {
+    const float want = positionValue(rec.frame_id, i);
+    if (std::memcmp(&rec.positions[i], &want, sizeof want) != 0) return false;
+  }
+  return true;
+}
+
+// Publishes frames every `period` (stamping receive_ns) until the consumer exits or 30 s pass.
+void publishUntilExit(ShmPublisher& pub, CatRun& cat, std::chrono::microseconds period) {
+  const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+  while (!cat.exited() && std::chrono::steady_clock::now() < end) {
+    const std::uint64_t id = pub.framesPublished() + 1;
+    const std::size_t n = static_cast<std::size_t>(pub.vertexCount()) * 3;
+    float* p = pub.beginPositions();
+    for (std::size_t i = 0; i < n; ++i) p[i] = positionValue(id, i);
+    ShmFrameInfo info = infoFor(id);
+    info.receive_ns = tetrig::monotonicNowNs() - 50'000;  // "received" 50 us ago
+    pub.commit(info);
+    std::this_thread::sleep_for(period);
+  }
+}
+
+TEST(ShmCat, PrintsFramesAndDumpsThemBitForBit) {
+  const std::string name = uniqueName("cat");
+  NameGuard guard{name};
+  const int v = 50;
+  const Mesh mesh(v);
+  ShmPublisher pub(optionsFor(name), v, mesh.data());
+  CatRun cat;
+  ASSERT_TRUE(spawnCat(cat, {name, "--frames", "40", "--timeout-ms", "10000", "--dump", "@dump", "--json", "@json",
+                             "--poll-us", "50"}));
+  publishUntilExit(pub, cat, std::chrono::microseconds(1000));
+  ASSERT_TRUE(cat.exited());
+  EXPECT_EQ(cat.exit_code, 0) << cat.read("err.txt");
+
+  // stdout: one line per frame, ids increasing
+  std::istringstream out(cat.read("out.txt"));
+  std::string line;
+  std::vector<std::uint64_t> printed;
+  while (std::getline(out, line)) {
+    ASSERT_EQ(line.rfind("frame ", 0), 0u) << line;
+    EXPECT_NE(line.find(" recv->pub "), std::string::npos) << line;
+    EXPECT_NE(line.find(" pub->seen "), std::string::npos) << line;
+    const std::uint64_t id = std::stoull(line.substr(6));
+    std::ostringstream expect_source;
+    expect_source << "source " << id * 3 + 1 << " iter " << id % 17;
+    EXPECT_NE(line.find(expect_source.str()), std::string::npos) << line;
+    if (!printed.empty()) {
+      EXPECT_GT(id, printed.back());
+    }
+    printed.push_back(id);
+  }
+  EXPECT_EQ(printed.size(), 40u);
+
+  // --dump: every frame bit for bit, the publisher's instance, the same ids as printed
+  bool ok = false;
+  const std::vector<DumpRecord> dump = parseDump(cat.read("dump.bin"), ok);
+  ASSERT_TRUE(ok) << "malformed dump";
+  ASSERT_EQ(dump.size(), 40u);
+  std::uint64_t missed = 0;
+  for (std::size_t k = 0; k < dump.size(); ++k) {
+    EXPECT_EQ(dump[k].instance, pub.instanceId());
+    EXPECT_EQ(dump[k].positions.size(), static_cast<std::size_t>(v) * 3);
+    EXPECT_TRUE(exactPattern(dump[k])) << "frame " << dump[k].frame_id;
+    EXPECT_EQ(dump[k].frame_id, printed[k]);
+    if (k > 0) missed += dump[k].frame_id - dump[k - 1].frame_id - 1;
+  }
+
+  // --json: counts and latency percentiles
+  const std::string json = cat.read("out.json");
+  EXPECT_EQ(jsonNumber(json, "frames_seen"), 40.0) << json;
+  EXPECT_EQ(jsonNumber(json, "frames_missed"), static_cast<double>(missed)) << json;
+  EXPECT_EQ(jsonNumber(json, "instances"), 1.0) << json;
+  const std::string recv = jsonObject(json, "receive_to_publish_us");
+  const std::string seen = jsonObject(json, "publish_to_seen_us");
+  EXPECT_EQ(jsonNumber(recv, "count"), 40.0) << json;
+  EXPECT_EQ(jsonNumber(seen, "count"), 40.0) << json;
+  const double p50 = jsonNumber(recv, "p50"), p99 = jsonNumber(recv, "p99"), mx = jsonNumber(recv, "max");
+  EXPECT_GE(p50, 50.0) << json;  // receive was stamped 50 us before the commit
+  EXPECT_LE(p50, p99);
+  EXPECT_LE(p99, mx);
+  const double s50 = jsonNumber(seen, "p50"), s99 = jsonNumber(seen, "p99"), smax = jsonNumber(seen, "max");
+  EXPECT_GE(s50, 0.0);
+  EXPECT_LE(s50, s99);
+  EXPECT_LE(s99, smax);
+  std::cout << "[ cat      ] receive->publish p50 " << p50 << " us; publish->seen p50 " << s50 << " us, p99 " << s99
+            << " us, max " << smax << " us (poll 50 us, 2 shared cores); missed " << missed << "\n";
+}
+
+TEST(ShmCat, ExitsZeroWhenTheProducerStopsCleanly) {
+  const std::string name = uniqueName("cat_stop");
+  NameGuard guard{name};
+  const Mesh mesh(8);
+  auto pub = std::make_unique<ShmPublisher>(optionsFor(name), 8, mesh.data());
+  CatRun cat;
+  ASSERT_TRUE(spawnCat(cat, {name, "--timeout-ms", "10000"}));
+  ASSERT_TRUE(waitUntil(
+      [&] {
+        publishPattern(*pub);
+        return cat.frameLines() >= 3 || cat.exited();
+      },
+      std::chrono::seconds(20)));
+  pub.reset();
+  ASSERT_TRUE(waitUntil([&] { return cat.exited(); }, std::chrono::seconds(20)));
+  EXPECT_EQ(cat.exit_code, 0) << cat.read("err.txt");
+  EXPECT_NE(cat.read("err.txt").find("stopped cleanly"), std::string::npos) << cat.read("err.txt");
+}
+
+TEST(ShmCat, FailsWithAMessageOnTimeoutAndOnADeadProducer) {
+  {
+    CatRun cat;
+    ASSERT_TRUE(spawnCat(cat, {uniqueName("never"), "--timeout-ms", "200"}));
+    ASSERT_TRUE(waitUntil([&] { return cat.exited(); }, std::chrono::seconds(20)));
+    EXPECT_EQ(cat.exit_code, 2);
+    EXPECT_NE(cat.read("err.txt").find("timed out"), std::string::npos) << cat.read("err.txt");
+  }
+  const std::string name = uniqueName("cat_dead");
+  NameGuard guard{name};
+  ChildWriter child;
+  ASSERT_TRUE(startChildWriter(child, name, 8, 0, 1000));
+  CatRun cat;
+  ASSERT_TRUE(spawnCat(cat, {name, "--timeout-ms", "10000"}));
+  ASSERT_TRUE(waitUntil([&] { return cat.frameLines() >= 2 || cat.exited(); }, std::chrono::seconds(20)));
+  const std::string pid_text = std::to_string(child.pid);
+  ASSERT_EQ(kill(child.pid, SIGKILL), 0);
+  waitpid(child.pid, nullptr, 0);
+  child.pid = -1;
+  ASSERT_TRUE(waitUntil([&] { return cat.exited(); }, std::chrono::seconds(20)));
+  EXPECT_EQ(cat.exit_code, 3) << cat.read("err.txt");
+  const std::string err = cat.read("err.txt");
+  EXPECT_NE(err.find("producer pid " + pid_text + " died"), std::string::npos) << err;
+}
+
+TEST(ShmCat, FollowsARestartedProducerAndSaysSo) {
+  const std::string name = uniqueName("cat_restart");
+  NameGuard guard{name};
+  const int v = 12;
+  ChildWriter child;
+  ASSERT_TRUE(startChildWriter(child, name, v, 3, 5000));  // 3 frames, then heartbeats only
+  CatRun cat;
+  ASSERT_TRUE(spawnCat(cat, {name, "--follow", "--frames", "8", "--timeout-ms", "10000", "--dump", "@dump"}));
+  ASSERT_TRUE(waitUntil([&] { return cat.frameLines() >= 1 || cat.exited(); }, std::chrono::seconds(20)));
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));  // all three frames are out
+  const std::uint64_t old_instance = child.instance_id;
+  ASSERT_EQ(kill(child.pid, SIGKILL), 0);
+  waitpid(child.pid, nullptr, 0);
+  child.pid = -1;
+  const Mesh mesh(v);
+  ShmPublisher fresh(optionsFor(name), v, mesh.data());  // replaces the crashed segment
+  publishUntilExit(fresh, cat, std::chrono::microseconds(2000));
+  ASSERT_TRUE(cat.exited());
+  EXPECT_EQ(cat.exit_code, 0) << cat.read("err.txt");
+  const std::string err = cat.read("err.txt");
+  EXPECT_NE(err.find("producer restarted"), std::string::npos) << err;
+  bool ok = false;
+  const std::vector<DumpRecord> dump = parseDump(cat.read("dump.bin"), ok);
+  ASSERT_TRUE(ok);
+  ASSERT_EQ(dump.size(), 8u);
+  std::size_t from_old = 0;
+  while (from_old < dump.size() && dump[from_old].instance == old_instance) ++from_old;
+  EXPECT_GE(from_old, 1u);
+  EXPECT_LE(from_old, 3u);
+  for (std::size_t k = 0; k < dump.size(); ++k) {
+    EXPECT_EQ(dump[k].instance, k < from_old ? old_instance : fresh.instanceId()) << k;
+    EXPECT_TRUE(exactPattern(dump[k])) << k;
+  }
+}
+
+#endif  // TETRIG_SHM_CAT_PATH
+
+}  // namespace

@@ -1,0 +1,229 @@
+// Tests for the solver thread (runtime/src/frame_loop.cpp) on the project's demo bar rig
+// (tools/rigbuild/demo_bar_rig.cpp: 16 markers, driven here by the synthetic source's frames):
+// every published frame equals an offline LiveRig run of the same frames with the same iteration
+// counts, bit for bit; stale sources are reported and cleared; --frames stops the loop; budget
+// misses are counted and flagged; nothing is allocated on the solver thread per frame.
+#include "counting_allocator.hpp"
+#include "tetrig/clock.hpp"
+#include "tetrig/drivers/synthetic_source.hpp"
+#include "tetrig/frame_loop.hpp"
+#include "tetrig/live_rig.hpp"
+#include "tetrig/rigbuild/demo_bar_rig.hpp"
+#include "tetrig/shm_publisher.hpp"
+#include "tetrig/tet_mesh_io.hpp"
+#include "tetrig_shm.h"
+
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cstring>
+#include <memory>
+#include <string>
+#include <thread>
+#include <unistd.h>
+#include <vector>
+
+namespace tetrig {
+namespace {
+
+const Rig& demoRig() {
+  static const Rig rig = rigbuild::makeDemoBarRig(readTetGen(std::string(TETRIG_SOURCE_DIR) + "/assets/bar_4x4x33.node"));
+  return rig;
+}
+
+std::vector<std::string> rigLabels(const Rig& rig) {
+  std::vector<std::string> labels;
+  for (const RigMarker& m : rig.markers) labels.push_back(m.label);
+  return labels;
+}
+
+// The synthetic source swaying the rig's own markers (device mm), with dropouts so that the
+// occlusion prediction and blends run too.
+std::unique_ptr<drivers::SyntheticSource> makeSource(const Rig& rig, float dropout = 0.02f) {
+  drivers::SyntheticOptions o;
+  const Eigen::Matrix3d inverse = rig.alignment.linear.inverse();
+  for (const RigMarker& m : rig.markers) {
+    const Eigen::Vector3d mm = inverse * (m.rest_position - rig.alignment.translation);
+    o.rest_positions_mm.push_back({static_cast<float>(mm.x()), static_cast<float>(mm.y()), static_cast<float>(mm.z())});
+  }
+  o.marker_count = static_cast<int>(rig.markers.size());
+  o.rotation_center_mm = {20.0f, 20.0f, 0.0f};
+  o.rotation_axis = {1.0f, 0.0f, 0.0f};
+  o.rotation_amplitude_deg = 25.0f;
+  o.rotation_frequency_hz = 1.0f;
+  o.dropout_probability = dropout;
+  o.seed = 7;
+  return std::make_unique<drivers::SyntheticSource>(o);
+}
+
+std::string segmentName(const char* what) { return "/tetrig-test-loop-" + std::string(what) + "-" + std::to_string(getpid()); }
+
+struct Harness {
+  explicit Harness(const char* what, FrameLoopOptions options, LiveRigOptions live_options = {})
+      : live(demoRig(), live_options), mailbox(std::make_unique<FrameMailbox>()) {
+    live.bindLabels(rigLabels(demoRig()));
+    ShmPublisherOptions shm;
+    shm.name = segmentName(what);
+    shm.normals = live_options.normals;
+    ShmStaticData data;
+    data.triangles = live.fineTriangles();
+    data.rest_positions = live.restPositions();
+    data.rig_name = demoRig().name;
+    publisher = std::make_unique<ShmPublisher>(shm, live.fineVertexCount(), data);
+    EXPECT_EQ(tetrig_shm_attach(&reader, publisher->segmentData(), publisher->segmentSize()), TETRIG_SHM_OK);
+    loop = std::make_unique<FrameLoop>(*mailbox, live, *publisher, options);
+  }
+  // Publishes `frame` (stamped now) and waits until the solver published it (lockstep).
+  bool publishAndWait(MarkerFrame& frame) {
+    const std::uint64_t before = tetrig_shm_latest_frame_id(&reader);
+    frame.receive_timestamp_ns = monotonicNowNs();
+    mailbox->publish(frame);
+    const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+    while (tetrig_shm_latest_frame_id(&reader) == before) {
+      if (std::chrono::steady_clock::now() > end) return false;
+      std::this_thread::yield();
+    }
+    return true;
+  }
+  LiveRig live;
+  std::unique_ptr<FrameMailbox> mailbox;
+  std::unique_ptr<ShmPublisher> publisher;
+  TetrigShmReader reader{};
+  std::unique_ptr<FrameLoop> loop;
+};
+
+TEST(FrameLoop, EveryPublishedFrameEqualsAnOfflineRunBitForBit) {
+  FrameLoopOptions options;
+  options.budget_ns = 0;  // no deadline: the iteration count alone decides
+  options.lock_memory = false;
+  LiveRigOptions live_options;
+  live_options.normals = true;
+  Harness h("bitexact", options, live_options);
+  h.loop->start();
+  const auto source = makeSource(demoRig());
+  const std::size_t n = static_cast<std::size_t>(h.live.fineVertexCount()) * 3;
+  std::vector<float> got(n), got_normals(n), want(n), want_normals(n);
+  LiveRig offline(demoRig(), live_options);
+  offline.bindLabels(rigLabels(demoRig()));
+  auto frame = std::make_unique<MarkerFrame>();
+  int predicted_frames = 0;
+  for (std::uint64_t k = 0; k < 240; ++k) {
+    source->fillFrame(k, *frame);
+    ASSERT_TRUE(h.publishAndWait(*frame)) << "frame " << k << " was not published within 10 s";
+    TetrigShmFrameInfo info{};
+    ASSERT_EQ(tetrig_shm_read_latest(&h.reader, got.data(), n, got_normals.data(), n, &info), TETRIG_SHM_OK);
+    EXPECT_EQ(info.frame_id, k + 1);
+    EXPECT_EQ(info.source_frame, k);
+    EXPECT_EQ(info.iterations, 3);
+    EXPECT_LE(info.receive_ns, info.taken_ns);
+    EXPECT_LE(info.taken_ns, info.step_done_ns);
+    EXPECT_LE(info.step_done_ns, info.pose_done_ns);
+    EXPECT_LE(info.pose_done_ns, info.publish_ns);
+    if (info.flags & TETRIG_SHM_FRAME_MARKERS_PREDICTED) ++predicted_frames;
+    const LiveFrameStats s = offline.processFrame(*frame, StepBudget{info.iterations}, want.data(), want_normals.data());
+    EXPECT_EQ(s.occluded_markers, info.occluded_markers);
+    ASSERT_EQ(std::memcmp(got.data(), want.data(), n * sizeof(float)), 0) << "positions differ at frame " << k;
+    ASSERT_EQ(std::memcmp(got_normals.data(), want_normals.data(), n * sizeof(float)), 0) << "normals differ at frame " << k;
+  }
+  h.loop->requestStop();
+  h.loop->join();
+  EXPECT_GT(predicted_frames, 0) << "the dropouts were meant to exercise the occlusion prediction";
+  const FrameLoopCounters c = h.loop->counters();
+  EXPECT_EQ(c.frames, 240u);
+  EXPECT_EQ(c.iterations, 720u);
+  EXPECT_EQ(c.mailbox_dropped, 0u);
+  EXPECT_EQ(c.budget_misses, 0u);
+  EXPECT_EQ(h.loop->latency().receive_to_published.count(), 240u);
+  EXPECT_GE(h.loop->latency().receive_to_published.percentileNs(0.5), h.loop->latency().step.percentileNs(0.5) / 2);
+  // The pose moved: the last frame is not the rest pose.
+  const auto rest = h.live.restPositions();
+  EXPECT_NE(std::memcmp(got.data(), rest.data(), n * sizeof(float)), 0);
+}
+
+TEST(FrameLoop, AStaleSourceIsReportedInTheSegmentAndClearsWithTheNextFrame) {
+  FrameLoopOptions options;
+  options.stale_after_ns = 60'000'000;  // 60 ms
+  options.lock_memory = false;
+  Harness h("stale", options);
+  h.loop->start();
+  const auto source = makeSource(demoRig(), 0.0f);
+  auto frame = std::make_unique<MarkerFrame>();
+  source->fillFrame(0, *frame);
+  ASSERT_TRUE(h.publishAndWait(*frame));
+  EXPECT_EQ(tetrig_shm_state(&h.reader), TETRIG_SHM_STATE_RUNNING);
+  // No frames: within a few stale periods the state says stale and the heartbeat keeps going.
+  const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(5);
+  while (tetrig_shm_state(&h.reader) != TETRIG_SHM_STATE_STALE_SOURCE && std::chrono::steady_clock::now() < end)
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  EXPECT_EQ(tetrig_shm_state(&h.reader), TETRIG_SHM_STATE_STALE_SOURCE);
+  EXPECT_TRUE(h.loop->snapshot().stale);
+  const std::int64_t beat = tetrig_shm_heartbeat_ns(&h.reader);
+  std::this_thread::sleep_for(std::chrono::milliseconds(250));
+  EXPECT_GT(tetrig_shm_heartbeat_ns(&h.reader), beat) << "the heartbeat continues while stale: the producer is alive";
+  EXPECT_EQ(tetrig_shm_latest_frame_id(&h.reader), 1u) << "no frame was published while stale (the last pose stays)";
+  source->fillFrame(1, *frame);
+  ASSERT_TRUE(h.publishAndWait(*frame));
+  EXPECT_EQ(tetrig_shm_state(&h.reader), TETRIG_SHM_STATE_RUNNING);
+  h.loop->requestStop();
+  h.loop->join();
+  EXPECT_EQ(h.loop->counters().stale_periods, 1u);
+  EXPECT_FALSE(h.loop->snapshot().stale);
+}
+
+TEST(FrameLoop, StopsAfterMaxFramesAndCountsBudgetMisses) {
+  FrameLoopOptions options;
+  options.max_frames = 5;
+  options.budget_ns = 1000;  // 1 us: no frame can make it
+  options.lock_memory = false;
+  Harness h("budget", options);
+  h.loop->start();
+  const auto source = makeSource(demoRig(), 0.0f);
+  auto frame = std::make_unique<MarkerFrame>();
+  for (std::uint64_t k = 0; k < 5; ++k) {
+    source->fillFrame(k, *frame);
+    ASSERT_TRUE(h.publishAndWait(*frame));
+    TetrigShmFrameInfo info{};
+    ASSERT_EQ(tetrig_shm_read_latest(&h.reader, nullptr, 0, nullptr, 0, &info), TETRIG_SHM_OK);
+    EXPECT_NE(info.flags & TETRIG_SHM_FRAME_BUDGET_MISS, 0u);
+    EXPECT_EQ(info.iterations, 1) << "the deadline had passed: one iteration (the step always runs one), not 3";
+  }
+  const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(5);
+  while (!h.loop->finished() && std::chrono::steady_clock::now() < end) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  EXPECT_TRUE(h.loop->finished());
+  h.loop->join();
+  EXPECT_EQ(h.loop->counters().frames, 5u);
+  EXPECT_EQ(h.loop->counters().budget_misses, 5u);
+  EXPECT_EQ(h.loop->counters().deadline_hits, 5u);
+}
+
+TEST(FrameLoop, NoHeapAllocationPerFrameAfterWarmUp) {
+  FrameLoopOptions options;
+  options.lock_memory = false;
+  LiveRigOptions live_options;
+  live_options.normals = true;
+  Harness h("alloc", options, live_options);
+  h.loop->start();
+  const auto source = makeSource(demoRig());
+  auto frame = std::make_unique<MarkerFrame>();
+  for (std::uint64_t k = 0; k < 20; ++k) {  // warm-up
+    source->fillFrame(k, *frame);
+    ASSERT_TRUE(h.publishAndWait(*frame));
+  }
+  Eigen::internal::set_is_malloc_allowed(false);
+  const std::uint64_t before = test::allocationCount();
+  bool all_published = true;
+  for (std::uint64_t k = 20; k < 220; ++k) {
+    source->fillFrame(k, *frame);
+    all_published = h.publishAndWait(*frame) && all_published;
+  }
+  const std::uint64_t after = test::allocationCount();
+  Eigen::internal::set_is_malloc_allowed(true);
+  h.loop->requestStop();
+  h.loop->join();
+  EXPECT_TRUE(all_published);
+  EXPECT_EQ(after - before, 0u) << "allocations on the solver thread (or this one) while 200 frames went through";
+  EXPECT_EQ(h.loop->counters().frames, 220u);
+}
+
+}  // namespace
+}  // namespace tetrig

@@ -1,0 +1,324 @@
+// `tetrig run` (tools/run.hpp): source -> mailbox -> solver thread -> shared memory.
+#include "run.hpp"
+
+#include "tetrig/clock.hpp"
+#include "tetrig/drivers/source_factory.hpp"
+#include "tetrig/frame_loop.hpp"
+#include "tetrig/live_rig.hpp"
+#include "tetrig/rigbuild/write_file_atomic.hpp"
+#include "tetrig/shm_publisher.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <csignal>
+#include <cstdio>
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+extern char** environ;
+
+namespace tetrig::tools {
+
+namespace {
+
+volatile std::sig_atomic_t g_signal = 0;
+extern "C" void onSignal(int signal_number) { g_signal = signal_number; }
+
+// Installs SIGINT/SIGTERM handlers for the run's lifetime and restores the previous ones after.
+class SignalScope {
+ public:
+  SignalScope() {
+    g_signal = 0;
+    struct sigaction action {};
+    action.sa_handler = onSignal;
+    sigemptyset(&action.sa_mask);
+    sigaction(SIGINT, &action, &old_int_);
+    sigaction(SIGTERM, &action, &old_term_);
+  }
+  ~SignalScope() {
+    sigaction(SIGINT, &old_int_, nullptr);
+    sigaction(SIGTERM, &old_term_, nullptr);
+  }
+
+ private:
+  struct sigaction old_int_ {}, old_term_ {};
+};
+
+std::string joinLabels(const std::vector<std::string>& labels, std::size_t max_shown = 12) {
+  std::string out;
+  for (std::size_t i = 0; i < labels.size() && i < max_shown; ++i) out += (i ? ", " : "") + labels[i];
+  if (labels.size() > max_shown) out += ", ... (" + std::to_string(labels.size()) + " in all)";
+  return out;
+}
+
+double us(std::int64_t ns) { return static_cast<double>(ns) * 1e-3; }
+
+nlohmann::json phaseJson(const LatencyHistogram& h) {
+  return {{"p50", us(h.percentileNs(0.50))}, {"p99", us(h.percentileNs(0.99))}, {"max", us(h.maxNs())}, {"count", h.count()}};
+}
+
+// A child process: /bin/sh -c "<command> <segment>". Returns its pid (or -1).
+pid_t spawnConsumer(const std::string& command) {
+  const std::string shell_command = command;
+  std::vector<char*> argv = {const_cast<char*>("/bin/sh"), const_cast<char*>("-c"), const_cast<char*>(shell_command.c_str()), nullptr};
+  pid_t pid = -1;
+  if (posix_spawn(&pid, "/bin/sh", nullptr, nullptr, argv.data(), environ) != 0) return -1;
+  return pid;
+}
+
+// Waits up to timeout for the child; kills it if still running. Returns its exit status (or -1).
+int reapConsumer(pid_t pid, std::chrono::milliseconds timeout) {
+  const auto end = std::chrono::steady_clock::now() + timeout;
+  int status = 0;
+  while (std::chrono::steady_clock::now() < end) {
+    const pid_t r = waitpid(pid, &status, WNOHANG);
+    if (r == pid) return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + (WIFSIGNALED(status) ? WTERMSIG(status) : 0);
+    if (r < 0) return -1;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  kill(pid, SIGTERM);
+  waitpid(pid, &status, 0);
+  return -1;
+}
+
+}  // namespace
+
+int runLive(const RunOptions& options) {
+  if (options.iterations < 1) throw std::invalid_argument("--iterations must be at least 1");
+  // 1. The rig and the live rig (load time: allocation, factorization).
+  std::optional<Rig> loaded;
+  if (!options.rig) loaded = loadRigFile(options.rig_path);
+  const Rig& rig = options.rig ? *options.rig : *loaded;
+  LiveRigOptions live_options;
+  live_options.occlusion_blend_s = options.occlusion_blend_ms * 1e-3;
+  live_options.normals = options.normals;
+  LiveRig live(rig, live_options);
+
+  // 2. The source, its labels, the binding.
+  devices::SourceOpenOptions open;
+  open.pacing = options.as_fast_as_possible ? drivers::Pacing::kAsFastAsPossible : drivers::Pacing::kRealTime;
+  open.speed = options.speed;
+  open.loop = options.loop;
+  std::vector<std::array<float, 3>> rest_mm;
+  if (options.source.rfind("synthetic", 0) == 0) {
+    // The synthetic source sways the rig's own markers about their rest positions (device mm).
+    const Eigen::Matrix3d inverse = rig.alignment.linear.inverse();
+    for (const RigMarker& m : rig.markers) {
+      const Eigen::Vector3d mm = inverse * (m.rest_position - rig.alignment.translation);
+      open.synthetic_rest_mm.push_back({static_cast<float>(mm.x()), static_cast<float>(mm.y()), static_cast<float>(mm.z())});
+      open.synthetic_labels.push_back(m.label);
+    }
+  }
+  std::unique_ptr<drivers::MarkerSource> source = devices::openMarkerSource(options.source, open);
+  auto mailbox = std::make_unique<FrameMailbox>();
+  if (!source->start(*mailbox)) throw std::runtime_error("source " + options.source + " did not start: " + source->lastError());
+  std::vector<std::string> labels;
+  if (!source->waitForLabels(std::chrono::milliseconds(static_cast<std::int64_t>(options.label_timeout_ms)), labels)) {
+    source->stop();
+    throw std::runtime_error("source " + options.source + " named no markers within " +
+                             std::to_string(static_cast<int>(options.label_timeout_ms)) +
+                             " ms (a marker-stream device must send its descriptor; see docs/protocol.md)");
+  }
+  const MarkerBindingReport binding = live.bindLabels(labels);
+  if (binding.matched == 0) {
+    source->stop();
+    std::vector<std::string> rig_labels;
+    for (const RigMarker& m : rig.markers) rig_labels.push_back(m.label);
+    std::vector<std::string> named;
+    for (const std::string& l : labels)
+      if (!l.empty()) named.push_back(l);
+    throw std::runtime_error("the source's markers share no label with the rig (rig: " + joinLabels(rig_labels) +
+                             "; source: " + (named.empty() ? std::string("none") : joinLabels(named)) +
+                             "): build the rig from a clip of the same marker set");
+  }
+  if (!options.quiet) {
+    std::printf("tetrig run: %s\n", source->describe().c_str());
+    std::printf("  rig: %s: %d tet vertices, %d tets, %d fine vertices, %zu markers; %d bound by label\n", rig.name.c_str(),
+                rig.tet_mesh.vertexCount(), rig.tet_mesh.tetCount(), live.fineVertexCount(), rig.markers.size(), binding.matched);
+    if (!binding.missing.empty())
+      std::printf("  note: %zu rig markers the source never names are treated as occluded: %s\n", binding.missing.size(),
+                  joinLabels(binding.missing).c_str());
+    if (!binding.unknown.empty())
+      std::printf("  note: %zu source markers the rig does not know are ignored: %s\n", binding.unknown.size(),
+                  joinLabels(binding.unknown).c_str());
+  }
+
+  // 3. The segment.
+  ShmPublisherOptions shm_options;
+  shm_options.name = options.publish.empty() || options.publish.front() == '/' ? options.publish : "/" + options.publish;
+  shm_options.normals = options.normals;
+  shm_options.permissions = options.shm_permissions;
+  std::vector<std::string> rig_labels;
+  for (const RigMarker& m : rig.markers) rig_labels.push_back(m.label);
+  ShmStaticData static_data;
+  static_data.triangles = live.fineTriangles();
+  static_data.rest_positions = live.restPositions();
+  static_data.rig_name = rig.name;
+  static_data.marker_labels = rig_labels;
+  std::unique_ptr<ShmPublisher> publisher;
+  try {
+    publisher = std::make_unique<ShmPublisher>(shm_options, live.fineVertexCount(), static_data);
+  } catch (...) {
+    source->stop();
+    throw;
+  }
+
+  // 4. The solver thread.
+  const double rate = source->nominalRateHz();
+  FrameLoopOptions loop_options;
+  loop_options.max_iterations = options.iterations;
+  const double budget_ms = options.budget_ms > 0 ? options.budget_ms : rate > 0 ? 0.9 * 1000.0 / rate : 8.0;
+  loop_options.budget_ns = static_cast<std::int64_t>(budget_ms * 1e6);
+  loop_options.stale_after_ns = static_cast<std::int64_t>(options.stale_ms * 1e6);
+  loop_options.max_frames = options.frames;
+  loop_options.cpu = options.cpu;
+  loop_options.realtime_fifo = options.fifo;
+  loop_options.lock_memory = options.lock_memory;
+  SignalScope signals;
+  FrameLoop loop(*mailbox, live, *publisher, loop_options);
+  loop.start();
+  if (!options.quiet)
+    std::printf("  publishing to shared memory '%s' (%s); budget %.2f ms, %d iterations per frame\n", options.publish.c_str(),
+                options.normals ? "positions and normals" : "positions", budget_ms, options.iterations);
+  std::fflush(stdout);
+  pid_t consumer = -1;
+  if (!options.consumer_command.empty()) consumer = spawnConsumer(options.consumer_command + " " + options.publish);
+
+  // 5. Wait for the end: source finished and drained, --frames reached, or a signal.
+  const bool tty = options.status_line && !options.quiet && isatty(STDERR_FILENO);
+  std::uint64_t last_frames = 0;
+  int idle_polls = 0;
+  auto last_status = std::chrono::steady_clock::now();
+  std::uint64_t status_frames = 0;
+  const std::int64_t start_ns = monotonicNowNs();
+  std::string end_reason = "source ended";
+  while (true) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    const FrameLoopSnapshot s = loop.snapshot();
+    if (g_signal != 0) {
+      end_reason = g_signal == SIGINT ? "interrupted (SIGINT)" : "terminated (SIGTERM)";
+      break;
+    }
+    if (loop.finished()) {
+      end_reason = "frame limit reached";
+      break;
+    }
+    if (source->finished() && !mailbox->hasPending()) {
+      idle_polls = s.counters.frames == last_frames ? idle_polls + 1 : 0;
+      if (idle_polls >= 2) break;
+    }
+    last_frames = s.counters.frames;
+    const auto now = std::chrono::steady_clock::now();
+    if (tty && now - last_status >= std::chrono::milliseconds(250)) {
+      const double dt = std::chrono::duration<double>(now - last_status).count();
+      std::fprintf(stderr,
+                   "\r\033[2K%8llu frames | %6.1f Hz | latency p50 %.3f ms p99 %.3f ms | %.2f it | occluded %llu | unknown %llu | "
+                   "dropped %llu | misses %llu%s",
+                   static_cast<unsigned long long>(s.counters.frames), static_cast<double>(s.counters.frames - status_frames) / dt,
+                   static_cast<double>(s.recent_p50_ns) * 1e-6, static_cast<double>(s.recent_p99_ns) * 1e-6,
+                   s.counters.frames ? static_cast<double>(s.counters.iterations) / static_cast<double>(s.counters.frames) : 0.0,
+                   static_cast<unsigned long long>(s.counters.occluded_marker_frames),
+                   static_cast<unsigned long long>(s.counters.unknown_marker_frames),
+                   static_cast<unsigned long long>(s.counters.mailbox_dropped),
+                   static_cast<unsigned long long>(s.counters.budget_misses), s.stale ? " | STALE" : "");
+      last_status = now;
+      status_frames = s.counters.frames;
+    }
+  }
+  if (tty) std::fprintf(stderr, "\r\033[2K");
+  loop.requestStop();
+  loop.join();
+  source->stop();
+  const double seconds = static_cast<double>(monotonicNowNs() - start_ns) * 1e-9;
+  const FrameLoopCounters c = loop.counters();
+  const FrameLoopLatency& l = loop.latency();
+  const drivers::MarkerSourceStats source_stats = source->stats();
+  publisher.reset();  // state stopped, name unlinked: consumers see a clean end
+  int consumer_status = 0;
+  if (consumer > 0) consumer_status = reapConsumer(consumer, std::chrono::seconds(5));
+
+  if (!options.quiet) {
+    std::printf("tetrig run: %s after %.1f s: %llu frames solved (%.1f Hz), %.2f iterations per frame\n", end_reason.c_str(), seconds,
+                static_cast<unsigned long long>(c.frames), seconds > 0 ? static_cast<double>(c.frames) / seconds : 0.0,
+                c.frames ? static_cast<double>(c.iterations) / static_cast<double>(c.frames) : 0.0);
+    std::printf("  latency (us)            p50      p99      max\n");
+    const std::pair<const char*, const LatencyHistogram*> rows[] = {
+        {"receive -> taken", &l.receive_to_taken}, {"step", &l.step}, {"pose transfer", &l.pose_transfer},
+        {"receive -> published", &l.receive_to_published}, {"overhead", &l.overhead}};
+    for (const auto& [name, h] : rows)
+      std::printf("  %-20s %8.1f %8.1f %8.1f\n", name, us(h->percentileNs(0.5)), us(h->percentileNs(0.99)), us(h->maxNs()));
+    std::printf("  budget misses %llu, deadline hits %llu, frames dropped in the mailbox %llu, held poses %llu, stale periods %llu\n",
+                static_cast<unsigned long long>(c.budget_misses), static_cast<unsigned long long>(c.deadline_hits),
+                static_cast<unsigned long long>(c.mailbox_dropped), static_cast<unsigned long long>(c.held_frames),
+                static_cast<unsigned long long>(c.stale_periods));
+    std::printf("  occluded marker-frames %llu, unknown marker-frames %llu; source: %llu frames, %llu lost, %llu decode errors\n",
+                static_cast<unsigned long long>(c.occluded_marker_frames), static_cast<unsigned long long>(c.unknown_marker_frames),
+                static_cast<unsigned long long>(source_stats.frames_published), static_cast<unsigned long long>(source_stats.frames_lost),
+                static_cast<unsigned long long>(source_stats.decode_errors));
+    std::printf("  solver thread: %s\n", loop.hygiene().c_str());
+  }
+  if (!options.final_obj.empty()) {
+    std::vector<float> last(static_cast<std::size_t>(live.fineVertexCount()) * 3);
+    live.writeLastPose(last.data(), nullptr);
+    std::string text = "# tetrig: last published pose of " + rig.name + "\n";
+    char line[96];
+    for (std::size_t i = 0; i < last.size(); i += 3) {
+      std::snprintf(line, sizeof line, "v %.9g %.9g %.9g\n", last[i], last[i + 1], last[i + 2]);
+      text += line;
+    }
+    const auto tris = live.fineTriangles();
+    for (std::size_t i = 0; i + 2 < tris.size(); i += 3) {
+      std::snprintf(line, sizeof line, "f %d %d %d\n", tris[i] + 1, tris[i + 1] + 1, tris[i + 2] + 1);
+      text += line;
+    }
+    rigbuild::writeFileAtomically(options.final_obj, std::span<const std::uint8_t>(reinterpret_cast<const std::uint8_t*>(text.data()), text.size()));
+    if (!options.quiet) std::printf("  wrote %s\n", options.final_obj.c_str());
+  }
+  if (!options.stats_json.empty()) {
+    nlohmann::json j;
+    j["frames"] = c.frames;
+    j["budget_misses"] = c.budget_misses;
+    j["dropped_frames"] = c.mailbox_dropped;
+    j["occluded_marker_frames"] = c.occluded_marker_frames;
+    j["unknown_marker_frames"] = c.unknown_marker_frames;
+    j["held_frames"] = c.held_frames;
+    j["stale_periods"] = c.stale_periods;
+    j["deadline_hits"] = c.deadline_hits;
+    j["iterations_per_frame"] = c.frames ? static_cast<double>(c.iterations) / static_cast<double>(c.frames) : 0.0;
+    j["seconds"] = seconds;
+    j["budget_ms"] = budget_ms;
+    j["end"] = end_reason;
+    j["source"] = {{"spec", options.source}, {"description", source->describe()}, {"rate_hz", rate},
+                   {"frames_published", source_stats.frames_published}, {"frames_lost", source_stats.frames_lost},
+                   {"decode_errors", source_stats.decode_errors}, {"late_frames", source_stats.late_frames}};
+    j["rig"] = {{"name", rig.name}, {"tet_vertices", rig.tet_mesh.vertexCount()}, {"tets", rig.tet_mesh.tetCount()},
+                {"fine_vertices", live.fineVertexCount()}, {"markers", rig.markers.size()}, {"markers_bound", binding.matched}};
+    j["solver_thread"] = loop.hygiene();
+    j["latency_us"] = {{"receive_to_taken", phaseJson(l.receive_to_taken)},
+                       {"step", phaseJson(l.step)},
+                       {"pose_transfer", phaseJson(l.pose_transfer)},
+                       {"receive_to_step_done", phaseJson(l.receive_to_step_done)},
+                       {"receive_to_pose_done", phaseJson(l.receive_to_pose_done)},
+                       {"receive_to_published", phaseJson(l.receive_to_published)},
+                       {"overhead", phaseJson(l.overhead)}};
+    const std::string text = j.dump(2) + "\n";
+    rigbuild::writeFileAtomically(options.stats_json, std::span<const std::uint8_t>(reinterpret_cast<const std::uint8_t*>(text.data()), text.size()));
+  }
+  if (consumer > 0 && consumer_status != 0) {
+    std::fprintf(stderr, "tetrig run: error: the consumer exited with status %d\n", consumer_status);
+    return 1;
+  }
+  return 0;
+}
+
+}  // namespace tetrig::tools

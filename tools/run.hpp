@@ -1,0 +1,47 @@
+// `tetrig run`: the live path as a command. A marker source (device, C3D clip, raw recording,
+// synthetic) on its driver thread -> FrameMailbox -> the solver thread (FrameLoop: LiveRig step +
+// pose transfer straight into the shared-memory slot) -> engines reading the segment.
+// Keys of --stats-json: docs/live.md.
+#pragma once
+
+#include "tetrig/rig_file.hpp"
+
+#include <cstdint>
+#include <optional>
+#include <string>
+
+namespace tetrig::tools {
+
+struct RunOptions {
+  std::string rig_path;                 // rig file (ignored when `rig` is set)
+  std::optional<tetrig::Rig> rig;       // an already built rig (tetrig demo)
+  std::string source = "synthetic";     // c3d:PATH, replay:PATH, synthetic[:N], hid:VID:PID, usb:VID:PID, hydra[:SERIAL]
+  std::string publish = "tetrig";       // shared-memory segment name (without the leading '/')
+  std::uint64_t frames = 0;             // stop after this many solved frames (0: until the source ends or SIGINT)
+  int iterations = 3;
+  double budget_ms = 0;                 // 0: derived from the source rate (0.9 of its period; 8 ms when unknown)
+  double stale_ms = 250;
+  bool as_fast_as_possible = false;
+  double speed = 1.0;
+  bool loop = false;
+  bool normals = false;
+  double occlusion_blend_ms = 150;
+  double label_timeout_ms = 3000;
+  std::string stats_json;               // write the run's statistics here (atomically)
+  int cpu = -1;
+  bool fifo = false;
+  bool lock_memory = true;
+  unsigned shm_permissions = 0600;
+  bool quiet = false;
+  bool status_line = true;              // a live status line on a terminal (stderr)
+  std::string final_obj;                // write the last published fine surface here as OBJ (atomically)
+  std::string consumer_command;         // demo: started after the segment exists, with the segment name appended; waited for at the end
+};
+
+// Runs until the source ends, `frames` frames were solved, or SIGINT/SIGTERM. Prints a summary
+// on stdout. Returns the process exit code; throws (one clear line) on bad input: a rig that does
+// not load, a source that cannot open, a segment name in use by a live producer, a source whose
+// markers share no label with the rig.
+int runLive(const RunOptions& options);
+
+}  // namespace tetrig::tools
