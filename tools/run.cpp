@@ -109,6 +109,7 @@ int runLive(const RunOptions& options) {
   open.pacing = options.as_fast_as_possible ? drivers::Pacing::kAsFastAsPossible : drivers::Pacing::kRealTime;
   open.speed = options.speed;
   open.loop = options.loop;
+  open.rate_hz = options.rate_hz;
   std::vector<std::array<float, 3>> rest_mm;
   if (options.source.rfind("synthetic", 0) == 0) {
     // The synthetic source sways the rig's own markers about their rest positions (device mm).
@@ -130,7 +131,7 @@ int runLive(const RunOptions& options) {
                              " ms (a marker-stream device must send its descriptor; see docs/protocol.md)");
   }
   const MarkerBindingReport binding = live.bindLabels(labels);
-  if (binding.matched == 0) {
+  if (binding.matched == 0 && binding.sensors_matched == 0) {
     source->stop();
     std::vector<std::string> rig_labels;
     for (const RigMarker& m : rig.markers) rig_labels.push_back(m.label);
@@ -148,6 +149,10 @@ int runLive(const RunOptions& options) {
     if (!binding.missing.empty())
       std::printf("  note: %zu rig markers the source never names are treated as occluded: %s\n", binding.missing.size(),
                   joinLabels(binding.missing).c_str());
+    if (!rig.pose_sensors.empty())
+      std::printf("  pose sensors: %d of %zu bound%s%s\n", binding.sensors_matched, rig.pose_sensors.size(),
+                  binding.missing_sensors.empty() ? "" : "; never named by the source (their regions stay put): ",
+                  joinLabels(binding.missing_sensors).c_str());
     if (!binding.unknown.empty())
       std::printf("  note: %zu source markers the rig does not know are ignored: %s\n", binding.unknown.size(),
                   joinLabels(binding.unknown).c_str());

@@ -23,6 +23,7 @@ struct RunOptions {
   double stale_ms = 250;
   bool as_fast_as_possible = false;
   double speed = 1.0;
+  std::uint16_t rate_hz = 0;            // devices: SET_RATE; c3d: overrides the clip's rate; synthetic: its rate
   bool loop = false;
   bool normals = false;
   double occlusion_blend_ms = 150;

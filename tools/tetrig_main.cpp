@@ -137,6 +137,8 @@ int main(int argc, char** argv) {
   run_cmd->add_flag("--as-fast-as-possible", run.as_fast_as_possible, "Playback sources: no pacing (offline runs)");
   run_cmd->add_option("--speed", run.speed, "Playback speed factor (real-time pacing)")->capture_default_str()->check(CLI::Range(0.01, 100.0));
   run_cmd->add_flag("--loop", run.loop, "Playback sources: start again at the end");
+  run_cmd->add_option("--rate", run.rate_hz, "Frame rate in Hz: asked of a device (SET_RATE), or overriding a clip's or the synthetic rate")
+      ->check(CLI::Range(1, 65535));
   run_cmd->add_flag("--normals", run.normals, "Also publish per-vertex normals");
   run_cmd->add_option("--occlusion-blend-ms", run.occlusion_blend_ms, "Blend time when a marker drops out or returns")
       ->capture_default_str()

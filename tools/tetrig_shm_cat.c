@@ -2,7 +2,7 @@
  * and libc (docs/shm.md, "tetrig-shm-cat"). Waits for the segment, prints one line per new frame
  * (frame id, source frame, iterations, receive->publish and publish->seen latencies), tells a
  * dead producer from a slow one and a restarted producer from the old one, and can write latency
- * percentiles as JSON (--json) and every frame's positions as raw binary (--dump).
+ * percentiles as JSON (--json: receive->published, published->seen, receive->seen) and every frame's positions as raw binary (--dump).
  *
  *   tetrig-shm-cat NAME [--frames N] [--timeout-ms T] [--json FILE] [--dump FILE]
  *                       [--follow] [--quiet] [--poll-us U] [--stale-ms S]
@@ -75,11 +75,11 @@ static double percentile(const Samples* s, double p) {
 
 static void writeStats(FILE* f, const char* key, Samples* s, int last) {
   if (s->count == 0) {
-    fprintf(f, "  \"%s\": {\"count\": 0, \"p50\": null, \"p99\": null, \"max\": null}%s\n", key, last ? "" : ",");
+    fprintf(f, "    \"%s\": {\"count\": 0, \"p50\": null, \"p99\": null, \"max\": null}%s\n", key, last ? "" : ",");
     return;
   }
   qsort(s->values, s->count, sizeof *s->values, compareDoubles);
-  fprintf(f, "  \"%s\": {\"count\": %lu, \"p50\": %.3f, \"p99\": %.3f, \"max\": %.3f}%s\n", key,
+  fprintf(f, "    \"%s\": {\"count\": %lu, \"p50\": %.3f, \"p99\": %.3f, \"max\": %.3f}%s\n", key,
           (unsigned long)s->count, percentile(s, 0.50), percentile(s, 0.99), s->values[s->count - 1], last ? "" : ",");
 }
 
@@ -201,6 +201,7 @@ typedef struct Run {
   int reported_death;
   Samples receive_to_publish;
   Samples publish_to_seen;
+  Samples receive_to_seen;
   FILE* dump;
 } Run;
 
@@ -275,7 +276,7 @@ static int writeDump(Run* run, const TetrigShmFrameInfo* info) {
 /* Handles the newest frame; returns 1 when a new frame was taken, 0 when none, or -(status). */
 static int takeFrame(Run* run) {
   TetrigShmFrameInfo info;
-  int64_t seen_ns, recv_pub, pub_seen;
+  int64_t seen_ns, recv_pub, pub_seen, recv_seen;
   const int rc = tetrig_shm_read_latest(&run->reader, run->positions, run->positions_len, NULL, 0, &info);
   if (rc != TETRIG_SHM_OK || info.frame_id <= run->last_frame_id) return 0; /* BUSY: next poll retries */
   seen_ns = tetrig_shm_now_ns();
@@ -284,8 +285,10 @@ static int takeFrame(Run* run) {
   run->frames_seen += 1;
   recv_pub = tetrig_shm_receive_to_publish_ns(&info);
   pub_seen = tetrig_shm_publish_age_ns(&info, seen_ns);
+  recv_seen = tetrig_shm_interval_ns(info.receive_ns, seen_ns);
   if ((recv_pub >= 0 && !samplesPush(&run->receive_to_publish, (double)recv_pub * 1e-3)) ||
-      (pub_seen >= 0 && !samplesPush(&run->publish_to_seen, (double)pub_seen * 1e-3))) {
+      (pub_seen >= 0 && !samplesPush(&run->publish_to_seen, (double)pub_seen * 1e-3)) ||
+      (recv_seen >= 0 && !samplesPush(&run->receive_to_seen, (double)recv_seen * 1e-3))) {
     fprintf(stderr, "tetrig-shm-cat: out of memory\n");
     return -EXIT_USAGE;
   }
@@ -378,9 +381,11 @@ static int writeJson(Run* run) {
   fprintf(f, "\",\n");
   fprintf(f, "  \"frames_seen\": %" PRIu64 ",\n  \"frames_missed\": %" PRIu64 ",\n", run->frames_seen, run->frames_missed);
   fprintf(f, "  \"instances\": %" PRIu64 ",\n  \"reader_retries\": %" PRIu64 ",\n", run->instances, run->retries);
-  writeStats(f, "receive_to_publish_us", &run->receive_to_publish, 0);
-  writeStats(f, "publish_to_seen_us", &run->publish_to_seen, 1);
-  fprintf(f, "}\n");
+  fprintf(f, "  \"latency_us\": {\n");
+  writeStats(f, "receive_to_published", &run->receive_to_publish, 0);
+  writeStats(f, "published_to_seen", &run->publish_to_seen, 0);
+  writeStats(f, "receive_to_seen", &run->receive_to_seen, 1);
+  fprintf(f, "  }\n}\n");
   return fclose(f) == 0;
 }
 
@@ -454,5 +459,6 @@ int main(int argc, char** argv) {
   free(run.positions);
   free(run.receive_to_publish.values);
   free(run.publish_to_seen.values);
+  free(run.receive_to_seen.values);
   return status;
 }

@@ -454,6 +454,14 @@ static inline uint64_t tetrig_shm_latest_frame_id(const TetrigShmReader* r) {
   return __atomic_load_n(&r->header->latest_frame_id, __ATOMIC_ACQUIRE);
 }
 
+/* Test hook: a statement run in the middle of each read attempt's copy (after the frame info,
+ * before the positions), e.g. to wait until the writer has lapped the slot so that the copy is
+ * really torn. Empty unless defined before this header is included; `reader` is the
+ * TetrigShmReader* being read. */
+#ifndef TETRIG_SHM_READ_WINDOW_HOOK
+#define TETRIG_SHM_READ_WINDOW_HOOK(reader) ((void)0)
+#endif
+
 /* Copies the newest complete frame: positions (vertex_count x 3 floats into `positions`, which
  * holds `positions_len` floats; NULL to skip), normals (same, only when the segment has normals;
  * otherwise `normals` is left untouched; NULL to skip) and its info (NULL to skip). Seqlock read:
@@ -461,9 +469,9 @@ static inline uint64_t tetrig_shm_latest_frame_id(const TetrigShmReader* r) {
  * relaxed word loads, acquire fence, reload the sequence: unchanged means no write overlapped the
  * copy. Retries (counted in reader->retries) at most reader->max_attempts times in all; returns
  * TETRIG_SHM_OK, TETRIG_SHM_NO_FRAME, TETRIG_SHM_BUSY (buffers then hold garbage) or
- * TETRIG_SHM_E_ARGUMENT. The frame returned can be newer than the latest id read before the call
- * and its id never goes below a previous read's. Wait-free apart from the bounded retries; no
- * system call, no allocation. */
+ * TETRIG_SHM_E_ARGUMENT. The frame returned is the one latest_frame_id named when the successful
+ * attempt began, so ids returned to one reader never go backwards. Wait-free apart from the
+ * bounded retries; no system call, no allocation. */
 static inline int tetrig_shm_read_latest(TetrigShmReader* r, float* positions, size_t positions_len,
                                          float* normals, size_t normals_len, TetrigShmFrameInfo* info) {
   const TetrigShmHeader* h;
@@ -491,11 +499,14 @@ static inline int tetrig_shm_read_latest(TetrigShmReader* r, float* positions, s
       continue;
     }
     tetrig_shm_load_words(&tmp, slot + TETRIG_SHM_SLOT_INFO_OFFSET, sizeof tmp);
+    TETRIG_SHM_READ_WINDOW_HOOK(r);
     if (positions != NULL) tetrig_shm_load_words(positions, slot + h->slot_positions_offset, float_bytes);
     if (with_normals) tetrig_shm_load_words(normals, slot + h->slot_normals_offset, float_bytes);
     __atomic_thread_fence(__ATOMIC_ACQUIRE);
     seq2 = __atomic_load_n(seq, __ATOMIC_RELAXED);
-    if (seq1 != seq2 || tmp.frame_id < latest || (tmp.frame_id - 1u) % h->slot_count != slot_index) {
+    /* tmp.frame_id > latest: the writer lapped us before seq1 (a complete newer frame, but
+     * returning it could make the next read, which may still load the older latest, go back) */
+    if (seq1 != seq2 || tmp.frame_id != latest) {
       ++r->retries;
       continue;
     }

@@ -7,9 +7,9 @@
 #include "tetrig/pose_transfer.hpp"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstring>
-#include <limits>
 #include <stdexcept>
 #include <string_view>
 
@@ -99,6 +99,11 @@ LiveRig::LiveRig(const Rig& rig, const LiveRigOptions& options)
   const DeformerSetup& setup = rig.setup;
   for (const std::int32_t v : setup.vertex_handles) vertex_targets_.push_back(rig.tet_mesh.vertices.row(v).transpose());
   region_targets_.assign(setup.region_handles.size(), RigidTransform{});
+  for (const RigPoseSensor& sensor : rig.pose_sensors) {
+    const auto& region = setup.region_handles.at(static_cast<std::size_t>(sensor.region_handle));
+    sensors_.emplace_back(sensor, rig.alignment, regionRestCentroid(rig.tet_mesh, region));
+  }
+  sensor_sample_.assign(sensors_.size(), nullptr);
   for (const PointHandle& p : setup.point_handles) {
     Eigen::Vector3d rest = Eigen::Vector3d::Zero();
     for (int c = 0; c < 4; ++c) rest += p.barycentric[c] * rig.tet_mesh.vertices.row(rig.tet_mesh.tets(p.tet, c)).transpose();
@@ -116,6 +121,7 @@ LiveRig::LiveRig(const Rig& rig, const LiveRigOptions& options)
   }
   previous_prediction_ = prediction_;
   marker_target_ = prediction_;
+  rotation_.assign(markers, Eigen::Quaterniond::Identity());
 
   const auto fine = static_cast<std::size_t>(rig.fine_vertices.rows());
   rest_positions_.resize(fine * 3);
@@ -186,11 +192,36 @@ MarkerBindingReport LiveRig::bindLabels(std::span<const std::string> labels_by_i
     marker_of_id_[static_cast<std::size_t>(best_id[k])] = static_cast<std::int32_t>(k);
     ++report.matched;
   }
+  // Pose sensors: the lowest id whose label matches (exactly, or after the last ':').
+  sensor_of_id_.assign(ids, -1);
+  for (std::size_t s = 0; s < sensors_.size(); ++s) {
+    const std::string& want = sensors_[s].sensor().sensor_label;
+    std::int32_t found = -1;
+    for (std::size_t id = 0; id < ids && found < 0; ++id) {
+      const std::string& label = labels_by_id[id];
+      if (!label.empty() && marker_of_id_[id] < 0 && sensor_of_id_[id] < 0 &&
+          (label == want || afterLastColon(label) == afterLastColon(want))) {
+        found = static_cast<std::int32_t>(id);
+      }
+    }
+    if (found < 0) {
+      report.missing_sensors.push_back(want);
+      continue;
+    }
+    sensor_of_id_[static_cast<std::size_t>(found)] = static_cast<std::int32_t>(s);
+    ++report.sensors_matched;
+  }
   for (std::size_t id = 0; id < ids; ++id) {
-    if (labels_by_id[id].empty() || marker_of_id_[id] >= 0) continue;
+    if (labels_by_id[id].empty() || marker_of_id_[id] >= 0 || sensor_of_id_[id] >= 0) continue;
     (candidate[id] >= 0 ? report.duplicates : report.unknown).push_back(labels_by_id[id]);
   }
   return report;
+}
+
+void LiveRig::setRegionTarget(std::int32_t region, const RigidTransform& target) noexcept {
+  if (region < 0 || static_cast<std::size_t>(region) >= region_targets_.size()) return;
+  region_targets_[static_cast<std::size_t>(region)] = target;
+  regions_changed_ = true;
 }
 
 double LiveRig::blendWeight(std::int64_t since_ns) const noexcept {
@@ -220,11 +251,17 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
   std::fill(measured_.begin(), measured_.end(), std::uint8_t{0});
   const int count = std::min<int>(frame.marker_count, kMaxMarkers);
   std::uint32_t unknown = 0;
+  std::fill(sensor_sample_.begin(), sensor_sample_.end(), nullptr);
   for (int i = 0; i < count; ++i) {
     const Marker& mk = frame.markers[static_cast<std::size_t>(i)];
     const std::int32_t k = markerOfId(mk.id);
     if (k < 0) {
-      ++unknown;
+      const std::int32_t s = mk.id < sensor_of_id_.size() ? sensor_of_id_[mk.id] : -1;
+      if (s >= 0) {
+        sensor_sample_[static_cast<std::size_t>(s)] = &mk;
+      } else {
+        ++unknown;
+      }
       continue;
     }
     const auto ku = static_cast<std::size_t>(k);
@@ -238,26 +275,29 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
   }
   std::uint32_t measured = 0;
   for (const std::uint8_t m : measured_) measured += m;
+  // Pose sensors move their regions (clutch or absolute; a sample that is not usable changes
+  // nothing). A frame that carries a usable sensor sample steps even with every marker occluded.
+  for (std::size_t s = 0; s < sensors_.size(); ++s) {
+    const Marker* sample = sensor_sample_[s];
+    if (sample == nullptr || !sample->valid || !sample->has_orientation) continue;
+    const auto region = static_cast<std::size_t>(sensors_[s].sensor().region_handle);
+    sensors_[s].update(sample, region_targets_[region]);
+    regions_changed_ = true;
+  }
   stats.unknown_markers = static_cast<std::uint16_t>(std::min<std::uint32_t>(unknown, 0xFFFF));
   stats.measured_markers = static_cast<std::uint16_t>(std::min<std::size_t>(measured, 0xFFFF));
   stats.occluded_markers = static_cast<std::uint16_t>(std::min<std::size_t>(markers - measured, 0xFFFF));
   // The blend clock runs only on frames that step: while the pose is held nothing is shown, so
   // no blend may progress unseen and land in one step when the markers return.
-  if (measured > 0) now_ns_ += dt_ns;
+  if (measured > 0 || markers == 0 || regions_changed_) now_ns_ += dt_ns;
 
-  // 3. Predictions from the deformer's current pose (a non-finite one keeps the previous).
+  // 3. Predictions from the deformer's current pose.
   previous_prediction_.swap(prediction_);
-  if (!predictor_.predict(deformer_.positions(), prediction_)) {
-    for (std::size_t k = 0; k < markers; ++k)
-      if (!prediction_[k].allFinite()) prediction_[k] = previous_prediction_[k];
-  }
+  refreshPredictions();
 
-  // 4. Targets through the blend states.
-  std::uint32_t blending = 0;
+  // 4. Blend states, then the targets.
   for (std::size_t k = 0; k < markers; ++k) {
     Track& track = tracks_[k];
-    const Eigen::Vector3d& p = prediction_[k];
-    Eigen::Vector3d target;
     if (measured_[k]) {
       if (track.state == MarkerTrackState::kPredicted) {
         if (stepped_) {
@@ -268,39 +308,28 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
           track.offset.setZero();
         }
       }
-      if (track.state == MarkerTrackState::kReturning) {
-        const double a = blendWeight(now_ns_ - track.return_ns);
-        if (a >= 1.0) {
-          track.state = MarkerTrackState::kMeasured;
-          track.offset.setZero();
-          target = measurement_[k];
-        } else {
-          const Eigen::Vector3d predicted = p + (1.0 - blendWeight(now_ns_ - track.dropout_ns)) * track.offset;
-          target = predicted + a * (measurement_[k] - predicted);
-          ++blending;
-        }
-      } else {
-        target = measurement_[k];
+      if (track.state == MarkerTrackState::kReturning && blendWeight(now_ns_ - track.return_ns) >= 1.0) {
+        track.state = MarkerTrackState::kMeasured;
+        track.offset.setZero();
       }
-    } else {
-      if (track.state != MarkerTrackState::kPredicted) {
-        track.state = MarkerTrackState::kPredicted;
-        track.offset = marker_target_[k] - previous_prediction_[k];
-        track.dropout_ns = now_ns_;
-      }
-      const double fade = 1.0 - blendWeight(now_ns_ - track.dropout_ns);
-      target = p + fade * track.offset;
-      if (fade > 0.0 && !track.offset.isZero(0.0)) ++blending;
+    } else if (track.state != MarkerTrackState::kPredicted) {
+      track.state = MarkerTrackState::kPredicted;
+      // The last target relative to the prediction from the pose that target produced (this
+      // frame's), in the anchor's frame so that it turns with the body while it fades.
+      track.offset = rotation_[k].conjugate() * (marker_target_[k] - prediction_[k]);
+      track.dropout_ns = now_ns_;
     }
-    marker_target_[k] = target;
-    vertex_targets_[static_cast<std::size_t>(rig.markers[k].vertex_handle)] = target;
   }
+  const std::uint32_t blending = updateTargets();
   stats.blending_markers = static_cast<std::uint16_t>(std::min<std::uint32_t>(blending, 0xFFFF));
   if (stats.occluded_markers > 0) stats.flags |= kLiveMarkersPredicted;
   if (blending > 0) stats.flags |= kLiveMarkersBlending;
 
-  // 5. Hold the pose when nothing was measured.
-  if (measured == 0) {
+  // 5. Hold the pose when nothing was measured (a rig without markers, or with region targets
+  // set for this frame, steps anyway).
+  const bool regions_changed = regions_changed_;
+  regions_changed_ = false;
+  if (measured == 0 && markers > 0 && !regions_changed) {
     stats.flags |= kLivePoseHeld;
     const std::int64_t t0 = monotonicNowNs();
     writeLastPose(positions, normals);
@@ -313,7 +342,40 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
   targets.vertex_positions = vertex_targets_;
   targets.region_transforms = region_targets_;
   targets.point_positions = point_targets_;
-  stats.step = deformer_.step(targets, budget);
+  // Refresh only when some marker is fully measured: that is what moves the body in the first
+  // iteration. With every marker predicted or blending (e.g. all returning after a held pose) the
+  // predictions would only chase the body they drive.
+  std::uint32_t anchored = 0;
+  for (std::size_t k = 0; k < markers; ++k) anchored += tracks_[k].state == MarkerTrackState::kMeasured ? 1u : 0u;
+  const bool refresh = options_.refresh_predictions && budget.max_iterations >= 2 && anchored > 0 &&
+                       (stats.occluded_markers > 0 || blending > 0);
+  if (!refresh) {
+    stats.step = deformer_.step(targets, budget);
+  } else {
+    // One iteration with the predictions from the last pose, then the rest with predictions from
+    // the pose that iteration gave (the measured markers have moved the body by then).
+    StepBudget first = budget;
+    first.max_iterations = 1;
+    stats.step = deformer_.step(targets, first);
+    if (std::chrono::steady_clock::now() < budget.deadline) {
+      refreshPredictions();
+      updateTargets();
+      StepBudget rest = budget;
+      rest.max_iterations = budget.max_iterations - 1;
+      const StepStats more = deformer_.step(targets, rest);
+      stats.step.iterations += more.iterations;
+      stats.step.flags |= more.flags;
+      stats.step.energy = more.energy;
+      stats.step.exact_rotations += more.exact_rotations;
+      stats.step.solve_ns += more.solve_ns;
+      stats.step.rotation_ns += more.rotation_ns;
+      stats.step.interpolation_ns += more.interpolation_ns;
+      stats.step.rigid_ns += more.rigid_ns;
+      stats.step.total_ns += more.total_ns;
+    } else {
+      stats.step.flags |= kStepDeadlineHit;
+    }
+  }
   stepped_ = true;
   if (stats.step.flags & kStepDeadlineHit) stats.flags |= kLiveDeadlineHit;
   if (stats.step.flags & (kStepTargetsRejected | kStepTargetsWrongSize)) stats.flags |= kLiveTargetsRejected;
@@ -339,6 +401,49 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
   }
   stats.pose_transfer_ns = monotonicNowNs() - t0;
   return stats;
+}
+
+double LiveRig::dropoutWeight(const Track& track) const noexcept {
+  return options_.fade_dropout_offset ? 1.0 - blendWeight(now_ns_ - track.dropout_ns) : 1.0;
+}
+
+void LiveRig::refreshPredictions() noexcept {
+  const bool finite = predictor_.predict(deformer_.positions(), prediction_);
+  for (std::size_t k = 0; k < prediction_.size(); ++k) {
+    rotation_[k] = predictor_.anchorRotation(static_cast<std::int32_t>(k));
+    // A non-finite pose (should not happen): such a marker keeps its previous prediction.
+    if (!finite && !prediction_[k].allFinite()) prediction_[k] = previous_prediction_[k];
+  }
+}
+
+std::uint32_t LiveRig::updateTargets() noexcept {
+  std::uint32_t blending = 0;
+  for (std::size_t k = 0; k < tracks_.size(); ++k) {
+    const Track& track = tracks_[k];
+    const Eigen::Vector3d& p = prediction_[k];
+    Eigen::Vector3d target;
+    switch (track.state) {
+      case MarkerTrackState::kMeasured:
+        target = measurement_[k];
+        break;
+      case MarkerTrackState::kReturning: {
+        const Eigen::Vector3d predicted = p + dropoutWeight(track) * (rotation_[k] * track.offset);
+        target = predicted + blendWeight(now_ns_ - track.return_ns) * (measurement_[k] - predicted);
+        ++blending;
+        break;
+      }
+      case MarkerTrackState::kPredicted:
+      default: {
+        const double fade = dropoutWeight(track);
+        target = p + fade * (rotation_[k] * track.offset);
+        if (fade > 0.0 && !track.offset.isZero(0.0)) ++blending;
+        break;
+      }
+    }
+    marker_target_[k] = target;
+    vertex_targets_[static_cast<std::size_t>(rig_->markers[k].vertex_handle)] = target;
+  }
+  return blending;
 }
 
 void LiveRig::writeLastPose(float* positions, float* normals) const noexcept {

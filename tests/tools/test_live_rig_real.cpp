@@ -14,6 +14,7 @@
 #include "tetrig/drivers/c3d_playback.hpp"
 #include "tetrig/drivers/c3d_reader.hpp"
 #include "tetrig/live_rig.hpp"
+#include "tetrig/marker_prediction.hpp"
 #include "tetrig/rigbuild/build_rig.hpp"
 #include "test_data.hpp"
 
@@ -134,6 +135,18 @@ class ClipRun {
     }
     return worst;
   }
+  // |prediction - measurement| of every marker measured (and not blending) in the last frame.
+  void collectPredictionErrors(std::vector<double>& out) {
+    for (std::size_t k = 0; k < live_.rig().markers.size(); ++k) {
+      if (live_.markerState(static_cast<std::int32_t>(k)) != MarkerTrackState::kMeasured || !live_.markerMeasured()[k]) continue;
+      out.push_back((live_.markerPredictions()[k] - live_.markerTargets()[k]).norm());
+    }
+  }
+  static double percentile(std::vector<double> v, double q) {
+    if (v.empty()) return 0.0;
+    std::sort(v.begin(), v.end());
+    return v[static_cast<std::size_t>(q * static_cast<double>(v.size() - 1))];
+  }
   bool allFinite() const {
     const auto finite = [](float v) { return std::isfinite(v); };
     return std::all_of(x_.begin(), x_.end(), finite) && std::all_of(normals_.begin(), normals_.end(), finite);
@@ -189,6 +202,18 @@ TEST(LiveRigReal, Hdm05OccludedMarkersAgainstTheUnoccludedRun) {
   TETRIG_REQUIRE_DATA(clip, kHdm05);
   const Scene& scene = *smplHdm05();
   ASSERT_EQ(scene.rig.markers.size(), 41u);
+  {
+    const LiveRig probe(scene.rig);
+    std::vector<std::int32_t> anchors;
+    std::vector<std::int32_t> marker_vertices;
+    for (const RigMarker& m : scene.rig.markers) marker_vertices.push_back(m.tet_vertex);
+    const MarkerPredictor predictor(scene.rig.tet_mesh, scene.rig.body_vertex_count, scene.rig.body_tet_count, marker_vertices,
+                                    MarkerPredictionOptions{probe.options().prediction_rings});
+    for (std::int32_t k = 0; k < predictor.markerCount(); ++k) anchors.push_back(static_cast<std::int32_t>(predictor.anchorVertices(k).size()));
+    std::sort(anchors.begin(), anchors.end());
+    std::printf("[ measured ] SMPL rig: %d tet vertices; anchor vertices per marker (rings %d): min %d, median %d, max %d\n",
+                scene.rig.tet_mesh.vertexCount(), probe.options().prediction_rings, anchors.front(), anchors[anchors.size() / 2], anchors.back());
+  }
   // Frames 1200-1920 are the clip's fastest (mean marker step 8.3-8.8 mm per frame at 120 Hz;
   // wrists and fingers up to 57-68 mm). The run starts at frame 0 (the T-pose the rig was built in).
   const std::vector<Window> windows{{"left wrist (LWRA, LWRB), 120 frames", {"LWRA", "LWRB"}, 1250, 1370},
@@ -201,6 +226,9 @@ TEST(LiveRigReal, Hdm05OccludedMarkersAgainstTheUnoccludedRun) {
   LiveRigOptions no_blend;
   no_blend.occlusion_blend_s = 0.0;
   ClipRun popping(scene, no_blend);
+  LiveRigOptions keep;
+  keep.fade_dropout_offset = false;
+  ClipRun kept(scene, keep);
   EXPECT_EQ(occluded.binding().matched, 41);
   EXPECT_TRUE(occluded.binding().missing.empty());
   EXPECT_EQ(occluded.binding().unknown.size(), 3u);  // the virtual points *0..*2 are not physical: not in frames
@@ -212,8 +240,10 @@ TEST(LiveRigReal, Hdm05OccludedMarkersAgainstTheUnoccludedRun) {
   for (std::size_t w = 0; w < windows.size(); ++w) near[w] = fineVerticesNear(scene.rig, windows[w].markers, 0.10);
 
   std::vector<double> error(windows.size(), 0.0), jump(windows.size(), 0.0), extra(windows.size(), 0.0), pop(windows.size(), 0.0),
-      reference_near(windows.size(), 0.0);
+      reference_near(windows.size(), 0.0), kept_error(windows.size(), 0.0), kept_extra(windows.size(), 0.0);
   double reference_motion = 0.0;
+  std::vector<double> prediction_errors;
+  std::int64_t reference_ns = 0, occluded_ns = 0, pose_ns = 0, timed = 0;
   const std::vector<float> rest(reference.live().restPositions().begin(), reference.live().restPositions().end());
   for (std::size_t f = 0; f < kEnd; ++f) {
     const auto occlude = [&](MarkerFrame& frame) {
@@ -223,10 +253,20 @@ TEST(LiveRigReal, Hdm05OccludedMarkersAgainstTheUnoccludedRun) {
         if (w >= 0 && f >= windows[static_cast<std::size_t>(w)].begin && f < windows[static_cast<std::size_t>(w)].end) m.valid = 0;
       }
     };
-    reference.frame(f);
+    const LiveFrameStats r = reference.frame(f);
+    reference.collectPredictionErrors(prediction_errors);
     const LiveFrameStats s = occluded.frame(f, occlude);
+    if (s.occluded_markers > 0 || s.blending_markers > 0) {
+      // Timing, printed only (no timing assertions): the occluded run steps twice (refresh).
+      reference_ns += r.step.total_ns;
+      occluded_ns += s.step.total_ns;
+      pose_ns += s.pose_transfer_ns;
+      ++timed;
+    }
     popping.frame(f, occlude);
+    kept.frame(f, occlude);
     ASSERT_TRUE(occluded.allFinite()) << "frame " << f;
+    ASSERT_TRUE(kept.allFinite()) << "frame " << f;
     reference_motion = std::max(reference_motion, reference.lastStep());
     for (std::size_t w = 0; w < windows.size(); ++w) {
       const Window& win = windows[w];
@@ -236,6 +276,7 @@ TEST(LiveRigReal, Hdm05OccludedMarkersAgainstTheUnoccludedRun) {
       }
       if (f >= win.begin && f < win.end + kAfter) {
         error[w] = std::max(error[w], ClipRun::maxDistance(occluded.positions(), reference.positions(), &near[w]));
+        kept_error[w] = std::max(kept_error[w], ClipRun::maxDistance(kept.positions(), reference.positions(), &near[w]));
         reference_near[w] = std::max(reference_near[w], ClipRun::maxDistance(reference.positions(), rest, &near[w]));
       }
       const bool edge = (f >= win.begin && f < win.begin + kEdge) || (f >= win.end && f < win.end + kEdge);
@@ -243,6 +284,7 @@ TEST(LiveRigReal, Hdm05OccludedMarkersAgainstTheUnoccludedRun) {
         jump[w] = std::max(jump[w], occluded.lastStep());
         extra[w] = std::max(extra[w], occluded.extraStep(reference));
         pop[w] = std::max(pop[w], popping.extraStep(reference));
+        kept_extra[w] = std::max(kept_extra[w], kept.extraStep(reference));
       }
     }
   }
@@ -252,22 +294,38 @@ TEST(LiveRigReal, Hdm05OccludedMarkersAgainstTheUnoccludedRun) {
     std::printf("[ measured ] %s: %zu fine vertices within 10 cm; max error there %.1f mm (they move up to %.0f mm from rest); "
                 "largest per-frame step at the edges %.1f mm, extra step over the unoccluded run %.2f mm (without blends %.2f mm)\n",
                 windows[w].name, near[w].size(), 1e3 * error[w], 1e3 * reference_near[w], 1e3 * jump[w], 1e3 * extra[w], 1e3 * pop[w]);
+    std::printf("[ measured ]   the same with the dropout offset kept (fade_dropout_offset = false): max error %.1f mm, extra step %.2f mm\n",
+                1e3 * kept_error[w], 1e3 * kept_extra[w]);
   }
+  std::printf("[ measured ] prediction - measurement of the measured markers (unoccluded run): median %.1f mm, 95 %% %.1f mm, max %.1f mm\n",
+              1e3 * ClipRun::percentile(prediction_errors, 0.5), 1e3 * ClipRun::percentile(prediction_errors, 0.95),
+              1e3 * ClipRun::percentile(prediction_errors, 1.0));
+  std::printf("[ measured ] in the %lld frames with predicted or blending markers: step %.0f us (the same frames unoccluded %.0f us), "
+              "pose transfer %.0f us (means; shared machine)\n",
+              static_cast<long long>(timed), 1e-3 * static_cast<double>(occluded_ns) / static_cast<double>(timed),
+              1e-3 * static_cast<double>(reference_ns) / static_cast<double>(timed), 1e-3 * static_cast<double>(pose_ns) / static_cast<double>(timed));
   // After the last window the two runs agree again.
   const double final_difference = ClipRun::maxDistance(occluded.positions(), reference.positions());
   std::printf("[ measured ] %zu frames after the last return: max difference %.3f mm\n", kEnd - windows.back().end, 1e3 * final_difference);
   for (std::size_t w = 0; w < windows.size(); ++w) {
-    EXPECT_GT(near[w].size(), 50u);
+    EXPECT_GE(near[w].size(), 10u);
     EXPECT_LE(jump[w], reference_motion) << windows[w].name;
   }
-  // Measured bounds (docs/live.md): see the printed values.
-  EXPECT_LE(error[0], 0.030);
-  EXPECT_LE(error[1], 0.030);
-  EXPECT_LE(error[2], 0.060);
-  for (std::size_t w = 0; w < windows.size(); ++w) EXPECT_LE(extra[w], 0.005) << windows[w].name;
+  // Measured bounds (docs/live.md, "Occlusion"), with a margin over the printed values.
+  EXPECT_LE(error[0], 0.015);
+  EXPECT_LE(error[1], 0.012);
+  EXPECT_LE(error[2], 0.085);  // all four head markers: nothing measures the head's own turn
+  EXPECT_LE(extra[0], 0.0025);
+  EXPECT_LE(extra[1], 0.0010);
+  EXPECT_LE(extra[2], 0.0050);
   EXPECT_GT(*std::max_element(pop.begin(), pop.end()), 2.0 * *std::max_element(extra.begin(), extra.end()))
       << "without blends the edges must show a larger extra step, or the measure proves nothing";
   EXPECT_LE(final_difference, 0.002);
+  // Keeping the offset (in the anchor's frame) follows the unoccluded run closer where the
+  // occluded markers pulled the body away from their rest offsets (the head, the knee).
+  EXPECT_LE(kept_error[0], 0.015);
+  EXPECT_LE(kept_error[1], 0.7 * error[1]);
+  EXPECT_LE(kept_error[2], 0.5 * error[2]);
 }
 
 TEST(LiveRigReal, Hdm05NoAllocationPerFrame) {
@@ -353,15 +411,21 @@ TEST(LiveRigReal, Sample20ShortGapsAgainstInterpolatedGaps) {
   EXPECT_GE(gap_runs, 200u);
   LiveRigOptions options;
   options.normals = true;
-  ClipRun gaps(scene, options), reference(scene);
+  LiveRigOptions no_blend;
+  no_blend.occlusion_blend_s = 0.0;
+  ClipRun gaps(scene, options), reference(scene), popping(scene, no_blend);
   EXPECT_EQ(gaps.binding().matched, 39);
   const std::size_t blend_frames = static_cast<std::size_t>(std::ceil(0.15 * c.frameRate())) + 2;
   std::vector<std::uint8_t> was_measured(scene.rig.markers.size(), 1);
   std::size_t edge_until = 0, edges = 0, edge_frames = 0;
-  double edge_extra = 0.0, other_extra = 0.0, edge_step = 0.0, reference_step = 0.0, worst_error = 0.0;
+  double edge_extra = 0.0, other_extra = 0.0, edge_step = 0.0, reference_step = 0.0, worst_error = 0.0, pop_extra = 0.0;
+  double edge_extra_sum = 0.0, pop_extra_sum = 0.0;
+  std::vector<double> prediction_errors;
   constexpr std::size_t kSettle = 10;
   for (std::size_t f = 0; f < frames; ++f) {
     const LiveFrameStats s = gaps.frame(f);
+    gaps.collectPredictionErrors(prediction_errors);
+    popping.frame(f);
     reference.frame(f, [&](MarkerFrame& frame) {
       for (int k = 0; k < frame.marker_count; ++k) {
         Marker& m = frame.markers[static_cast<std::size_t>(k)];
@@ -383,18 +447,28 @@ TEST(LiveRigReal, Sample20ShortGapsAgainstInterpolatedGaps) {
     const bool edge = f < edge_until;
     edge_frames += edge;
     (edge ? edge_extra : other_extra) = std::max(edge ? edge_extra : other_extra, gaps.extraStep(reference));
-    if (edge) edge_step = std::max(edge_step, gaps.lastStep());
+    if (edge) {
+      edge_step = std::max(edge_step, gaps.lastStep());
+      pop_extra = std::max(pop_extra, popping.extraStep(reference));
+      edge_extra_sum += gaps.extraStep(reference);
+      pop_extra_sum += popping.extraStep(reference);
+    }
     reference_step = std::max(reference_step, reference.lastStep());
     worst_error = std::max(worst_error, ClipRun::maxDistance(gaps.positions(), reference.positions()));
   }
   std::printf("[ measured ] sample20 (30 Hz, %zu gap runs filled in the reference): %zu marker edges, %zu edge frames; largest step at "
-              "edges %.1f mm (reference's largest step %.1f mm); extra step over the reference at edges %.1f mm, elsewhere %.1f mm; "
-              "max difference %.1f mm\n",
-              gap_runs, edges, edge_frames, 1e3 * edge_step, 1e3 * reference_step, 1e3 * edge_extra, 1e3 * other_extra, 1e3 * worst_error);
+              "edges %.1f mm (reference's largest step %.1f mm); extra step over the reference at edges %.1f mm (without blends "
+              "%.1f mm), elsewhere %.1f mm; mean extra step over the edge frames %.2f mm (without blends %.2f mm); max difference %.1f mm\n",
+              gap_runs, edges, edge_frames, 1e3 * edge_step, 1e3 * reference_step, 1e3 * edge_extra, 1e3 * pop_extra, 1e3 * other_extra,
+              1e3 * edge_extra_sum / static_cast<double>(edge_frames), 1e3 * pop_extra_sum / static_cast<double>(edge_frames), 1e3 * worst_error);
+  std::printf("[ measured ] sample20: prediction - measurement of the measured markers: median %.1f mm, 95 %% %.1f mm, max %.1f mm\n",
+              1e3 * ClipRun::percentile(prediction_errors, 0.5), 1e3 * ClipRun::percentile(prediction_errors, 0.95),
+              1e3 * ClipRun::percentile(prediction_errors, 1.0));
   EXPECT_GE(edges, 300u);
-  EXPECT_LE(edge_step, reference_step);
-  EXPECT_LE(edge_extra, 0.050);
-  EXPECT_LE(worst_error, 0.100);
+  EXPECT_LE(edge_step, 1.1 * reference_step);
+  EXPECT_LE(edge_extra, 0.030);
+  EXPECT_LT(edge_extra_sum, 0.85 * pop_extra_sum);
+  EXPECT_LE(worst_error, 0.065);
 }
 
 TEST(LiveRigReal, PigWalkLfhdGapRigFromTheStaticTrial) {

@@ -14,29 +14,41 @@
 // padded positions into the caller's buffer (and area-weighted vertex normals when asked for).
 // Occlusion never changes the factor: markers stay vertex handles, only their targets change.
 //
-// Blends (s(u) = u^2 (3 - 2u), u clamped to [0, 1], the smoothstep: zero slope at both ends; T =
-// occlusion_blend_s; p(t) the marker's prediction at time t):
-//   dropout at t0 (first frame without a measurement): o = (last target) - p(previous frame),
-//       target(t) = p(t) + (1 - s((t - t0) / T)) o        (continuous at t0, the offset fades out);
-//   return at t1 (first frame measured again): with P(t) the dropout target above,
-//       target(t) = P(t) + s((t - t1) / T) (m(t) - P(t))   (starts at the prediction, ends at m).
+// Blends (s(u) = u^2 (3 - 2u) for u in [0, 1], 1 beyond: the smoothstep, zero slope at both ends;
+// T = occlusion_blend_s; p(t) the marker's prediction at time t and R(t) its anchor's rotation,
+// both from the deformer's current pose):
+//   dropout at t0 (first frame without a measurement): the last target x relative to the
+//       prediction from the pose it produced, in the anchor's frame, o = R(t0)^T (x - p(t0));
+//       P(t) = p(t) + (1 - s((t - t0) / T)) R(t) o      (= x at t0: continuous; the offset turns
+//                                                        with the body and fades out);
+//   return at t1 (first frame measured again, measurement m(t)):
+//       target(t) = P(t) + s((t - t1) / T) (m(t) - P(t))   (starts at P, ends at m).
+// With fade_dropout_offset = false the (1 - s) factor is 1: the offset is kept for the whole
+// occlusion (measured closer to the unoccluded run on real data, docs/live.md; off by default).
 // Time is the frames' own: device_timestamp_ns when non-zero, else receive_timestamp_ns (never the
 // wall clock, so a live run replays bit for bit offline from the same frames and iteration counts),
 // accumulated as an internal blend clock that never runs backwards (a timestamp earlier than the
 // previous frame's advances it by 0; a frame with neither timestamp by untimed_frame_period_s) and
 // that stands still on held frames (below): a blend progresses only in frames that are shown.
 // Measured markers of the first frame that steps are taken as they are (there is no earlier pose
-// to blend from). A frame with no measured rig marker holds the last pose (no step, kLivePoseHeld).
+// to blend from). A frame with no measured rig marker holds the last pose (no step, kLivePoseHeld),
+// unless the rig has no markers or a region target was set for the frame (setRegionTarget).
+// Refresh (refresh_predictions, on by default): when some markers are predicted or blending and
+// some are fully measured, the step runs one iteration, the predictions are recomputed from the
+// pose that iteration gave, and the remaining iterations run with the new targets (predictions
+// otherwise lag the measured markers by one frame); the iteration count and deadline are those
+// of `budget` over both calls.
 //
 // Threads and ownership: `rig` is referenced, not copied: it must outlive the LiveRig. The
 // constructor and bindLabels() are load-time code (allocate, may throw). processFrame(),
-// writeLastPose() and the accessors belong to one thread at a time (the solver thread):
-// processFrame() allocates nothing, takes no lock, throws nothing and does no I/O.
+// writeLastPose(), setRegionTarget() and the accessors belong to one thread at a time (the solver
+// thread): processFrame() allocates nothing, takes no lock, throws nothing and does no I/O.
 #pragma once
 
 #include "tetrig/deformer.hpp"
 #include "tetrig/marker_frame.hpp"
 #include "tetrig/marker_prediction.hpp"
+#include "tetrig/pose_sensor.hpp"
 #include "tetrig/rig_file.hpp"
 
 #include <Eigen/Core>
@@ -53,6 +65,8 @@ struct LiveRigOptions {
   bool normals = false;              // also write per-vertex normals of the fine mesh
   int prediction_rings = 3;          // anchor rings of the occlusion prediction (MarkerPredictionOptions::rings)
   double untimed_frame_period_s = 1.0 / 120.0;  // clock advance of a frame with neither timestamp
+  bool fade_dropout_offset = true;   // false: keep the dropout offset (in the anchor's frame) for the whole occlusion
+  bool refresh_predictions = true;   // with predicted markers and >= 2 iterations: re-predict after the first
 };
 
 enum LiveFrameFlags : std::uint32_t {
@@ -80,6 +94,8 @@ struct MarkerBindingReport {
   std::vector<std::string> missing;       // rig markers the source never names (always predicted), rig order
   std::vector<std::string> unknown;       // source labels the rig does not know (ignored), id order
   std::vector<std::string> duplicates;    // source labels naming a rig marker another id already took (ignored)
+  std::int32_t sensors_matched = 0;       // rig pose sensors (rig.pose_sensors) bound to a source id
+  std::vector<std::string> missing_sensors;  // pose sensors the source never names (their regions stay put)
 };
 
 // Per-marker state of the occlusion blend.
@@ -122,14 +138,18 @@ class LiveRig {
   const Deformer& deformer() const noexcept { return deformer_; }
   const LiveRigOptions& options() const noexcept { return options_; }
 
-  // Region handles' targets, passed to every step (identity = rest unless something writes them,
-  // e.g. pose sensors, before processFrame on the same thread). One per rig.setup.region_handles.
-  std::span<RigidTransform> regionTargets() noexcept { return region_targets_; }
+  // Region handles' targets (x = R x_rest + t, rig units), passed to every step: identity (rest)
+  // unless something drives them, e.g. pose sensors, on the solver thread before processFrame.
+  // setRegionTarget also makes the next processFrame step when no marker is measured (a held pose
+  // would ignore the region); an index out of range is ignored. No allocation.
+  void setRegionTarget(std::int32_t region, const RigidTransform& target) noexcept;
+  std::span<const RigidTransform> regionTargets() const noexcept { return region_targets_; }  // one per rig.setup.region_handles
 
   // For tests and tools, per rig marker (rig.markers order), as of the last processFrame:
   std::span<const Eigen::Vector3d> markerTargets() const noexcept { return marker_target_; }      // the target it was driven with, rig units
   std::span<const Eigen::Vector3d> markerPredictions() const noexcept { return prediction_; }    // its prediction, rig units
   std::span<const std::uint8_t> markerMeasured() const noexcept { return measured_; }            // 1: measured in that frame
+  std::span<const Eigen::Quaterniond> markerAnchorRotations() const noexcept { return rotation_; }  // R of its prediction
   MarkerTrackState markerState(std::int32_t marker) const noexcept { return tracks_[static_cast<std::size_t>(marker)].state; }
   // The rig marker bound to source id `id`, or -1.
   std::int32_t markerOfId(std::uint16_t id) const noexcept {
@@ -139,12 +159,15 @@ class LiveRig {
  private:
   struct Track {
     MarkerTrackState state = MarkerTrackState::kPredicted;
-    Eigen::Vector3d offset = Eigen::Vector3d::Zero();  // dropout offset o
+    Eigen::Vector3d offset = Eigen::Vector3d::Zero();  // dropout offset o, in the anchor's frame (R^T o)
     std::int64_t dropout_ns = 0;                       // t0 (internal clock)
     std::int64_t return_ns = 0;                        // t1 (internal clock)
   };
 
   double blendWeight(std::int64_t since_ns) const noexcept;  // s((now - event) / T)
+  double dropoutWeight(const Track& track) const noexcept;   // 1 - s((now - t0) / T)
+  void refreshPredictions() noexcept;                         // prediction_ from the deformer's pose
+  std::uint32_t updateTargets() noexcept;                     // targets from the states; returns the blending count
 
   const Rig* rig_ = nullptr;
   LiveRigOptions options_;
@@ -156,6 +179,11 @@ class LiveRig {
 
   // Binding: source id -> rig marker (-1: unknown).
   std::vector<std::int32_t> marker_of_id_;
+  // Pose sensors (rig.pose_sensors): one driver each, the source id that carries it, and this
+  // frame's sample (tetrig/pose_sensor.hpp).
+  std::vector<PoseSensorDriver> sensors_;
+  std::vector<std::int32_t> sensor_of_id_;
+  std::vector<const Marker*> sensor_sample_;
 
   // Handle targets passed to step().
   std::vector<Eigen::Vector3d> vertex_targets_;  // one per vertex handle (non-marker ones stay at rest)
@@ -165,6 +193,7 @@ class LiveRig {
   // Per rig marker.
   std::vector<Track> tracks_;
   std::vector<Eigen::Vector3d> measurement_, prediction_, previous_prediction_, marker_target_;
+  std::vector<Eigen::Quaterniond> rotation_;  // the anchor rotation R of each prediction
   std::vector<std::uint8_t> measured_;
 
   // Clock (internal, ns) and whether any frame has stepped yet.
@@ -172,6 +201,7 @@ class LiveRig {
   std::int64_t last_source_ns_ = 0;
   std::int64_t now_ns_ = 0;
   bool stepped_ = false;
+  bool regions_changed_ = false;  // setRegionTarget since the last processFrame
 
   // Output: rest and last pose (floats, #fine*3), normals accumulator.
   std::vector<float> rest_positions_, last_positions_;
