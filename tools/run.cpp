@@ -102,6 +102,8 @@ int runLive(const RunOptions& options) {
   LiveRigOptions live_options;
   live_options.occlusion_blend_s = options.occlusion_blend_ms * 1e-3;
   live_options.normals = options.normals;
+  const int pose_threads = options.pose_threads > 0 ? options.pose_threads : 1;
+  live_options.split_pose_transfer = pose_threads >= 2;
   LiveRig live(rig, live_options);
 
   // 2. The source, its labels, the binding.
@@ -193,8 +195,9 @@ int runLive(const RunOptions& options) {
   FrameLoop loop(*mailbox, live, *publisher, loop_options);
   loop.start();
   if (!options.quiet)
-    std::printf("  publishing to shared memory '%s' (%s); budget %.2f ms, %d iterations per frame\n", options.publish.c_str(),
-                options.normals ? "positions and normals" : "positions", budget_ms, options.iterations);
+    std::printf("  publishing to shared memory '%s' (%s); budget %.2f ms, %d iterations per frame, pose transfer on %d thread%s\n",
+                options.publish.c_str(), options.normals ? "positions and normals" : "positions", budget_ms, options.iterations,
+                pose_threads, pose_threads > 1 ? "s" : "");
   std::fflush(stdout);
   pid_t consumer = -1;
   if (!options.consumer_command.empty()) consumer = spawnConsumer(options.consumer_command + " " + options.publish);

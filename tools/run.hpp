@@ -26,6 +26,7 @@ struct RunOptions {
   std::uint16_t rate_hz = 0;            // devices: SET_RATE; c3d: overrides the clip's rate; synthetic: its rate
   bool loop = false;
   bool normals = false;
+  int pose_threads = 1;                 // pose transfer threads: 1, or 2 (the solver + one worker; docs/live.md)
   double occlusion_blend_ms = 150;
   double label_timeout_ms = 3000;
   std::string stats_json;               // write the run's statistics here (atomically)

@@ -140,6 +140,8 @@ int main(int argc, char** argv) {
   run_cmd->add_option("--rate", run.rate_hz, "Frame rate in Hz: asked of a device (SET_RATE), or overriding a clip's or the synthetic rate")
       ->check(CLI::Range(1, 65535));
   run_cmd->add_flag("--normals", run.normals, "Also publish per-vertex normals");
+  run_cmd->add_option("--pose-threads", run.pose_threads, "Pose transfer threads: 1 (default), or 2 (the solver and one worker; docs/live.md)")
+      ->check(CLI::Range(1, 2));
   run_cmd->add_option("--occlusion-blend-ms", run.occlusion_blend_ms, "Blend time when a marker drops out or returns")
       ->capture_default_str()
       ->check(CLI::Range(0.0, 10000.0));

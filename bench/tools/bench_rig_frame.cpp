@@ -10,7 +10,7 @@
 //   BM_LiveRigFrame/smpl_hdm05: the same frames through the live path's own per-frame call,
 //   LiveRig::processFrame (clip frame as the C3D playback source fills it -> labels bound once ->
 //   targets incl. occlusion prediction -> step(3) -> pose transfer into a float buffer, what
-//   `tetrig run` writes into the shared-memory slot).
+//   `tetrig run` writes into the shared-memory slot); /1: the pose transfer split over two threads.
 #include "bench_data.hpp"
 
 #include "tetrig/deformer.hpp"
@@ -121,7 +121,9 @@ void BM_LiveRigFrame(benchmark::State& state) {
     state.SkipWithError(error.c_str());
     return;
   }
-  tetrig::LiveRig live(scene->rig);
+  tetrig::LiveRigOptions live_options;
+  live_options.split_pose_transfer = state.range(0) != 0;
+  tetrig::LiveRig live(scene->rig, live_options);
   tetrig::drivers::C3DPlaybackOptions options;
   options.pacing = tetrig::drivers::Pacing::kAsFastAsPossible;
   const tetrig::drivers::C3DPlayback playback(scene->clip, options);
@@ -149,6 +151,7 @@ void BM_LiveRigFrame(benchmark::State& state) {
   state.counters["pose_transfer_us"] = static_cast<double>(pose_ns) / n * 1e-3;
   state.counters["iterations"] = static_cast<double>(iterations) / n;
 }
-BENCHMARK(BM_LiveRigFrame)->Name("BM_LiveRigFrame/smpl_hdm05")->Unit(benchmark::kMicrosecond);
+// Argument: 0 = pose transfer on the calling thread, 1 = split with one worker (PoseTransferSplit).
+BENCHMARK(BM_LiveRigFrame)->Name("BM_LiveRigFrame/smpl_hdm05")->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
 
 }  // namespace

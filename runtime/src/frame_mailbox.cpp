@@ -8,45 +8,12 @@
 // published last (stats()) always sees taken + dropped <= published.
 #include "tetrig/frame_mailbox.hpp"
 
-#include <algorithm>
-#include <chrono>
-#include <thread>
-
-#if defined(__linux__)
-#include <linux/futex.h>
-#include <sys/syscall.h>
-#include <time.h>
-#include <unistd.h>
-#endif
+#include "futex.hpp"
 
 namespace tetrig {
 
-namespace {
-
-// Sleeps while *word == expected, at most timeout_ns (spurious returns are fine: callers re-check).
-void futexWait(std::atomic<std::uint32_t>& word, std::uint32_t expected, std::int64_t timeout_ns) noexcept {
-#if defined(__linux__)
-  static_assert(sizeof(std::atomic<std::uint32_t>) == sizeof(std::uint32_t));
-  timespec ts{};
-  ts.tv_sec = static_cast<time_t>(timeout_ns / 1'000'000'000);
-  ts.tv_nsec = static_cast<long>(timeout_ns % 1'000'000'000);
-  syscall(SYS_futex, reinterpret_cast<std::uint32_t*>(&word), FUTEX_WAIT_PRIVATE, expected, &ts, nullptr, 0);
-#else
-  if (word.load(std::memory_order_seq_cst) == expected) {
-    std::this_thread::sleep_for(std::chrono::nanoseconds(std::min<std::int64_t>(timeout_ns, 1'000'000)));
-  }
-#endif
-}
-
-void futexWakeAll(std::atomic<std::uint32_t>& word) noexcept {
-#if defined(__linux__)
-  syscall(SYS_futex, reinterpret_cast<std::uint32_t*>(&word), FUTEX_WAKE_PRIVATE, 1 << 30, nullptr, nullptr, 0);
-#else
-  (void)word;
-#endif
-}
-
-}  // namespace
+using detail::futexWait;
+using detail::futexWakeAll;
 
 FrameMailbox::FrameMailbox() noexcept : middle_(1u), back_(0u), front_(2u) {}
 

@@ -114,6 +114,8 @@ LiveRig::LiveRig(const Rig& rig, const LiveRigOptions& options)
   tracks_.assign(markers, Track{});
   measurement_.assign(markers, Eigen::Vector3d::Zero());
   measured_.assign(markers, 0);
+  skip_prediction_.assign(markers, 0);
+  if (options.split_pose_transfer) split_ = std::make_unique<PoseTransferSplit>(rig.pose_transfer.view());
   prediction_.resize(markers);
   for (std::size_t k = 0; k < markers; ++k) {
     // The deformer starts at rest, where every prediction is the marker's rest position.
@@ -383,7 +385,11 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
   // 7. Pose transfer into the caller's buffer; never publish a non-finite value.
   const std::int64_t t0 = monotonicNowNs();
   const std::size_t n = rest_positions_.size();
-  applyPoseTransferPadded(rig.pose_transfer.view(), deformer_.paddedPositions().data(), positions);
+  if (split_) {
+    split_->apply(deformer_.paddedPositions().data(), positions);
+  } else {
+    applyPoseTransferPadded(rig.pose_transfer.view(), deformer_.paddedPositions().data(), positions);
+  }
   bool finite = true;
   for (std::size_t i = 0; i < n; ++i)
     if (!std::isfinite(positions[i])) finite = false;
@@ -408,8 +414,13 @@ double LiveRig::dropoutWeight(const Track& track) const noexcept {
 }
 
 void LiveRig::refreshPredictions() noexcept {
-  const bool finite = predictor_.predict(deformer_.positions(), prediction_);
+  // A marker measured now that was measured (settled) before needs no prediction: its target is
+  // the measurement. Every other one does (predicted, blending, or dropping out / returning now).
+  for (std::size_t k = 0; k < skip_prediction_.size(); ++k)
+    skip_prediction_[k] = !options_.predict_all_markers && measured_[k] && tracks_[k].state == MarkerTrackState::kMeasured ? 1 : 0;
+  const bool finite = predictor_.predict(deformer_.positions(), prediction_, skip_prediction_);
   for (std::size_t k = 0; k < prediction_.size(); ++k) {
+    if (skip_prediction_[k]) continue;
     rotation_[k] = predictor_.anchorRotation(static_cast<std::int32_t>(k));
     // A non-finite pose (should not happen): such a marker keeps its previous prediction.
     if (!finite && !prediction_[k].allFinite()) prediction_[k] = previous_prediction_[k];

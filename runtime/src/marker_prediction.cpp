@@ -109,11 +109,14 @@ MarkerPredictor::MarkerPredictor(const TetMesh& mesh, std::int32_t body_vertex_c
   rotation_.assign(marker_vertices.size(), Eigen::Quaterniond::Identity());
 }
 
-bool MarkerPredictor::predict(std::span<const double> positions, std::span<Eigen::Vector3d> predictions) noexcept {
+bool MarkerPredictor::predict(std::span<const double> positions, std::span<Eigen::Vector3d> predictions,
+                              std::span<const std::uint8_t> skip) noexcept {
   if (positions.size() != static_cast<std::size_t>(vertex_count_) * 3 || predictions.size() != rest_offset_.size()) return false;
+  if (!skip.empty() && skip.size() != rest_offset_.size()) return false;
   bool all_finite = true;
   const double* x = positions.data();
   for (std::size_t k = 0; k < rest_offset_.size(); ++k) {
+    if (!skip.empty() && skip[k] != 0) continue;
     const auto begin = static_cast<std::size_t>(anchor_start_[k]), end = static_cast<std::size_t>(anchor_start_[k + 1]);
     Eigen::Vector3d c = Eigen::Vector3d::Zero();
     for (std::size_t e = begin; e < end; ++e) {

@@ -1,11 +1,14 @@
 // Run-time pose transfer x_fine = B x_tet over a CSR matrix.
 #include "tetrig/pose_transfer.hpp"
+#include "tetrig/pose_transfer_split.hpp"
 
 #include <gtest/gtest.h>
 
 #include <Eigen/Dense>
 
 #include <atomic>
+#include <cstring>
+#include <memory>
 #include <cstdlib>
 #include <new>
 #include <random>
@@ -156,6 +159,36 @@ TEST(PoseTransfer, ValidateFindsBrokenStructure) {
     bad.row_offsets[3] = bad.row_offsets[4] + 1;
     EXPECT_NE(validatePoseTransfer(bad.view()).find("decrease"), std::string::npos);
   }
+}
+
+
+// The two-core split gives the single-thread result bit for bit, whoever computes which chunk;
+// the worker takes part (its chunks are counted); apply() allocates nothing.
+TEST(PoseTransferSplit, BitIdenticalToOneThreadAndTheWorkerTakesChunks) {
+  const int rows = 3001;  // not a multiple of the chunk size
+  const int cols = 200;
+  const auto [b, x, expected] = randomProduct(rows, cols, 21);
+  std::vector<double> x4(static_cast<size_t>(cols) * 4, 0.0);
+  const PoseTransferCsr<double> bd = makePoseTransferCsr<double>(b);
+  std::vector<float> single(static_cast<size_t>(rows) * 3), split(static_cast<size_t>(rows) * 3);
+  auto worker = std::make_unique<PoseTransferSplit>(bd.view(), 64);
+  EXPECT_EQ(worker->chunkCount(), (rows + 63) / 64);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-2.0, 2.0);
+  const std::uint64_t before = test::allocationCount();
+  int mismatches = 0;
+  // At least 300 calls, and on until the worker took part (it wakes when the scheduler lets it:
+  // on a loaded machine the caller may finish whole calls alone), at most 20000.
+  for (int call = 0; call < 300 || (worker->workerChunks() == 0 && call < 20000); ++call) {
+    for (double& v : x4) v = u(rng);
+    applyPoseTransferPadded(bd.view(), x4.data(), single.data());
+    std::fill(split.begin(), split.end(), -7.0f);
+    worker->apply(x4.data(), split.data());
+    mismatches += std::memcmp(single.data(), split.data(), single.size() * sizeof(float)) != 0;
+  }
+  EXPECT_EQ(test::allocationCount(), before);
+  EXPECT_EQ(mismatches, 0);
+  EXPECT_GT(worker->workerChunks(), 0u) << "the worker thread never computed a chunk";
 }
 
 }  // namespace

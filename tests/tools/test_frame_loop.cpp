@@ -98,7 +98,9 @@ TEST(FrameLoop, EveryPublishedFrameEqualsAnOfflineRunBitForBit) {
   options.lock_memory = false;
   LiveRigOptions live_options;
   live_options.normals = true;
-  Harness h("bitexact", options, live_options);
+  LiveRigOptions split_options = live_options;
+  split_options.split_pose_transfer = true;  // the live side on two threads, the offline side on one
+  Harness h("bitexact", options, split_options);
   h.loop->start();
   const auto source = makeSource(demoRig());
   const std::size_t n = static_cast<std::size_t>(h.live.fineVertexCount()) * 3;

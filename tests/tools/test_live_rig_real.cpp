@@ -222,7 +222,9 @@ TEST(LiveRigReal, Hdm05OccludedMarkersAgainstTheUnoccludedRun) {
   constexpr std::size_t kEnd = 1920;
   constexpr std::size_t kAfter = 120;  // frames after a return over which the errors still count
   constexpr std::size_t kEdge = 24;    // frames after an edge that count as its jump (blend: 18)
-  ClipRun reference(scene), occluded(scene);
+  LiveRigOptions all;
+  all.predict_all_markers = true;  // the measured markers' predictions are collected (printed) below
+  ClipRun reference(scene, all), occluded(scene);
   LiveRigOptions no_blend;
   no_blend.occlusion_blend_s = 0.0;
   ClipRun popping(scene, no_blend);
@@ -411,6 +413,7 @@ TEST(LiveRigReal, Sample20ShortGapsAgainstInterpolatedGaps) {
   EXPECT_GE(gap_runs, 200u);
   LiveRigOptions options;
   options.normals = true;
+  options.predict_all_markers = true;  // the measured markers' predictions are collected (printed) below
   LiveRigOptions no_blend;
   no_blend.occlusion_blend_s = 0.0;
   ClipRun gaps(scene, options), reference(scene), popping(scene, no_blend);

@@ -49,11 +49,13 @@
 #include "tetrig/marker_frame.hpp"
 #include "tetrig/marker_prediction.hpp"
 #include "tetrig/pose_sensor.hpp"
+#include "tetrig/pose_transfer_split.hpp"
 #include "tetrig/rig_file.hpp"
 
 #include <Eigen/Core>
 
 #include <cstdint>
+#include <memory>
 #include <span>
 #include <string>
 #include <vector>
@@ -66,6 +68,11 @@ struct LiveRigOptions {
   int prediction_rings = 3;          // anchor rings of the occlusion prediction (MarkerPredictionOptions::rings)
   double untimed_frame_period_s = 1.0 / 120.0;  // clock advance of a frame with neither timestamp
   bool fade_dropout_offset = true;   // false: keep the dropout offset (in the anchor's frame) for the whole occlusion
+  bool split_pose_transfer = false; // run the pose transfer on this thread and one worker thread made at
+                                     // load (PoseTransferSplit; bit-identical results); for machines with 2+ cores
+  bool predict_all_markers = false;  // false: predict only the markers that need it (not measured, or
+                                     // blending); true: every marker every frame (markerPredictions()
+                                     // then holds a current prediction for measured markers too; tools, tests)
   bool refresh_predictions = true;   // with predicted markers and >= 2 iterations: re-predict after the first
 };
 
@@ -173,6 +180,7 @@ class LiveRig {
   LiveRigOptions options_;
   Deformer deformer_;
   MarkerPredictor predictor_;
+  std::unique_ptr<PoseTransferSplit> split_;  // when options.split_pose_transfer
   std::int64_t blend_ns_ = 0;
   std::int64_t untimed_ns_ = 0;
   double max_abs_coordinate_ = 0.0;
@@ -195,6 +203,7 @@ class LiveRig {
   std::vector<Eigen::Vector3d> measurement_, prediction_, previous_prediction_, marker_target_;
   std::vector<Eigen::Quaterniond> rotation_;  // the anchor rotation R of each prediction
   std::vector<std::uint8_t> measured_;
+  std::vector<std::uint8_t> skip_prediction_;  // per marker: measured and settled, no prediction needed
 
   // Clock (internal, ns) and whether any frame has stepped yet.
   bool have_time_ = false;

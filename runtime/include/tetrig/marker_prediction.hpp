@@ -57,8 +57,11 @@ class MarkerPredictor {
   // vertex positions (#V*3 doubles, mesh order, e.g. Deformer::positions()). Sizes must match
   // (#V*3 and markerCount(); otherwise nothing is written and false is returned). A marker whose
   // anchor has a non-finite position keeps its previous rotation and gets the non-finite
-  // prediction; the return value is false then. Frame path: no allocation, lock, exception, I/O.
-  bool predict(std::span<const double> positions, std::span<Eigen::Vector3d> predictions) noexcept;
+  // prediction; the return value is false then. `skip` (empty, or one flag per marker): markers
+  // flagged 1 are not computed (their prediction and rotation keep their previous values).
+  // Frame path: no allocation, lock, exception, I/O.
+  bool predict(std::span<const double> positions, std::span<Eigen::Vector3d> predictions,
+               std::span<const std::uint8_t> skip = {}) noexcept;
 
   // Every marker's rotation back to the identity (as after construction). No allocation.
   void reset() noexcept;
