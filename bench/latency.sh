@@ -9,16 +9,20 @@
 #   bash bench/latency.sh                 # SMPL + HDM05 (the figure of record)
 #   bash bench/latency.sh --synthetic     # the same rig driven by the synthetic source (10 s)
 #   bash bench/latency.sh --armadillo     # the Stanford Armadillo rig driven by the HDM05 clip
+#   bash bench/latency.sh --cap 48        # the SMPL rig with B capped at 48 entries per row (whole
+#                                         # tets, renormalised; accuracy cost in docs/live.md)
 #   extra arguments after -- go to `tetrig run` (e.g. -- --cpu 1 --fifo)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 data="${TETRIG_DATA_DIR:-../shared/data}"
 mode=smpl
+cap=0
 extra=()
 while [ $# -gt 0 ]; do
   case "$1" in
     --synthetic) mode=synthetic ;;
     --armadillo) mode=armadillo ;;
+    --cap) shift; cap="${1:?--cap needs a number}" ;;
     --) shift; extra=("$@"); break ;;
     *) echo "latency.sh: unknown argument $1 (use --synthetic, --armadillo, or -- ARGS for tetrig run)" >&2; exit 2 ;;
   esac
@@ -30,14 +34,23 @@ for f in "$clip" "$data/meshes/odedstein-meshes/human_man.obj"; do
 done
 if [ ! -x build/release/tetrig ] || [ ! -x build/release/tetrig-shm-cat ] || [ "${LATENCY_REBUILD:-1}" = 1 ]; then
   cmake --preset release >/dev/null
-  cmake --build --preset release --target tetrig tetrig-shm-cat >/dev/null
+  cmake --build --preset release --target tetrig tetrig-shm-cat tetrig_pose_cap_error >/dev/null
 fi
 out=build/release
 case "$mode" in
   smpl|synthetic)
     rig="$out/latency_smpl_hdm05.rig"
+    desc=()
+    if [ "$cap" != 0 ]; then
+      rig="$out/latency_smpl_hdm05_cap$cap.rig"
+      echo "{\"pose_transfer\": {\"max_nonzeros_per_row\": $cap}}" > "$out/latency_cap$cap.json"
+      desc=(--rig "$out/latency_cap$cap.json")
+      full="$out/latency_smpl_hdm05.rig"
+      [ -f "$full" ] || build/release/tetrig build-rig --mesh "$data/meshes/odedstein-meshes/human_man.obj" --markers "$clip" \
+        --tet-vertices 1500 --max-marker-distance 0.15 --out "$full" --quiet
+    fi
     [ -f "$rig" ] || build/release/tetrig build-rig --mesh "$data/meshes/odedstein-meshes/human_man.obj" --markers "$clip" \
-      --tet-vertices 1500 --max-marker-distance 0.15 --out "$rig" --quiet
+      --tet-vertices 1500 --max-marker-distance 0.15 "${desc[@]}" --out "$rig" --quiet
     ;;
   armadillo)
     rig="$out/latency_armadillo_hdm05.rig"
@@ -55,6 +68,10 @@ consumer=$!
 build/release/tetrig run --rig "$rig" --source "$source" --publish "$name" --iterations 3 \
   --stats-json "$out/latency_producer.json" "${frames[@]}" "${extra[@]}"
 wait "$consumer" || { echo "latency.sh: the consumer failed" >&2; exit 1; }
+if [ "$cap" != 0 ]; then
+  echo "accuracy of the capped B against the full one (metres):"
+  build/release/tetrig_pose_cap_error "$full" "$rig" "$clip"
+fi
 python3 - "$out/latency_producer.json" "$out/latency_consumer.json" "$out/latency.json" "$mode" <<'PY'
 import json, sys
 producer, consumer, out, mode = sys.argv[1:5]
