@@ -18,6 +18,8 @@
 
 #include <gtest/gtest.h>
 
+#include "shm_dump.hpp"
+
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -1101,38 +1103,8 @@ struct CatRun {
   return ::testing::AssertionSuccess();
 }
 
-// Parses the --dump file: (instance, frame id, positions) per record.
-struct DumpRecord {
-  std::uint64_t instance = 0, frame_id = 0;
-  std::vector<float> positions;
-};
-std::vector<DumpRecord> parseDump(const std::string& bytes, bool& ok) {
-  std::vector<DumpRecord> out;
-  ok = bytes.size() >= 8 && bytes.compare(0, 8, "TSHMDMP1") == 0;
-  std::size_t at = 8;
-  while (ok && at < bytes.size()) {
-    if (bytes.size() - at < 24) {
-      ok = false;
-      break;
-    }
-    DumpRecord rec;
-    std::uint32_t vc = 0, reserved = 1;
-    std::memcpy(&rec.instance, bytes.data() + at, 8);
-    std::memcpy(&rec.frame_id, bytes.data() + at + 8, 8);
-    std::memcpy(&vc, bytes.data() + at + 16, 4);
-    std::memcpy(&reserved, bytes.data() + at + 20, 4);
-    at += 24;
-    if (reserved != 0 || bytes.size() - at < static_cast<std::size_t>(vc) * 12) {
-      ok = false;
-      break;
-    }
-    rec.positions.resize(static_cast<std::size_t>(vc) * 3);
-    std::memcpy(rec.positions.data(), bytes.data() + at, rec.positions.size() * sizeof(float));
-    at += rec.positions.size() * sizeof(float);
-    out.push_back(std::move(rec));
-  }
-  return out;
-}
+using tetrig::test::DumpRecord;
+using tetrig::test::parseDump;
 
 // The number after "key": in the consumer's JSON (first occurrence), or NaN.
 double jsonNumber(const std::string& json, const std::string& key) {

@@ -43,6 +43,8 @@
 #include "umockdev_devices.hpp"
 
 #include <gtest/gtest.h>
+
+#include "shm_dump.hpp"
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
@@ -258,40 +260,8 @@ class ConsumerProgress {
   std::size_t frames_ = 0;
 };
 
-// tetrig-shm-cat --dump: "TSHMDMP1", then per frame instance u64, frame id u64, vertex count u32,
-// reserved u32, vertex_count x 3 float32 (tools/tetrig_shm_cat.c).
-struct DumpRecord {
-  std::uint64_t instance = 0, frame_id = 0;
-  std::vector<float> positions;
-};
-
-std::vector<DumpRecord> parseDump(const std::string& bytes, bool& ok) {
-  std::vector<DumpRecord> out;
-  ok = bytes.size() >= 8 && bytes.compare(0, 8, "TSHMDMP1") == 0;
-  std::size_t at = 8;
-  while (ok && at < bytes.size()) {
-    if (bytes.size() - at < 24) {
-      ok = false;
-      break;
-    }
-    DumpRecord rec;
-    std::uint32_t vertices = 0, reserved = 1;
-    std::memcpy(&rec.instance, bytes.data() + at, 8);
-    std::memcpy(&rec.frame_id, bytes.data() + at + 8, 8);
-    std::memcpy(&vertices, bytes.data() + at + 16, 4);
-    std::memcpy(&reserved, bytes.data() + at + 20, 4);
-    at += 24;
-    if (reserved != 0 || bytes.size() - at < static_cast<std::size_t>(vertices) * 12) {
-      ok = false;
-      break;
-    }
-    rec.positions.resize(static_cast<std::size_t>(vertices) * 3);
-    std::memcpy(rec.positions.data(), bytes.data() + at, rec.positions.size() * sizeof(float));
-    at += rec.positions.size() * sizeof(float);
-    out.push_back(std::move(rec));
-  }
-  return out;
-}
+using tetrig::test::DumpRecord;
+using tetrig::test::parseDump;
 
 // The 64-byte HID input reports carrying one encoded message (frame or descriptor).
 std::vector<std::vector<std::uint8_t>> messageReports(std::span<const std::uint8_t> message) {
