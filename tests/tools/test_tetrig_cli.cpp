@@ -5,6 +5,13 @@
 #include <gtest/gtest.h>
 
 #include <sys/wait.h>
+#include <unistd.h>
+
+#include <nlohmann/json.hpp>
+
+#include <chrono>
+#include <csignal>
+#include <thread>
 
 #include <cstdio>
 #include <fstream>
@@ -108,6 +115,77 @@ TEST(TetrigCli, BuildThenInspect) {
   EXPECT_CONTAINS(i.out, "tet mesh:      41 vertices (36 body + 5 marker)");
   EXPECT_CONTAINS(i.out, "region handle 'floor'");
   EXPECT_CONTAINS(i.out, "TOP");
+}
+
+// tetrig run: a clip through the live path, with --stats-json; and the bad inputs it refuses in
+// one line with a non-zero exit: a rig that does not load, a source that cannot open, a source
+// sharing no label with the rig, a segment name in use by a live producer.
+TEST(TetrigCli, RunPlaysAClipAndRefusesBadInput) {
+  const TempDir dir;
+  const std::filesystem::path node = test::writeBlockTetMesh(dir, "block");
+  const std::filesystem::path clip = test::writeSmallClip(dir);
+  const std::filesystem::path json = dir.write("small.json", test::smallRigJson());
+  const std::string rig = (dir.path() / "small.rig").string();
+  ASSERT_EQ(run("build-rig --mesh '" + node.string() + "' --rig '" + json.string() + "' --markers '" + clip.string() + "' --out '" +
+                    rig + "' --quiet",
+                dir)
+                .status,
+            0);
+  const std::string name = "tetrig-cli-" + std::to_string(getpid());
+  const std::string stats = (dir.path() / "stats.json").string();
+  const CliRun ok = run("run --rig '" + rig + "' --source 'c3d:" + clip.string() + "' --publish " + name + " --stats-json '" + stats + "'", dir);
+  ASSERT_EQ(ok.status, 0) << ok.err;
+  EXPECT_CONTAINS(ok.out, "5 bound by label");
+  const nlohmann::json j = nlohmann::json::parse(std::ifstream(stats));
+  EXPECT_GE(j["frames"].get<int>(), 1);
+  EXPECT_LE(j["frames"].get<int>(), 2);
+  EXPECT_EQ(j["frames"].get<int>() + j["dropped_frames"].get<int>(), 2) << "the clip has 2 frames";
+  for (const char* key : {"budget_misses", "dropped_frames", "occluded_marker_frames", "unknown_marker_frames"}) EXPECT_TRUE(j.contains(key)) << key;
+  for (const char* phase : {"receive_to_taken", "step", "pose_transfer", "receive_to_published", "overhead"}) {
+    const auto& p = j["latency_us"][phase];
+    EXPECT_LE(p["p50"].get<double>(), p["p99"].get<double>()) << phase;
+    EXPECT_LE(p["p99"].get<double>(), p["max"].get<double>()) << phase;
+  }
+  EXPECT_FALSE(std::filesystem::exists("/dev/shm/" + name)) << "a clean end unlinks the segment";
+
+  auto one_line_error = [](const CliRun& r, const char* needle) {
+    EXPECT_NE(r.status, 0) << r.out;
+    EXPECT_EQ(r.err.rfind("tetrig run: error: ", 0), 0u) << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+    EXPECT_CONTAINS(r.err, needle);
+  };
+  one_line_error(run("run --rig /nonexistent/x.rig --source synthetic", dir), "/nonexistent/x.rig");
+  one_line_error(run("run --rig '" + rig + "' --source 'c3d:/nonexistent/clip.c3d'", dir), "/nonexistent/clip.c3d");
+  one_line_error(run("run --rig '" + rig + "' --source 'tcp:1234'", dir), "tcp");
+  // A clip of another marker set: no label in common.
+  test::TestC3DSpec other;
+  other.floating = true;
+  other.rate = 100.0f;
+  other.frames = 2;
+  other.labels = {"LFHD", "RFHD", "C7", "T10", "STRN"};
+  for (std::size_t f = 0; f < other.frames; ++f)
+    for (const auto& p : test::smallMarkerPositionsMm()) {
+      other.xyz.push_back(p);
+      other.valid.push_back(true);
+    }
+  const std::filesystem::path other_clip = dir.writeBytes("other.c3d", test::writeTestC3D(other));
+  one_line_error(run("run --rig '" + rig + "' --source 'c3d:" + other_clip.string() + "'", dir), "share no label");
+  // A segment name in use by a live producer (a synthetic run in the background) is refused.
+  const std::string busy = "tetrig-cli-busy-" + std::to_string(getpid());
+  const std::string pid_file = (dir.path() / "producer.pid").string();
+  ASSERT_EQ(std::system(("'" + std::string(TETRIG_EXE) + "' run --rig '" + rig + "' --source synthetic --publish " + busy +
+                         " -q >/dev/null 2>&1 & echo $! > '" + pid_file + "'")
+                            .c_str()),
+            0);
+  for (int i = 0; i < 500 && !std::filesystem::exists("/dev/shm/" + busy); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  ASSERT_TRUE(std::filesystem::exists("/dev/shm/" + busy));
+  one_line_error(run("run --rig '" + rig + "' --source synthetic --publish " + busy, dir), "pid");
+  pid_t producer = 0;
+  std::ifstream(pid_file) >> producer;
+  ASSERT_GT(producer, 0);
+  kill(producer, SIGINT);  // ends cleanly: summary, segment unlinked
+  for (int i = 0; i < 500 && std::filesystem::exists("/dev/shm/" + busy); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  EXPECT_FALSE(std::filesystem::exists("/dev/shm/" + busy)) << "SIGINT ends the producer cleanly";
 }
 
 }  // namespace

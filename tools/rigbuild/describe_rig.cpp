@@ -8,6 +8,14 @@
 
 namespace tetrig::rigbuild {
 
+namespace {
+std::string hex2(unsigned value) {
+  char text[8];
+  std::snprintf(text, sizeof text, "%02x", value & 0xFFu);
+  return text;
+}
+}  // namespace
+
 std::string describeRig(const Rig& rig, std::int64_t file_bytes, bool list_markers) {
   std::ostringstream o;
   char buf[256];
@@ -53,6 +61,12 @@ std::string describeRig(const Rig& rig, std::int64_t file_bytes, bool list_marke
   }
   for (std::size_t p = 0; p < s.point_handles.size(); ++p) {
     line("  point handle '%s': tet %d", rig.point_handle_names[p].c_str(), s.point_handles[p].tet);
+  }
+  for (const RigPoseSensor& sensor : rig.pose_sensors) {
+    line("  pose sensor '%s' drives region '%s': %s%s, translation scale %g", sensor.sensor_label.c_str(),
+         rig.region_handle_names[static_cast<std::size_t>(sensor.region_handle)].c_str(),
+         sensor.mode == PoseSensorMode::kClutch ? "clutch on buttons 0x" : "absolute",
+         sensor.mode == PoseSensorMode::kClutch ? hex2(sensor.clutch_buttons).c_str() : "", sensor.translation_scale);
   }
   line("rigid groups:  %zu", s.rigid_groups.size());
   for (std::size_t g = 0; g < s.rigid_groups.size(); ++g) {
