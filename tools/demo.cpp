@@ -70,13 +70,15 @@ int runDemo(const DemoOptions& options) {
     run.source = "synthetic";
     run.frames = options.frames != 0 ? options.frames : 600;
   } else {
-    const std::filesystem::path cached = cacheDir() / (cacheKey(options.mesh, options.c3d) + ".rig");
+    const std::filesystem::path cached =
+        cacheDir() / (cacheKey(options.mesh, options.c3d) + "-" + std::to_string(options.max_marker_distance) + ".rig");
     if (std::filesystem::exists(cached)) {
       if (!options.quiet) std::printf("tetrig demo: reusing the rig %s\n", cached.string().c_str());
     } else {
       rigbuild::BuildRigInputs in;
       in.mesh = options.mesh;
       in.clip = options.c3d;
+      if (options.max_marker_distance > 0) in.max_marker_distance = options.max_marker_distance;
       rigbuild::Progress progress("tetrig demo", options.quiet ? rigbuild::Progress::Mode::kQuiet : rigbuild::Progress::Mode::kAuto);
       const Rig rig = rigbuild::buildRig(in, nullptr, &progress);
       std::filesystem::create_directories(cached.parent_path());

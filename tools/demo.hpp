@@ -16,6 +16,7 @@ struct DemoOptions {
   double frame_budget_ms = 0;       // receive -> published deadline; 0: from the source rate
   std::string out_obj;              // write the final deformed surface here (optional)
   std::string mesh, c3d;            // real data: build (or reuse) a rig from these and play the clip
+  double max_marker_distance = 0;   // real data: the rig builder's limit (0: its default)
   std::string publish;              // segment name (default: tetrig-demo-<pid>)
   bool quiet = false;
 };

@@ -109,6 +109,9 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1, 100000000));
   demo_cmd->add_option("--mesh", demo.mesh, "Real data: a surface mesh (with --c3d); the rig is built once and cached");
   demo_cmd->add_option("--c3d", demo.c3d, "Real data: the C3D clip that drives the mesh (with --mesh)");
+  demo_cmd->add_option("--max-marker-distance", demo.max_marker_distance,
+                       "Real data: stop when a marker is further than this from the surface after alignment, rig units (default 0.1)")
+      ->check(CLI::Range(1e-6, 1e6));
   demo_cmd->add_option("--publish", demo.publish, "Shared-memory segment name (default: tetrig-demo-<pid>)");
   demo_cmd->add_option("--iterations", demo.iterations, "Iterations per frame (also bounded by the budget)")
       ->capture_default_str()
