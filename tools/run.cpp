@@ -265,10 +265,11 @@ int runLive(const RunOptions& options) {
         {"receive -> published", &l.receive_to_published}, {"overhead", &l.overhead}};
     for (const auto& [name, h] : rows)
       std::printf("  %-20s %8.1f %8.1f %8.1f\n", name, us(h->percentileNs(0.5)), us(h->percentileNs(0.99)), us(h->maxNs()));
-    std::printf("  budget misses %llu, deadline hits %llu, frames dropped in the mailbox %llu, held poses %llu, stale periods %llu\n",
+    std::printf("  budget misses %llu, deadline hits %llu, frames dropped in the mailbox %llu, held poses %llu, stale periods %llu, "
+                "frames received before the solver started %llu (not in the latencies)\n",
                 static_cast<unsigned long long>(c.budget_misses), static_cast<unsigned long long>(c.deadline_hits),
                 static_cast<unsigned long long>(c.mailbox_dropped), static_cast<unsigned long long>(c.held_frames),
-                static_cast<unsigned long long>(c.stale_periods));
+                static_cast<unsigned long long>(c.stale_periods), static_cast<unsigned long long>(c.frames_before_start));
     std::printf("  occluded marker-frames %llu, unknown marker-frames %llu; source: %llu frames, %llu lost, %llu decode errors\n",
                 static_cast<unsigned long long>(c.occluded_marker_frames), static_cast<unsigned long long>(c.unknown_marker_frames),
                 static_cast<unsigned long long>(source_stats.frames_published), static_cast<unsigned long long>(source_stats.frames_lost),
@@ -301,6 +302,7 @@ int runLive(const RunOptions& options) {
     j["unknown_marker_frames"] = c.unknown_marker_frames;
     j["held_frames"] = c.held_frames;
     j["stale_periods"] = c.stale_periods;
+    j["frames_before_start"] = c.frames_before_start;
     j["deadline_hits"] = c.deadline_hits;
     j["iterations_per_frame"] = c.frames ? static_cast<double>(c.iterations) / static_cast<double>(c.frames) : 0.0;
     j["seconds"] = seconds;

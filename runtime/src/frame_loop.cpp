@@ -61,6 +61,7 @@ FrameLoop::~FrameLoop() {
 void FrameLoop::start() {
   if (started_.exchange(true)) return;
   mailbox_dropped_at_start_ = mailbox_.dropped();
+  start_ns_ = monotonicNowNs();
   thread_ = std::thread([this] { run(); });
 }
 
@@ -180,35 +181,41 @@ void FrameLoop::run() noexcept {
     publisher_.commit(info);
     const std::int64_t published_ns = monotonicNowNs();
 
-    // Counters and histograms (solver thread only; no allocation).
-    const std::int64_t total = published_ns - receive_ns;
-    const std::int64_t step_ns = stats.flags & kLivePoseHeld ? 0 : stats.step.total_ns;
-    latency_.receive_to_taken.record(taken_ns - receive_ns);
-    latency_.step.record(step_ns);
-    latency_.pose_transfer.record(stats.pose_transfer_ns);
-    latency_.receive_to_step_done.record(step_done_ns - receive_ns);
-    latency_.receive_to_pose_done.record(pose_done_ns - receive_ns);
-    latency_.receive_to_published.record(total);
-    latency_.overhead.record(total - step_ns - stats.pose_transfer_ns);
+    // Counters (solver thread only; no allocation).
     pose_estimate_ns = pose_estimate_ns == 0 ? stats.pose_transfer_ns
                                              : std::max(stats.pose_transfer_ns, (7 * pose_estimate_ns + stats.pose_transfer_ns) / 8);
-    if (frame_deadline != 0 && published_ns > frame_deadline) budget_misses_.fetch_add(1, std::memory_order_relaxed);
     if (stats.flags & kLiveDeadlineHit) deadline_hits_.fetch_add(1, std::memory_order_relaxed);
     if (stats.flags & kLivePoseHeld) held_frames_.fetch_add(1, std::memory_order_relaxed);
     occluded_marker_frames_.fetch_add(stats.occluded_markers, std::memory_order_relaxed);
     unknown_marker_frames_.fetch_add(stats.unknown_markers, std::memory_order_relaxed);
     iterations_.fetch_add(static_cast<std::uint64_t>(std::max(0, stats.step.iterations)), std::memory_order_relaxed);
-    last_latency_ns_.store(total, std::memory_order_relaxed);
-    recent[static_cast<std::size_t>(recent_count % kRecentWindow)] = total;
-    ++recent_count;
-    if (recent_count % 16 == 0) {
-      const int n = std::min(recent_count, kRecentWindow);
-      std::copy_n(recent.begin(), n, sorted.begin());
-      std::sort(sorted.begin(), sorted.begin() + n);
-      recent_p50_ns_.store(sorted[static_cast<std::size_t>((n - 1) / 2)], std::memory_order_relaxed);
-      recent_p99_ns_.store(sorted[static_cast<std::size_t>(((n - 1) * 99) / 100)], std::memory_order_relaxed);
-    }
     const std::uint64_t done = frames_.fetch_add(1, std::memory_order_relaxed) + 1;
+    // Latencies and budget misses. A frame received before start() waited for the set-up (rig,
+    // binding, segment), not for the live path: it is counted apart.
+    if (receive_ns < start_ns_) {
+      frames_before_start_.fetch_add(1, std::memory_order_relaxed);
+    } else {
+      const std::int64_t total = published_ns - receive_ns;
+      const std::int64_t step_ns = stats.flags & kLivePoseHeld ? 0 : stats.step.total_ns;
+      latency_.receive_to_taken.record(taken_ns - receive_ns);
+      latency_.step.record(step_ns);
+      latency_.pose_transfer.record(stats.pose_transfer_ns);
+      latency_.receive_to_step_done.record(step_done_ns - receive_ns);
+      latency_.receive_to_pose_done.record(pose_done_ns - receive_ns);
+      latency_.receive_to_published.record(total);
+      latency_.overhead.record(total - step_ns - stats.pose_transfer_ns);
+      if (frame_deadline != 0 && published_ns > frame_deadline) budget_misses_.fetch_add(1, std::memory_order_relaxed);
+      last_latency_ns_.store(total, std::memory_order_relaxed);
+      recent[static_cast<std::size_t>(recent_count % kRecentWindow)] = total;
+      ++recent_count;
+      if (recent_count % 16 == 0) {
+        const int n = std::min(recent_count, kRecentWindow);
+        std::copy_n(recent.begin(), n, sorted.begin());
+        std::sort(sorted.begin(), sorted.begin() + n);
+        recent_p50_ns_.store(sorted[static_cast<std::size_t>((n - 1) / 2)], std::memory_order_relaxed);
+        recent_p99_ns_.store(sorted[static_cast<std::size_t>(((n - 1) * 99) / 100)], std::memory_order_relaxed);
+      }
+    }
     if (options_.max_frames != 0 && done >= options_.max_frames) break;
   }
   done_.store(true, std::memory_order_release);
@@ -225,6 +232,7 @@ FrameLoopCounters FrameLoop::counters() const noexcept {
   c.stale_periods = stale_periods_.load(std::memory_order_relaxed);
   c.iterations = iterations_.load(std::memory_order_relaxed);
   c.mailbox_dropped = mailbox_.dropped() - mailbox_dropped_at_start_;
+  c.frames_before_start = frames_before_start_.load(std::memory_order_relaxed);
   return c;
 }
 

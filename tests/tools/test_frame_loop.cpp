@@ -198,6 +198,31 @@ TEST(FrameLoop, StopsAfterMaxFramesAndCountsBudgetMisses) {
   EXPECT_EQ(h.loop->counters().deadline_hits, 5u);
 }
 
+TEST(FrameLoop, AFrameReceivedBeforeStartIsPublishedButKeptOutOfTheLatencies) {
+  FrameLoopOptions options;
+  options.lock_memory = false;
+  Harness h("prestart", options);
+  const auto source = makeSource(demoRig(), 0.0f);
+  auto frame = std::make_unique<MarkerFrame>();
+  source->fillFrame(0, *frame);
+  frame->receive_timestamp_ns = monotonicNowNs();
+  h.mailbox->publish(*frame);  // waits in the mailbox while the solver does not exist yet
+  std::this_thread::sleep_for(std::chrono::milliseconds(30));
+  h.loop->start();
+  const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+  while (tetrig_shm_latest_frame_id(&h.reader) < 1 && std::chrono::steady_clock::now() < end) std::this_thread::yield();
+  ASSERT_EQ(tetrig_shm_latest_frame_id(&h.reader), 1u) << "the early frame is solved and published";
+  source->fillFrame(1, *frame);
+  ASSERT_TRUE(h.publishAndWait(*frame));
+  h.loop->requestStop();
+  h.loop->join();
+  const FrameLoopCounters c = h.loop->counters();
+  EXPECT_EQ(c.frames, 2u);
+  EXPECT_EQ(c.frames_before_start, 1u);
+  EXPECT_EQ(h.loop->latency().receive_to_published.count(), 1u) << "only the frame received after start()";
+  EXPECT_LT(h.loop->latency().receive_to_published.maxNs(), 30'000'000) << "the early frame's 30 ms wait is not in it";
+}
+
 TEST(FrameLoop, NoHeapAllocationPerFrameAfterWarmUp) {
   FrameLoopOptions options;
   options.lock_memory = false;

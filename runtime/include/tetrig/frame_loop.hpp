@@ -68,6 +68,9 @@ struct FrameLoopCounters {
   std::uint64_t stale_periods = 0;          // times the source went stale
   std::uint64_t iterations = 0;             // sum of iterations run
   std::uint64_t mailbox_dropped = 0;        // frames overwritten in the mailbox before the solver took them
+  std::uint64_t frames_before_start = 0;    // frames received before start() (while the rig and segment were set
+                                            // up): solved and published, but kept out of the latency histograms
+                                            // and budget misses (their wait is start-up, not the live path)
 };
 
 // What the status line shows (any thread; relaxed, not one consistent snapshot).
@@ -114,9 +117,10 @@ class FrameLoop {
   std::string hygiene_;  // written by the solver thread before hygiene_ready_
   // Live counters (solver thread writes, others read relaxed).
   std::atomic<std::uint64_t> frames_{0}, budget_misses_{0}, deadline_hits_{0}, held_frames_{0},
-      occluded_marker_frames_{0}, unknown_marker_frames_{0}, stale_periods_{0}, iterations_{0};
+      occluded_marker_frames_{0}, unknown_marker_frames_{0}, stale_periods_{0}, iterations_{0}, frames_before_start_{0};
   std::atomic<std::int64_t> last_latency_ns_{0}, recent_p50_ns_{0}, recent_p99_ns_{0};
   std::uint64_t mailbox_dropped_at_start_ = 0;
+  std::int64_t start_ns_ = 0;  // monotonic time of start()
 };
 
 }  // namespace tetrig
