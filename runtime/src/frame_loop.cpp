@@ -10,6 +10,7 @@
 #include <cerrno>
 #include <chrono>
 #include <cstring>
+#include <thread>
 
 #if defined(__linux__)
 #include <pthread.h>
@@ -61,8 +62,10 @@ FrameLoop::~FrameLoop() {
 void FrameLoop::start() {
   if (started_.exchange(true)) return;
   mailbox_dropped_at_start_ = mailbox_.dropped();
-  start_ns_ = monotonicNowNs();
   thread_ = std::thread([this] { run(); });
+  // Return once the solver waits for frames (its real-time set-up, mlockall above all, takes
+  // milliseconds: frames received meanwhile are counted as received before the start).
+  while (!hygiene_ready_.load(std::memory_order_acquire) && !done_.load(std::memory_order_acquire)) std::this_thread::yield();
 }
 
 void FrameLoop::requestStop() noexcept {
@@ -108,6 +111,7 @@ void FrameLoop::applyHygiene() {
     add("memory locking, pinning and SCHED_FIFO are Linux-only here: not applied");
 #endif
   hygiene_ = report.empty() ? "none requested" : report;
+  start_ns_ = monotonicNowNs();
   hygiene_ready_.store(true, std::memory_order_release);
 }
 
@@ -120,6 +124,8 @@ void FrameLoop::run() noexcept {
     applyHygiene();
   } catch (...) {
     // Only the report string can throw (allocation); the loop runs without it.
+    start_ns_ = monotonicNowNs();
+    hygiene_ready_.store(true, std::memory_order_release);
   }
   std::array<std::int64_t, kRecentWindow> recent{};
   std::array<std::int64_t, kRecentWindow> sorted{};

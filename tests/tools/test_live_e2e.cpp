@@ -642,7 +642,8 @@ TEST(LiveEndToEnd, StepsCutByTheDeadlineMatchTheOfflineRunWithThePublishedIterat
     ASSERT_NE(l.flags & 0x4u, 0u) << "budget miss not flagged at frame " << l.frame_id;
   }
   EXPECT_EQ(o.stats.at("deadline_hits").get<std::uint64_t>(), kFrames);
-  EXPECT_EQ(o.stats.at("budget_misses").get<std::uint64_t>(), kFrames);
+  // Frames received before the solver was ready are kept out of the budget misses (docs/live.md).
+  EXPECT_EQ(o.stats.at("budget_misses").get<std::uint64_t>() + o.stats.at("frames_before_start").get<std::uint64_t>(), kFrames);
   OfflineResult r;
   compareWithOfflineRun(*s, o, r);
   EXPECT_EQ(r.mismatched, 0u) << "published frames differing from the offline run: first frame " << r.first_mismatch

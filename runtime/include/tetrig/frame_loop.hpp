@@ -68,7 +68,7 @@ struct FrameLoopCounters {
   std::uint64_t stale_periods = 0;          // times the source went stale
   std::uint64_t iterations = 0;             // sum of iterations run
   std::uint64_t mailbox_dropped = 0;        // frames overwritten in the mailbox before the solver took them
-  std::uint64_t frames_before_start = 0;    // frames received before start() (while the rig and segment were set
+  std::uint64_t frames_before_start = 0;    // frames received before the solver was ready (rig, segment, mlockall
                                             // up): solved and published, but kept out of the latency histograms
                                             // and budget misses (their wait is start-up, not the live path)
 };
@@ -89,7 +89,7 @@ class FrameLoop {
   FrameLoop(const FrameLoop&) = delete;
   FrameLoop& operator=(const FrameLoop&) = delete;
 
-  void start();           // spawns the solver thread; allocates
+  void start();           // spawns the solver thread and returns when it is ready for frames; allocates
   void requestStop() noexcept;
   void join();
   [[nodiscard]] bool finished() const noexcept { return done_.load(std::memory_order_acquire); }
@@ -120,7 +120,7 @@ class FrameLoop {
       occluded_marker_frames_{0}, unknown_marker_frames_{0}, stale_periods_{0}, iterations_{0}, frames_before_start_{0};
   std::atomic<std::int64_t> last_latency_ns_{0}, recent_p50_ns_{0}, recent_p99_ns_{0};
   std::uint64_t mailbox_dropped_at_start_ = 0;
-  std::int64_t start_ns_ = 0;  // monotonic time of start()
+  std::int64_t start_ns_ = 0;  // when the solver thread was ready (written before hygiene_ready_)
 };
 
 }  // namespace tetrig
