@@ -238,7 +238,8 @@ int runLive(const RunOptions& options) {
                    static_cast<unsigned long long>(s.counters.occluded_marker_frames),
                    static_cast<unsigned long long>(s.counters.unknown_marker_frames),
                    static_cast<unsigned long long>(s.counters.mailbox_dropped),
-                   static_cast<unsigned long long>(s.counters.budget_misses), s.stale ? " | STALE" : "");
+                   static_cast<unsigned long long>(s.counters.budget_misses),
+                   !source->finished() && !source->stats().connected ? " | DEVICE NOT CONNECTED" : s.stale ? " | STALE" : "");
       last_status = now;
       status_frames = s.counters.frames;
     }
