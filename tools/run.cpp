@@ -124,9 +124,14 @@ int runLive(const RunOptions& options) {
   }
   std::unique_ptr<drivers::MarkerSource> source = devices::openMarkerSource(options.source, open);
   auto mailbox = std::make_unique<FrameMailbox>();
-  if (!source->start(*mailbox)) throw std::runtime_error("source " + options.source + " did not start: " + source->lastError());
+  // Sources that know their labels before they start (playback, synthetic, the Hydra) start only
+  // once the solver waits, so that no frame waits for the set-up; a device names its markers
+  // after it opens, so it starts first.
   std::vector<std::string> labels;
-  if (!source->waitForLabels(std::chrono::milliseconds(static_cast<std::int64_t>(options.label_timeout_ms)), labels)) {
+  const bool start_late = source->waitForLabels(std::chrono::milliseconds(0), labels);
+  if (!start_late && !source->start(*mailbox))
+    throw std::runtime_error("source " + options.source + " did not start: " + source->lastError());
+  if (!start_late && !source->waitForLabels(std::chrono::milliseconds(static_cast<std::int64_t>(options.label_timeout_ms)), labels)) {
     source->stop();
     throw std::runtime_error("source " + options.source + " named no markers within " +
                              std::to_string(static_cast<int>(options.label_timeout_ms)) +
@@ -194,6 +199,11 @@ int runLive(const RunOptions& options) {
   SignalScope signals;
   FrameLoop loop(*mailbox, live, *publisher, loop_options);
   loop.start();
+  if (start_late && !source->start(*mailbox)) {
+    loop.requestStop();
+    loop.join();
+    throw std::runtime_error("source " + options.source + " did not start: " + source->lastError());
+  }
   if (!options.quiet)
     std::printf("  publishing to shared memory '%s' (%s); budget %.2f ms, %d iterations per frame, pose transfer on %d thread%s\n",
                 options.publish.c_str(), options.normals ? "positions and normals" : "positions", budget_ms, options.iterations,
