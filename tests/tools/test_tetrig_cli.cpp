@@ -1,6 +1,7 @@
 // The `tetrig` command as scripts use it: --help for every subcommand, the flags scripts rely on,
 // one-line errors with a non-zero exit and no partial output file, build-rig then inspect.
 #include "small_rig.hpp"
+#include "test_data.hpp"
 
 #include <gtest/gtest.h>
 
@@ -186,6 +187,51 @@ TEST(TetrigCli, RunPlaysAClipAndRefusesBadInput) {
   kill(producer, SIGINT);  // ends cleanly: summary, segment unlinked
   for (int i = 0; i < 500 && std::filesystem::exists("/dev/shm/" + busy); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
   EXPECT_FALSE(std::filesystem::exists("/dev/shm/" + busy)) << "SIGINT ends the producer cleanly";
+}
+
+// tetrig demo, the README's run command: the whole live path on the project's own data, with a
+// consumer process; and on real data, building the rig once and reusing it from the cache.
+TEST(TetrigCli, DemoRunsTheLivePathOnDefaultAndOnRealData) {
+  const TempDir dir;
+  const std::string obj = (dir.path() / "pose.obj").string();
+  const CliRun d = run("demo --frames 60 --out '" + obj + "'", dir);
+  ASSERT_EQ(d.status, 0) << d.err;
+  EXPECT_CONTAINS(d.out, "16 bound by label");
+  EXPECT_CONTAINS(d.out, "60 frames solved");
+  EXPECT_CONTAINS(d.out + d.err, "60 frames seen, 0 missed") << "the consumer process read every frame";
+  EXPECT_CONTAINS(d.out, "receive -> published");
+  ASSERT_TRUE(std::filesystem::exists(obj));
+  std::ifstream in(obj);
+  std::string line;
+  int vertices = 0, faces = 0;
+  while (std::getline(in, line)) {
+    vertices += line.rfind("v ", 0) == 0;
+    faces += line.rfind("f ", 0) == 0;
+  }
+  EXPECT_EQ(vertices, 562) << "the bar's boundary vertices";
+  EXPECT_EQ(faces, 1120);
+
+  TETRIG_REQUIRE_DATA(man, "meshes/odedstein-meshes/human_man.obj");
+  TETRIG_REQUIRE_DATA(clip, "mocap/hdm05/HDM_mm_01-02_03_120.c3d");
+  const std::string real = "XDG_CACHE_HOME='" + (dir.path() / "cache").string() + "' '" + std::string(TETRIG_EXE) + "' demo --mesh '" +
+                           man.string() + "' --c3d '" + clip.string() + "' --frames 30 --max-marker-distance 0.15";
+  const std::string out = (dir.path() / "real.txt").string();
+  auto run_real = [&]() {
+    const int raw = std::system((real + " >'" + out + "' 2>&1").c_str());
+    std::ifstream f(out);
+    std::stringstream text;
+    text << f.rdbuf();
+    return std::make_pair(WIFEXITED(raw) ? WEXITSTATUS(raw) : -1, text.str());
+  };
+  const auto first = run_real();
+  ASSERT_EQ(first.first, 0) << first.second;
+  EXPECT_CONTAINS(first.second, "rig cached in");
+  EXPECT_CONTAINS(first.second, "41 bound by label");
+  EXPECT_CONTAINS(first.second, "30 frames solved");
+  const auto second = run_real();
+  ASSERT_EQ(second.first, 0) << second.second;
+  EXPECT_CONTAINS(second.second, "reusing the rig");
+  EXPECT_CONTAINS(second.second, "30 frames solved");
 }
 
 }  // namespace
