@@ -112,15 +112,10 @@ int runLive(const RunOptions& options) {
   open.speed = options.speed;
   open.loop = options.loop;
   open.rate_hz = options.rate_hz;
-  std::vector<std::array<float, 3>> rest_mm;
   if (options.source.rfind("synthetic", 0) == 0) {
     // The synthetic source sways the rig's own markers about their rest positions (device mm).
-    const Eigen::Matrix3d inverse = rig.alignment.linear.inverse();
-    for (const RigMarker& m : rig.markers) {
-      const Eigen::Vector3d mm = inverse * (m.rest_position - rig.alignment.translation);
-      open.synthetic_rest_mm.push_back({static_cast<float>(mm.x()), static_cast<float>(mm.y()), static_cast<float>(mm.z())});
-      open.synthetic_labels.push_back(m.label);
-    }
+    open.synthetic_rest_mm = markerRestPositionsMm(rig);
+    for (const RigMarker& m : rig.markers) open.synthetic_labels.push_back(m.label);
   }
   std::unique_ptr<drivers::MarkerSource> source = devices::openMarkerSource(options.source, open);
   auto mailbox = std::make_unique<FrameMailbox>();

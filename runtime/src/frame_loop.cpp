@@ -133,7 +133,6 @@ void FrameLoop::run() noexcept {
   std::int64_t pose_estimate_ns = 0;  // recent pose-transfer cost, reserved out of the step's deadline
   std::int64_t last_frame_ns = monotonicNowNs();
   std::int64_t last_heartbeat_ns = last_frame_ns;
-  const bool normals = publisher_.beginNormals() != nullptr;
 
   while (!stop_.load(std::memory_order_acquire)) {
     const MarkerFrame* frame = mailbox_.tryAcquireLatest();
@@ -164,9 +163,7 @@ void FrameLoop::run() noexcept {
     const std::int64_t frame_deadline = options_.budget_ns > 0 ? receive_ns + options_.budget_ns : 0;
     if (frame_deadline != 0) budget.deadline = steadyAt(frame_deadline - pose_estimate_ns);
 
-    float* positions = publisher_.beginPositions();
-    float* slot_normals = normals ? publisher_.beginNormals() : nullptr;
-    const LiveFrameStats stats = live_.processFrame(*frame, budget, positions, slot_normals);
+    const LiveFrameStats stats = live_.processFrame(*frame, budget, publisher_.beginPositions(), publisher_.beginNormals());
     const std::int64_t pose_done_ns = monotonicNowNs();
     const std::int64_t step_done_ns = pose_done_ns - stats.pose_transfer_ns;
 

@@ -194,6 +194,17 @@ std::uint32_t rigCrc32c(std::span<const std::uint8_t> data, std::uint32_t previo
   return c ^ 0xFFFFFFFFu;
 }
 
+std::vector<std::array<float, 3>> markerRestPositionsMm(const Rig& rig) {
+  const Eigen::Matrix3d inverse = rig.alignment.linear.inverse();
+  std::vector<std::array<float, 3>> out;
+  out.reserve(rig.markers.size());
+  for (const RigMarker& m : rig.markers) {
+    const Eigen::Vector3d mm = inverse * (m.rest_position - rig.alignment.translation);
+    out.push_back({static_cast<float>(mm.x()), static_cast<float>(mm.y()), static_cast<float>(mm.z())});
+  }
+  return out;
+}
+
 std::string validateRig(const Rig& rig) {
   const std::int32_t nv = rig.tet_mesh.vertexCount();
   const std::int32_t nt = rig.tet_mesh.tetCount();

@@ -273,7 +273,38 @@ std::vector<std::vector<std::uint8_t>> fragments(const MarkerFrame& frame) {
 
 class HidSourceTest : public HidTransportTest {
  protected:
+  void TearDown() override {
+    hydra_control_.reset();  // the shared-usb interface goes first
+    HidTransportTest::TearDown();
+  }
+  // A Razer Hydra plugged in: motion reports on interface 0 (hidraw0, the fixture's device) and the
+  // mode-switch feature report on interface 1 (hidraw10) of the same USB device.
+  struct Hydra {
+    tetrig::testing::MockHidDevice& motion;
+    tetrig::testing::MockHidDevice& control;
+  };
+  Hydra plugHydra(const std::string& serial) {
+    tetrig::testing::MockHidSpec motion;
+    motion.vendor_id = drv::kHydraVendorId;
+    motion.product_id = drv::kHydraProductId;
+    motion.manufacturer = "Razer";
+    motion.product = "Razer Hydra";
+    motion.serial = serial;
+    motion.input_report_size = drv::kHydraReportSize;
+    motion.hidraw_index = 0;
+    motion.interface_number = 0;
+    tetrig::testing::MockHidSpec control = motion;
+    control.hidraw_index = 10;
+    control.interface_number = 1;
+    control.shares_usb_device = true;
+    auto& dev0 = makeDevice(motion);
+    dev0.plug();
+    hydra_control_ = std::make_unique<tetrig::testing::MockHidDevice>(*testbed_, control);
+    hydra_control_->plug();
+    return {dev0, *hydra_control_};
+  }
   std::unique_ptr<FrameMailbox> mailbox_ = std::make_unique<FrameMailbox>();
+  std::unique_ptr<tetrig::testing::MockHidDevice> hydra_control_;
 };
 
 TEST_F(HidSourceTest, MarkerStreamSourcePublishesReassembledFramesAndSurvivesReplug) {
@@ -353,23 +384,9 @@ TEST_F(HidSourceTest, MarkerStreamSourcePublishesReassembledFramesAndSurvivesRep
 }
 
 TEST_F(HidSourceTest, HydraSourceSwitchesMotionModeOnInterfaceOneAndDecodesBothSensors) {
-  tetrig::testing::MockHidSpec motion;
-  motion.vendor_id = drv::kHydraVendorId;
-  motion.product_id = drv::kHydraProductId;
-  motion.manufacturer = "Razer";
-  motion.product = "Razer Hydra";
-  motion.serial = "HY1";
-  motion.input_report_size = drv::kHydraReportSize;
-  motion.hidraw_index = 0;
-  motion.interface_number = 0;
-  tetrig::testing::MockHidSpec control = motion;
-  control.hidraw_index = 10;
-  control.interface_number = 1;
-  control.shares_usb_device = true;
-  auto& dev0 = makeDevice(motion);
-  dev0.plug();
-  tetrig::testing::MockHidDevice dev1(*testbed_, control);
-  dev1.plug();
+  const Hydra hydra = plugHydra("HY1");
+  auto& dev0 = hydra.motion;
+  auto& dev1 = hydra.control;
 
   tetrig::devices::HydraSourceConfig config;
   config.hid.read_timeout_ms = 20;
@@ -587,19 +604,9 @@ TEST_F(HidSourceTest, MarkerSourceAdapterTimesOutWhenTheDeviceNeverNamesItsMarke
 }
 
 TEST_F(HidSourceTest, HydraAdapterNamesItsSensorsAndCarriesButtons) {
-  tetrig::testing::MockHidSpec motion;
-  motion.vendor_id = drv::kHydraVendorId;
-  motion.product_id = drv::kHydraProductId;
-  motion.serial = "HY2";
-  motion.input_report_size = drv::kHydraReportSize;
-  tetrig::testing::MockHidSpec control = motion;
-  control.hidraw_index = 10;
-  control.interface_number = 1;
-  control.shares_usb_device = true;
-  auto& dev0 = makeDevice(motion);
-  dev0.plug();
-  tetrig::testing::MockHidDevice dev1(*testbed_, control);
-  dev1.plug();
+  const Hydra hydra = plugHydra("HY2");
+  auto& dev0 = hydra.motion;
+  auto& dev1 = hydra.control;
 
   tetrig::devices::HydraSourceConfig config;
   config.hid.read_timeout_ms = 20;

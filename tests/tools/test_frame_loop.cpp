@@ -41,11 +41,7 @@ std::vector<std::string> rigLabels(const Rig& rig) {
 // occlusion prediction and blends run too.
 std::unique_ptr<drivers::SyntheticSource> makeSource(const Rig& rig, float dropout = 0.02f) {
   drivers::SyntheticOptions o;
-  const Eigen::Matrix3d inverse = rig.alignment.linear.inverse();
-  for (const RigMarker& m : rig.markers) {
-    const Eigen::Vector3d mm = inverse * (m.rest_position - rig.alignment.translation);
-    o.rest_positions_mm.push_back({static_cast<float>(mm.x()), static_cast<float>(mm.y()), static_cast<float>(mm.z())});
-  }
+  o.rest_positions_mm = markerRestPositionsMm(rig);
   o.marker_count = static_cast<int>(rig.markers.size());
   o.rotation_center_mm = {20.0f, 20.0f, 0.0f};
   o.rotation_axis = {1.0f, 0.0f, 0.0f};

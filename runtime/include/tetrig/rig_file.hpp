@@ -29,6 +29,7 @@
 
 #include <Eigen/Core>
 
+#include <array>
 #include <cstdint>
 #include <filesystem>
 #include <span>
@@ -123,6 +124,11 @@ Rig parseRig(std::span<const std::uint8_t> bytes, std::string_view source_name, 
 
 // Reads and parses a rig file. Throws RigFileError (also for a missing or unreadable file).
 Rig loadRigFile(const std::filesystem::path& path);
+
+// Each rig marker's rest position back in device millimetres (the inverse of rig.alignment), in
+// rig.markers order: what a device would report with the subject in the rest pose (the synthetic
+// source sways these). Load time: allocates; any thread.
+std::vector<std::array<float, 3>> markerRestPositionsMm(const Rig& rig);
 
 // Checks a rig's internal consistency (sizes, index ranges, finite values, orientation, marker
 // handles, pose sensors: label non-empty, region in range and oriented, one sensor per region,
