@@ -50,8 +50,15 @@ std::string trim(std::string_view s) {
   return std::string(s.substr(b, e - b));
 }
 
-// Printable form of a name read from the file (control bytes escaped) for messages.
+// Longest piece of file text (name, label, unit) quoted in a message, in characters of the input.
+constexpr std::size_t kMaxQuotedChars = 40;
+
+// Printable form of a name read from the file, for messages: bytes outside printable ASCII are
+// shown as \xNN, and text longer than kMaxQuotedChars is cut there and ends in "...". A message
+// never carries raw file bytes (a name may hold terminal escape sequences or binary junk).
 std::string printable(std::string_view s) {
+  const bool cut = s.size() > kMaxQuotedChars;
+  if (cut) s = s.substr(0, kMaxQuotedChars);
   std::string out;
   for (char c : s) {
     const auto u = static_cast<unsigned char>(c);
@@ -64,6 +71,7 @@ std::string printable(std::string_view s) {
       out.push_back(kHex[u & 0xf]);
     }
   }
+  if (cut) out += "...";
   return out;
 }
 
@@ -121,7 +129,8 @@ void encodeVaxFloat(float value, std::uint8_t bytes[4]) noexcept {
 
 class C3DParser {
  public:
-  C3DParser(std::span<const std::uint8_t> bytes, std::string_view name) : d_(bytes), name_(name) {}
+  C3DParser(std::span<const std::uint8_t> bytes, std::string_view name, const C3DReadOptions& options)
+      : d_(bytes), name_(name), options_(options) {}
 
   C3DClip run() {
     clip_.source_name_ = name_;
@@ -187,11 +196,13 @@ class C3DParser {
       has_param_header_ = true;
       param_blocks_ = d_[param_start_ + 2];
       const std::uint8_t p = d_[param_start_ + 3];
-      if (p == 84 || p == 85 || p == 86) {
-        proc = static_cast<C3DProcessor>(p);
-      } else {
-        warn("processor type byte is " + std::to_string(p) + " (expected 84, 85 or 86); guessed from the header");
+      if (p != 84 && p != 85 && p != 86) {
+        // Every number in the file depends on it: guessing could decode the data as garbage.
+        fail(param_start_ + 3, "unknown processor type " + std::to_string(p) +
+                                   " in the parameter section header (parameter block " + std::to_string(param_block) +
+                                   "; expected 84 Intel, 85 DEC or 86 MIPS/SGI): the file is damaged or not a C3D file");
       }
+      proc = static_cast<C3DProcessor>(p);
       if (d_[param_start_ + 1] != kKey) {
         warn("parameter section key is " + std::to_string(d_[param_start_ + 1]) + ", expected 80");
       }
@@ -238,23 +249,28 @@ class C3DParser {
   void readParameters() {
     if (!has_param_header_) return;
     const C3DHeader& h = clip_.header_;
+    // Entries may run up to the data start (the header's data block when it lies after the
+    // parameter block, else the end of the file; always bounded by the file): the declared block
+    // count is only a claim, and some writers set it too small (their LABELS runs past it). When
+    // the header's block is not usable, resolve() checks the entries against the block used.
     const bool header_ds_after_params = h.data_start_block > h.parameter_block;
     const std::size_t header_ds_offset = (static_cast<std::size_t>(h.data_start_block) - 1) * kBlockSize;
-    std::size_t end = 0;
+    const std::size_t end = header_ds_after_params ? std::min(header_ds_offset, d_.size()) : d_.size();
+    std::size_t declared_end = 0;
     if (param_blocks_ > 0) {
-      end = param_start_ + static_cast<std::size_t>(param_blocks_) * kBlockSize;
-      if (header_ds_after_params && header_ds_offset < end) {
+      declared_end = param_start_ + static_cast<std::size_t>(param_blocks_) * kBlockSize;
+      std::size_t present = declared_end;
+      if (header_ds_after_params && header_ds_offset < declared_end) {
         warn("parameter section declares " + std::to_string(param_blocks_) + " blocks but the data starts at block " +
              std::to_string(h.data_start_block) + "; parameters read up to the data");
-        end = header_ds_offset;
+        present = header_ds_offset;
       }
-      need(param_start_, end - param_start_,
+      need(param_start_, present - param_start_,
            "the parameter section (" + std::to_string(param_blocks_) + " blocks from block " +
                std::to_string(h.parameter_block) + ")");
-    } else {
-      end = header_ds_after_params ? std::min(header_ds_offset, d_.size()) : d_.size();
-      end = std::max(end, std::min(param_start_ + kBlockSize, d_.size()));
     }
+    const std::string end_what = end == d_.size() ? "the end of the file"
+                                                  : "the data start (block " + std::to_string(h.data_start_block) + ")";
 
     struct GroupName {
       int id;
@@ -276,7 +292,8 @@ class C3DParser {
       const std::size_t q = p + 2 + name_len;  // offset field
       inSection(p, 2 + name_len + 2, end, "a parameter/group name and its next-entry offset");
       const std::string name(reinterpret_cast<const char*>(&d_[p + 2]), name_len);
-      const std::uint16_t next_offset = u16(q);
+      const std::int16_t next_offset = i16(q);  // signed: a negative offset would point backwards
+      std::size_t content_end = q + 2;  // where the next entry may start (descriptions may be cut)
       if (id < 0) {
         inSection(q + 2, 1, end, "the description length of group '" + printable(name) + "'");
         groups.push_back({-id, upper(name)});
@@ -301,6 +318,7 @@ class C3DParser {
         const std::size_t data = q + 4 + ndims;
         const std::uint64_t bytes = count * elem;
         inSection(data, bytes, end, "the data of parameter '" + printable(name) + "'");
+        content_end = data + static_cast<std::size_t>(bytes);
         const std::size_t n = static_cast<std::size_t>(count);
         switch (param.type) {
           case -1:
@@ -322,8 +340,34 @@ class C3DParser {
         clip_.parameters_.push_back(std::move(param));
         param_group_ids.push_back(id);
       }
+      if (content_end > params_extent_) {
+        params_extent_ = content_end;
+        params_extent_entry_ = p;
+      }
       if (next_offset == 0) break;
-      p = q + next_offset;
+      // The chain only moves forward, past the entry's own data (its description may be cut
+      // short: mocap36.c3d's LABELS points at the byte after its data), and stays in the section.
+      auto entry = [&] { return describeEntry(p) + " at byte " + std::to_string(p); };
+      if (next_offset < 0) {
+        fail(q, "corrupt parameter section: " + entry() + " gives the next entry at offset " +
+                    std::to_string(next_offset) + ", backwards");
+      }
+      const std::size_t next = q + static_cast<std::size_t>(next_offset);
+      if (next < content_end) {
+        fail(q, "corrupt parameter section: " + entry() + " gives the next entry at byte " + std::to_string(next) +
+                    ", inside its own data (which ends at byte " + std::to_string(content_end) + ")");
+      }
+      if (next > end) {
+        fail(q, "corrupt parameter section: " + entry() + " gives the next entry at byte " + std::to_string(next) +
+                    ", past " + end_what + " at byte " + std::to_string(end));
+      }
+      p = next;
+    }
+    if (param_blocks_ > 0 && params_extent_ > declared_end) {
+      warn("parameter section declares " + std::to_string(param_blocks_) + (param_blocks_ == 1 ? " block" : " blocks") +
+           " (to byte " +
+           std::to_string(declared_end) + ") but its entries run to byte " + std::to_string(params_extent_) +
+           " (" + describeEntry(params_extent_entry_) + "); read up to " + end_what);
     }
     for (std::size_t i = 0; i < clip_.parameters_.size(); ++i) {
       std::string group = "?" + std::to_string(param_group_ids[i]);
@@ -334,6 +378,14 @@ class C3DParser {
     }
   }
 
+  // "parameter 'NAME'" or "group 'NAME'" for the entry at byte `p` (whose name was bounds-checked
+  // when it was read), the name escaped and cut, for messages.
+  std::string describeEntry(std::size_t p) const {
+    const int name_len = std::abs(static_cast<int>(static_cast<std::int8_t>(d_[p])));
+    const std::string_view name(reinterpret_cast<const char*>(&d_[p + 2]), static_cast<std::size_t>(name_len));
+    return (static_cast<std::int8_t>(d_[p + 1]) < 0 ? "group '" : "parameter '") + printable(name) + "'";
+  }
+
   void inSection(std::size_t offset, std::uint64_t count, std::size_t end, const std::string& what) const {
     if (offset > end || count > end - offset) {
       if (end >= d_.size() || offset + count > d_.size()) {
@@ -341,7 +393,7 @@ class C3DParser {
              what);
       }
       fail(offset, "corrupt parameter section: " + what + " (" + std::to_string(count) +
-                       " bytes) runs past the end of the section at byte " + std::to_string(end));
+                       " bytes) runs into the data, which starts at byte " + std::to_string(end));
     }
   }
 
@@ -450,6 +502,14 @@ class C3DParser {
                    (param_ds ? " (and " + std::to_string(*param_ds) + " in POINT:DATA_START)" : std::string()) +
                    " points into the header or parameter section (parameter block " +
                    std::to_string(h.parameter_block) + ")");
+    }
+    // The header's block bounded the entries already; a block from POINT:DATA_START is checked
+    // here: parameters and frames must not share bytes.
+    const std::size_t data_offset = (std::size_t{ds} - 1) * kBlockSize;
+    if (params_extent_ > data_offset) {
+      fail(data_offset, "corrupt parameter section: " + describeEntry(params_extent_entry_) + " runs to byte " +
+                            std::to_string(params_extent_) + ", into the frames, which start at block " +
+                            std::to_string(ds));
     }
     clip_.data_start_block_ = ds;
     clip_.frame_count_ = static_cast<std::size_t>(count);
@@ -577,18 +637,25 @@ class C3DParser {
     clip_.samples_.assign(frames * points, C3DSample::kInvalid);
     if (points == 0) return;  // frames without points (analog only, or empty): nothing to decode
     // One specialised loop per storage variant (the processor test is hoisted out of the loop).
+    std::size_t zero_gaps = 0;
     switch (clip_.processor_) {
       case C3DProcessor::kDec:
-        clip_.is_float_ ? decodeSamples<C3DProcessor::kDec, true>(start) : decodeSamples<C3DProcessor::kDec, false>(start);
+        zero_gaps = clip_.is_float_ ? decodeSamples<C3DProcessor::kDec, true>(start)
+                                    : decodeSamples<C3DProcessor::kDec, false>(start);
         break;
       case C3DProcessor::kMips:
-        clip_.is_float_ ? decodeSamples<C3DProcessor::kMips, true>(start) : decodeSamples<C3DProcessor::kMips, false>(start);
+        zero_gaps = clip_.is_float_ ? decodeSamples<C3DProcessor::kMips, true>(start)
+                                    : decodeSamples<C3DProcessor::kMips, false>(start);
         break;
       case C3DProcessor::kIntel:
       default:
-        clip_.is_float_ ? decodeSamples<C3DProcessor::kIntel, true>(start)
-                        : decodeSamples<C3DProcessor::kIntel, false>(start);
+        zero_gaps = clip_.is_float_ ? decodeSamples<C3DProcessor::kIntel, true>(start)
+                                    : decodeSamples<C3DProcessor::kIntel, false>(start);
         break;
+    }
+    if (zero_gaps > 0) {
+      warn(std::to_string(zero_gaps) + " samples at x = y = z = 0 with residual 0 read as gaps" +
+           " (C3DReadOptions::keep_zero_points keeps them)");
     }
   }
 
@@ -614,64 +681,81 @@ class C3DParser {
   }
 
   // Decodes every (x, y, z, residual word) of every frame; bounds were checked by readData().
+  // Returns the number of kZeroGap samples.
   template <C3DProcessor P, bool kFloat>
-  void decodeSamples(std::size_t start) {
+  std::size_t decodeSamples(std::size_t start) {
     const std::size_t points = static_cast<std::size_t>(clip_.point_count_);
     const std::size_t frames = clip_.frame_count_;
     const float scale = clip_.scale_;
+    const bool zero_is_gap = !options_.keep_zero_points;
     float* positions = clip_.positions_.data();
     float* residuals = clip_.residuals_.data();
     C3DSample* samples = clip_.samples_.data();
+    std::size_t zero_gaps = 0;
     for (std::size_t f = 0; f < frames; ++f) {
       const std::uint8_t* frame = d_.data() + start + f * frame_bytes_;
       for (std::size_t p = 0; p < points; ++p) {
         const std::size_t k = f * points + p;
         float xyz[3];
-        float residual = 0.0f;
+        unsigned word = 0;  // the residual word's 15 value bits: camera mask << 8 | residual
         if constexpr (kFloat) {
           const std::uint8_t* o = frame + p * 16;
           const float r = readFloat<P>(o + 12);
-          if (!(r >= 0.0f)) {  // negative: invalid; NaN: non-finite
-            if (std::isnan(r)) samples[k] = C3DSample::kNonFinite;
-            continue;  // stays kInvalid, position 0, residual -1
+          // The word's integer value as a float: < 0 is the signed form of an invalid word (-1.0),
+          // 32768..65535 its unsigned form (65535.0 = -1), >= 65536 no 16-bit word at all.
+          if (std::isnan(r) || r == std::numeric_limits<float>::infinity()) {
+            samples[k] = C3DSample::kNonFinite;
+            continue;
           }
+          if (!(r >= 0.0f && r < 32768.0f)) continue;  // stays kInvalid, position 0, residual -1
           for (std::size_t c = 0; c < 3; ++c) xyz[c] = readFloat<P>(o + 4 * c);
-          residual = static_cast<float>(static_cast<int>(std::min(r, 32767.0f)) & 0xff) * scale;
+          word = static_cast<unsigned>(r);
         } else {
           const std::uint8_t* o = frame + p * 8;
           const std::int16_t r = readInt16<P>(o + 6);
           if (r < 0) continue;
           for (std::size_t c = 0; c < 3; ++c) xyz[c] = static_cast<float>(readInt16<P>(o + 2 * c)) * scale;
-          residual = static_cast<float>(r & 0xff) * scale;
+          word = static_cast<unsigned>(r);
         }
         if (!std::isfinite(xyz[0]) || !std::isfinite(xyz[1]) || !std::isfinite(xyz[2])) {
           samples[k] = C3DSample::kNonFinite;
           continue;
         }
+        const unsigned residual_byte = word & 0xffu;
+        if (zero_is_gap && residual_byte == 0 && xyz[0] == 0.0f && xyz[1] == 0.0f && xyz[2] == 0.0f) {
+          samples[k] = C3DSample::kZeroGap;
+          ++zero_gaps;
+          continue;
+        }
         positions[k * 3] = xyz[0];
         positions[k * 3 + 1] = xyz[1];
         positions[k * 3 + 2] = xyz[2];
-        residuals[k] = residual;
+        residuals[k] = static_cast<float>(residual_byte) * scale;
         samples[k] = C3DSample::kValid;
       }
     }
+    return zero_gaps;
   }
 
   std::span<const std::uint8_t> d_;
   std::string name_;
+  C3DReadOptions options_;
   C3DClip clip_;
   bool big_endian_ = false;
   bool has_param_header_ = false;
   std::size_t param_start_ = 0;
   std::size_t param_blocks_ = 0;
+  std::size_t params_extent_ = 0;      // end of the furthest parameter/group content read
+  std::size_t params_extent_entry_ = 0;  // byte offset of the entry that reaches params_extent_
   std::size_t frame_bytes_ = 0;
 };
 
-C3DClip C3DClip::parse(std::span<const std::uint8_t> bytes, std::string_view source_name) {
-  return C3DParser(bytes, source_name).run();
+C3DClip C3DClip::parse(std::span<const std::uint8_t> bytes, std::string_view source_name,
+                       const C3DReadOptions& options) {
+  return C3DParser(bytes, source_name, options).run();
 }
 
-C3DClip C3DClip::load(const std::filesystem::path& path) {
+C3DClip C3DClip::load(const std::filesystem::path& path, const C3DReadOptions& options) {
   std::ifstream in(path, std::ios::binary);
   if (!in) throw C3DError(path.string() + ": cannot open the file for reading");
   in.seekg(0, std::ios::end);
@@ -682,7 +766,7 @@ C3DClip C3DClip::load(const std::filesystem::path& path) {
   if (size > 0 && !in.read(reinterpret_cast<char*>(bytes.data()), size)) {
     throw C3DError(path.string() + ": read error after byte " + std::to_string(in.gcount()));
   }
-  return parse(bytes, path.string());
+  return parse(bytes, path.string(), options);
 }
 
 int C3DClip::findPoint(std::string_view label) const noexcept {

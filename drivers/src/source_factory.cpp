@@ -71,7 +71,9 @@ std::unique_ptr<drivers::MarkerSource> openC3D(std::string_view spec, std::strin
                                                const SourceOpenOptions& options) {
   const std::filesystem::path path = existingFile(spec, "c3d", rest);
   checkSpeed(spec, options.speed);
-  auto clip = std::make_shared<const drivers::C3DClip>(drivers::C3DClip::load(path));
+  drivers::C3DReadOptions read;
+  read.keep_zero_points = options.c3d_keep_zero_points;
+  auto clip = std::make_shared<const drivers::C3DClip>(drivers::C3DClip::load(path, read));
   drivers::C3DPlaybackOptions playback;
   playback.pacing = options.pacing;
   playback.speed = options.speed;

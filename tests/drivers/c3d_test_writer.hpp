@@ -19,6 +19,16 @@
 
 namespace tetrig::test {
 
+// A parameter written as given (after the writer's own POINT parameters), e.g. with a hostile
+// name or an invalid type.
+struct TestC3DRawParam {
+  std::string name;
+  int group_id = 1;                  // 1 POINT, 2 TRIAL
+  int type = -1;                     // written as is (the reader accepts -1, 1, 2, 4)
+  std::vector<int> dims;
+  std::vector<std::uint8_t> data;    // raw bytes (byte order is the caller's business)
+};
+
 struct TestC3DSpec {
   drivers::C3DProcessor processor = drivers::C3DProcessor::kIntel;
   bool floating = true;
@@ -33,13 +43,20 @@ struct TestC3DSpec {
   std::uint16_t analog_words = 0;             // analog values per frame (written as 7 / 7.0)
   std::uint16_t first_frame = 1;
   bool write_parameters = true;               // false: parameter header with 0 blocks, no entries
-  std::uint8_t processor_byte_override = 0;   // != 0: written instead of the processor type
+  std::optional<std::uint8_t> processor_byte_override;  // written instead of the processor type
   int header_data_start_override = -1;        // >= 0: header word 9 value
   std::optional<int> param_data_start;        // POINT:DATA_START value (default: the real block)
   int data_block_shift = 0;                   // extra empty blocks between parameters and data
   bool long_frame_fields = false;             // TRIAL:ACTUAL_START/END_FIELD as 32-bit numbers
   std::vector<std::pair<std::string, std::vector<std::string>>> point_string_params;  // e.g. ANGLES
   bool pad_to_block = true;
+  // Non-empty: frames * points residual words written as given (float files: this value as a
+  // float, e.g. 65535.0; int files: the low 16 bits of this integer, e.g. -1 or 0x8203), and
+  // every sample's coordinates from xyz (`valid` is then not used by the writer).
+  std::vector<double> fourth_words;
+  int param_blocks_delta = 0;                 // added to the declared parameter block count
+  int header_parameter_block = -1;            // >= 0: header byte 1 (the parameter block pointer)
+  std::vector<TestC3DRawParam> extra_params;  // appended after the POINT parameters
   // Filled by writeTestC3D: byte offset where the frames start and where they end.
   mutable std::size_t data_offset = 0;
   mutable std::size_t data_end = 0;
@@ -56,8 +73,8 @@ class TestC3DWriter {
     params.push_back(1);
     params.push_back(0x50);
     params.push_back(0);  // block count, patched below
-    params.push_back(s_.processor_byte_override != 0 ? s_.processor_byte_override
-                                                    : static_cast<std::uint8_t>(s_.processor));
+    params.push_back(s_.processor_byte_override ? *s_.processor_byte_override
+                                                : static_cast<std::uint8_t>(s_.processor));
     std::size_t data_block = 3;
     if (s_.write_parameters) {
       // Two passes: the data start depends on the section size, which does not depend on it.
@@ -82,6 +99,11 @@ class TestC3DWriter {
                                               s_.labels.begin() + static_cast<std::ptrdiff_t>(last)));
         }
         for (const auto& [name, values] : s_.point_string_params) paramChars(params, 1, name, values);
+        for (const TestC3DRawParam& raw : s_.extra_params) {
+          paramHead(params, raw.group_id, raw.name, raw.type, raw.dims);
+          params.insert(params.end(), raw.data.begin(), raw.data.end());
+          params.push_back(0);
+        }
         if (s_.long_frame_fields) {
           const std::uint32_t first = s_.first_frame;
           const auto last = static_cast<std::uint32_t>(first + s_.frames - 1);
@@ -94,7 +116,7 @@ class TestC3DWriter {
         putU16At(params, last_offset_pos_, 0);
         const std::size_t blocks = (params.size() + 511) / 512;
         data_block = 2 + blocks + static_cast<std::size_t>(s_.data_block_shift);
-        params[2] = static_cast<std::uint8_t>(blocks);
+        params[2] = static_cast<std::uint8_t>(static_cast<int>(blocks) + s_.param_blocks_delta);
       }
     } else {
       data_block = 3 + static_cast<std::size_t>(s_.data_block_shift);
@@ -104,7 +126,7 @@ class TestC3DWriter {
 
     // ---- header ----
     std::vector<std::uint8_t> file(512, 0);
-    file[0] = 2;
+    file[0] = static_cast<std::uint8_t>(s_.header_parameter_block >= 0 ? s_.header_parameter_block : 2);
     file[1] = 0x50;
     putU16At(file, 2, static_cast<std::uint16_t>(points));
     putU16At(file, 4, s_.analog_words);
@@ -125,7 +147,8 @@ class TestC3DWriter {
     for (std::size_t f = 0; f < s_.frames; ++f) {
       for (std::size_t p = 0; p < points; ++p) {
         const std::size_t k = f * points + p;
-        const bool ok = s_.valid[k];
+        const bool raw_word = !s_.fourth_words.empty();
+        const bool ok = raw_word || s_.valid[k];
         for (int c = 0; c < 3; ++c) {
           const float v = ok ? s_.xyz[k][static_cast<std::size_t>(c)] : 0.0f;
           if (s_.floating) {
@@ -135,7 +158,14 @@ class TestC3DWriter {
           }
         }
         // Residual word: cameras 0x02 in the high byte, residual 3 in the low byte; -1 invalid.
-        if (s_.floating) {
+        if (raw_word) {
+          const double w = s_.fourth_words[k];
+          if (s_.floating) {
+            appendFloat(file, static_cast<float>(w));
+          } else {
+            appendU16(file, static_cast<std::uint16_t>(static_cast<std::int64_t>(w) & 0xffff));
+          }
+        } else if (s_.floating) {
           appendFloat(file, ok ? 515.0f : -1.0f);
         } else {
           appendU16(file, ok ? std::uint16_t{0x0203} : std::uint16_t{0xffff});

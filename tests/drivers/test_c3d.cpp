@@ -4,8 +4,12 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
+#include <fstream>
+#include <iterator>
+#include <limits>
 #include <random>
 #include <set>
 #include <string>
@@ -95,15 +99,107 @@ TEST(C3DReader, GeneratedVariantsDecodeToTheSpec) {
   }
 }
 
-TEST(C3DReader, ZeroPositionWithNonNegativeResidualIsValid) {
-  // The data set marks every gap with a negative residual; (0,0,0) with residual >= 0 is a real
-  // value (e.g. a modelled power) and must stay valid.
-  TestC3DSpec s = smallSpec(C3DProcessor::kIntel, true, 2, 2);
-  s.xyz[1] = {0.0f, 0.0f, 0.0f};
-  s.valid[1] = true;
-  const C3DClip clip = parseBytes(writeTestC3D(s));
-  EXPECT_TRUE(clip.isValid(0, 1));
-  EXPECT_EQ(clip.positions(0)[3], 0.0f);
+// ---- invalid-sample encodings (the residual word) ----
+
+// One point, one frame per case: each case is a residual word, a position, and what the reader
+// must make of it.
+struct WordCase {
+  double word;                   // float files: the float written; int files: its low 16 bits
+  std::array<float, 3> xyz;
+  C3DSample expected;            // with the default options
+  float residual_byte = 0.0f;    // valid cases: the expected residual / |scale|
+};
+
+std::vector<WordCase> wordCases(bool floating, C3DProcessor proc) {
+  const std::array<float, 3> at{12.5f, -3.0f, 800.0f};
+  const std::array<float, 3> origin{0.0f, 0.0f, 0.0f};
+  std::vector<WordCase> c = {
+      {-1.0, at, C3DSample::kInvalid},            // the standard's invalid word
+      {-32768.0, at, C3DSample::kInvalid},        // 0x8000: any word with bit 15 set
+      {0.0, at, C3DSample::kValid, 0.0f},         // residual 0 away from the origin: a real point
+      {515.0, at, C3DSample::kValid, 3.0f},       // cameras 0x02, residual 3
+      {32767.0, at, C3DSample::kValid, 255.0f},   // the largest valid word
+      {0.0, origin, C3DSample::kZeroGap},         // zeros for a gap
+      {512.0, origin, C3DSample::kZeroGap},       // cameras set but residual 0 at the origin
+      {515.0, origin, C3DSample::kValid, 3.0f},   // a non-zero residual keeps the origin valid
+  };
+  if (floating) {
+    // The same invalid words as their unsigned 16-bit values, and numbers no word can be.
+    c.push_back({65535.0, at, C3DSample::kInvalid});   // -1 stored unsigned
+    c.push_back({32768.0, at, C3DSample::kInvalid});   // 0x8000 unsigned
+    c.push_back({33283.0, at, C3DSample::kInvalid});   // 0x8203 unsigned (bit 15 and a residual)
+    c.push_back({70000.0, at, C3DSample::kInvalid});   // not a 16-bit word
+    c.push_back({-0.5, at, C3DSample::kInvalid});
+    c.push_back({3.75, at, C3DSample::kValid, 3.0f});  // a fraction: its integer part is the word
+    if (proc != C3DProcessor::kDec) {                  // VAX floats have no NaN/Inf encoding here
+      c.push_back({std::numeric_limits<double>::infinity(), at, C3DSample::kNonFinite});
+      c.push_back({std::numeric_limits<double>::quiet_NaN(), at, C3DSample::kNonFinite});
+      c.push_back({-std::numeric_limits<double>::infinity(), at, C3DSample::kInvalid});
+    }
+  } else {
+    c.push_back({0xffff, at, C3DSample::kInvalid});    // -1
+    c.push_back({0x8203, at, C3DSample::kInvalid});    // bit 15 with cameras and a residual
+    c.push_back({0x00ff, origin, C3DSample::kValid, 255.0f});
+  }
+  return c;
+}
+
+TestC3DSpec wordSpec(const Variant& v, const std::vector<WordCase>& cases) {
+  TestC3DSpec s = smallSpec(v.proc, v.floating, cases.size(), 1);
+  for (std::size_t i = 0; i < cases.size(); ++i) {
+    s.xyz[i] = cases[i].xyz;
+    s.fourth_words.push_back(cases[i].word);
+  }
+  return s;
+}
+
+TEST(C3DReader, InvalidSampleEncodingsInEveryVariant) {
+  for (const Variant& v : kVariants) {
+    SCOPED_TRACE(std::to_string(static_cast<int>(v.proc)) + (v.floating ? " float" : " int"));
+    const std::vector<WordCase> cases = wordCases(v.floating, v.proc);
+    const C3DClip clip = parseBytes(writeTestC3D(wordSpec(v, cases)));
+    std::size_t zero_gaps = 0;
+    for (std::size_t i = 0; i < cases.size(); ++i) {
+      const int p = static_cast<int>(i);
+      SCOPED_TRACE("case " + std::to_string(i) + ": word " + std::to_string(cases[i].word));
+      EXPECT_EQ(clip.samples(0)[i], cases[i].expected);
+      EXPECT_EQ(clip.isValid(0, p), cases[i].expected == C3DSample::kValid);
+      zero_gaps += cases[i].expected == C3DSample::kZeroGap ? 1 : 0;
+      if (cases[i].expected == C3DSample::kValid) {
+        for (std::size_t c = 0; c < 3; ++c) EXPECT_FLOAT_EQ(clip.positions(0)[i * 3 + c], cases[i].xyz[c]);
+        EXPECT_FLOAT_EQ(clip.residual(0, p), cases[i].residual_byte * 0.5f);  // |scale| = 0.5
+      } else {
+        for (std::size_t c = 0; c < 3; ++c) EXPECT_EQ(clip.positions(0)[i * 3 + c], 0.0f);
+        EXPECT_EQ(clip.residual(0, p), -1.0f);
+      }
+    }
+    // The zero gaps are counted in one warning that names the option keeping them.
+    ASSERT_EQ(clip.warnings().size(), 1u);
+    EXPECT_NE(clip.warnings()[0].find(std::to_string(zero_gaps) + " samples at x = y = z = 0"), std::string::npos)
+        << clip.warnings()[0];
+    EXPECT_NE(clip.warnings()[0].find("keep_zero_points"), std::string::npos);
+  }
+}
+
+TEST(C3DReader, KeepZeroPointsReadsZeroSamplesAsValid) {
+  for (const Variant& v : kVariants) {
+    SCOPED_TRACE(std::to_string(static_cast<int>(v.proc)) + (v.floating ? " float" : " int"));
+    const std::vector<WordCase> cases = wordCases(v.floating, v.proc);
+    C3DReadOptions keep;
+    keep.keep_zero_points = true;
+    const C3DClip clip = C3DClip::parse(writeTestC3D(wordSpec(v, cases)), "keep.c3d", keep);
+    for (std::size_t i = 0; i < cases.size(); ++i) {
+      SCOPED_TRACE("case " + std::to_string(i));
+      // Only the zero gaps change: they become valid points at the origin with residual 0.
+      const C3DSample expected = cases[i].expected == C3DSample::kZeroGap ? C3DSample::kValid : cases[i].expected;
+      EXPECT_EQ(clip.samples(0)[i], expected);
+      if (cases[i].expected == C3DSample::kZeroGap) {
+        EXPECT_EQ(clip.residual(0, static_cast<int>(i)), 0.0f);
+        for (std::size_t c = 0; c < 3; ++c) EXPECT_EQ(clip.positions(0)[i * 3 + c], 0.0f);
+      }
+    }
+    EXPECT_TRUE(clip.warnings().empty()) << clip.warnings().front();
+  }
 }
 
 TEST(C3DReader, NonFiniteFloatsAreInvalidNotCrashes) {
@@ -251,17 +347,205 @@ TEST(C3DReader, NoParameterSection) {
   }
 }
 
-TEST(C3DReader, UnknownProcessorByteIsGuessedFromTheHeader) {
+TEST(C3DReader, ProcessorIsGuessedOnlyWithoutAParameterSection) {
+  // Header block pointer 1: no parameter section, so no processor byte to read. The guess is
+  // exercised with the parameter block holding a byte that would be refused (0).
   for (const Variant& v : kVariants) {
     TestC3DSpec s = smallSpec(v.proc, v.floating);
     s.write_parameters = false;
+    s.header_parameter_block = 1;
     s.processor_byte_override = 0x00;
     const C3DClip clip = parseBytes(writeTestC3D(s));
     EXPECT_EQ(clip.processor(), v.proc);
+    EXPECT_FALSE(clip.hasParameters());
     TestC3DSpec expected = s;
     expected.labels.assign(s.labels.size(), "");
     expectMatchesSpec(clip, expected);
+    bool guessed = false;
+    for (const std::string& w : clip.warnings()) guessed = guessed || w.find("guessed") != std::string::npos;
+    EXPECT_TRUE(guessed);
   }
+}
+
+TEST(C3DReader, UnknownProcessorByteIsRefused) {
+  // With a parameter section header, its processor byte decides how every number is read: a byte
+  // other than 84/85/86 is damage, not something to guess around (with or without entries).
+  for (const bool with_parameters : {true, false}) {
+    for (const std::uint8_t byte : {std::uint8_t{0}, std::uint8_t{83}, std::uint8_t{87}, std::uint8_t{0xff}}) {
+      TestC3DSpec s = smallSpec(C3DProcessor::kIntel, true);
+      s.write_parameters = with_parameters;
+      s.processor_byte_override = byte;
+      try {
+        (void)parseBytes(writeTestC3D(s), "proc.c3d");
+        ADD_FAILURE() << "processor byte " << int(byte) << " accepted";
+      } catch (const C3DError& e) {
+        const std::string m = e.what();
+        EXPECT_EQ(m.rfind("proc.c3d: unknown processor type " + std::to_string(byte) + " ", 0), 0u) << m;
+        EXPECT_NE(m.find("expected 84 Intel, 85 DEC or 86 MIPS/SGI"), std::string::npos) << m;
+        EXPECT_NE(m.find("(at byte 515)"), std::string::npos) << m;  // block 2, byte 4 of its header
+      }
+    }
+  }
+}
+
+// ---- parameter section extent and corruption ----
+
+// A spec whose parameter section spans several blocks: long labels make LABELS about 2 KB.
+TestC3DSpec longLabelSpec(C3DProcessor proc, bool floating) {
+  TestC3DSpec s = smallSpec(proc, floating, 60, 3);
+  for (std::size_t p = 0; p < s.labels.size(); ++p) {
+    std::string label = "a_subject_with_a_long_name:MARKER_";
+    label += std::to_string(p);
+    s.labels[p] = label;
+  }
+  return s;
+}
+
+// Byte offset of the next-entry offset field of the parameter or group called `name`.
+std::size_t offsetFieldOf(const std::vector<std::uint8_t>& file, const std::string& name) {
+  for (std::size_t i = 512 + 4; i + name.size() + 2 < file.size(); ++i) {
+    if (file[i] == name.size() && std::memcmp(&file[i + 2], name.data(), name.size()) == 0) {
+      return i + 2 + name.size();
+    }
+  }
+  ADD_FAILURE() << name << " not found";
+  return 0;
+}
+
+void putI16(std::vector<std::uint8_t>& file, std::size_t at, std::int16_t v, C3DProcessor proc) {
+  const auto u = static_cast<std::uint16_t>(v);
+  file[at] = static_cast<std::uint8_t>(proc == C3DProcessor::kMips ? u >> 8 : u & 0xff);
+  file[at + 1] = static_cast<std::uint8_t>(proc == C3DProcessor::kMips ? u & 0xff : u >> 8);
+}
+
+std::string errorOf(const std::vector<std::uint8_t>& bytes, const std::string& name = "bad.c3d") {
+  try {
+    (void)C3DClip::parse(bytes, name);
+  } catch (const C3DError& e) {
+    return e.what();
+  }
+  return "(parsed)";
+}
+
+TEST(C3DReader, ParameterSectionLongerThanDeclaredIsReadUpToTheData) {
+  // Some writers declare fewer parameter blocks than their entries use, so LABELS runs past the
+  // declared end. The entries are read up to the data start (header word 9) instead.
+  for (const Variant& v : kVariants) {
+    SCOPED_TRACE(std::to_string(static_cast<int>(v.proc)) + (v.floating ? " float" : " int"));
+    TestC3DSpec s = longLabelSpec(v.proc, v.floating);
+    const std::vector<std::uint8_t> honest = writeTestC3D(s);
+    const std::size_t blocks = honest[512 + 2];
+    ASSERT_GE(blocks, 4u) << "the section must span several blocks";
+    for (int delta : {-1, -2, -static_cast<int>(blocks) + 1}) {
+      s.param_blocks_delta = delta;
+      const std::vector<std::uint8_t> bytes = writeTestC3D(s);
+      ASSERT_EQ(bytes[512 + 2], blocks + static_cast<std::size_t>(delta));
+      const C3DClip clip = parseBytes(bytes);
+      expectMatchesSpec(clip, s);
+      ASSERT_EQ(clip.warnings().size(), 1u);
+      const std::size_t declared = blocks + static_cast<std::size_t>(delta);
+      EXPECT_NE(clip.warnings()[0].find("declares " + std::to_string(declared) + (declared == 1 ? " block (" : " blocks (")),
+                std::string::npos)
+          << clip.warnings()[0];
+      EXPECT_NE(clip.warnings()[0].find("read up to the data start (block"), std::string::npos) << clip.warnings()[0];
+    }
+  }
+}
+
+TEST(C3DReader, ParameterEntriesRunningIntoTheDataAreRefused) {
+  // The header's data start bounds the entries: a LABELS that runs into the frames is corrupt.
+  TestC3DSpec s = longLabelSpec(C3DProcessor::kIntel, true);
+  (void)writeTestC3D(s);  // sets s.data_offset
+  const int header_block = static_cast<int>(s.data_offset / 512 + 1);
+  s.header_data_start_override = header_block - 2;  // cuts LABELS (the section fills its blocks)
+  s.param_data_start = header_block - 2;
+  const std::string m = errorOf(writeTestC3D(s));
+  EXPECT_NE(m.find("corrupt parameter section: the data of parameter 'LABELS'"), std::string::npos) << m;
+  EXPECT_NE(m.find("runs into the data, which starts at byte " + std::to_string((header_block - 3) * 512)),
+            std::string::npos)
+      << m;
+}
+
+TEST(C3DReader, ParameterEntriesOverlappingTheDataBlockUsedAreRefused) {
+  // The header's block is impossible, so the entries are read to the end of the file and the
+  // block comes from POINT:DATA_START, which lies inside the parameter section: refused, since
+  // parameters and frames would share bytes.
+  TestC3DSpec s = longLabelSpec(C3DProcessor::kDec, false);
+  s.header_data_start_override = 1;
+  s.param_data_start = 3;
+  const std::string m = errorOf(writeTestC3D(s));
+  EXPECT_NE(m.find("corrupt parameter section: parameter '"), std::string::npos) << m;
+  EXPECT_NE(m.find("into the frames, which start at block 3 (at byte 1024)"), std::string::npos) << m;
+}
+
+TEST(C3DReader, CorruptParameterChainsAreRefused) {
+  for (const C3DProcessor proc : {C3DProcessor::kIntel, C3DProcessor::kMips}) {
+    SCOPED_TRACE(static_cast<int>(proc));
+    const TestC3DSpec s = smallSpec(proc, true);
+    const std::vector<std::uint8_t> good = writeTestC3D(s);
+    const std::size_t rate = offsetFieldOf(good, "RATE");
+    const std::string at_rate = "parameter 'RATE' at byte " + std::to_string(rate - 6);
+    struct Case {
+      std::int16_t offset;
+      std::string expected;
+    };
+    const Case cases[] = {
+        {-8, at_rate + " gives the next entry at offset -8, backwards"},
+        {-1, at_rate + " gives the next entry at offset -1, backwards"},
+        // RATE's data (type, dims, one float) ends 2 + 2 + 4 bytes after its offset field.
+        {2, at_rate + " gives the next entry at byte " + std::to_string(rate + 2) + ", inside its own data (which ends at byte " +
+                std::to_string(rate + 8) + ")"},
+        {7, "inside its own data"},
+        {0x7fff, at_rate + " gives the next entry at byte " + std::to_string(rate + 0x7fff) +
+                     ", past the data start (block 3) at byte 1024"},
+    };
+    for (const Case& c : cases) {
+      std::vector<std::uint8_t> bad = good;
+      putI16(bad, rate, c.offset, proc);
+      const std::string m = errorOf(bad);
+      EXPECT_EQ(m.rfind("bad.c3d: corrupt parameter section: ", 0), 0u) << m;
+      EXPECT_NE(m.find(c.expected), std::string::npos) << m;
+      EXPECT_NE(m.find("(at byte " + std::to_string(rate) + ")"), std::string::npos) << m;
+    }
+    // Without a usable header data start the section may reach the end of the file, not further.
+    // (An offset landing exactly at the end of the entry's data, cutting its description, is
+    // accepted: mocap36.c3d's LABELS does that, and the real-data tests load it.)
+    TestC3DSpec t = s;
+    t.header_data_start_override = 0;
+    std::vector<std::uint8_t> bad = writeTestC3D(t);
+    putI16(bad, rate, 0x7fff, proc);
+    const std::string m = errorOf(bad);
+    EXPECT_NE(m.find("past the end of the file at byte " + std::to_string(bad.size())), std::string::npos) << m;
+  }
+}
+
+// ---- no raw bytes in messages ----
+
+TEST(C3DReader, NamesInMessagesAreEscapedAndCut) {
+  // A parameter name with a terminal escape sequence, 60 bytes long, and an invalid type.
+  std::string hostile = "\x1b[2J\x07" "EVIL";
+  hostile.push_back(static_cast<char>(0xff));
+  while (hostile.size() < 56) hostile.push_back('N');
+  hostile += "TAIL";
+  TestC3DSpec s = smallSpec(C3DProcessor::kIntel, true);
+  s.extra_params.push_back({hostile, 1, 3, {}, {1, 2, 3}});
+  const std::string m = errorOf(writeTestC3D(s), "hostile.c3d");
+  EXPECT_NE(m.find("corrupt parameter '\\x1b[2J\\x07EVIL\\xff"), std::string::npos) << m;
+  EXPECT_NE(m.find("NNN...': type 3"), std::string::npos) << m;
+  EXPECT_EQ(m.find("TAIL"), std::string::npos) << "the name was not cut: " << m;
+  for (const char c : m) {
+    const auto u = static_cast<unsigned char>(c);
+    EXPECT_TRUE(u >= 0x20 && u < 0x7f) << "raw byte " << int(u) << " in: " << m;
+  }
+  // Text in warnings too: an unknown unit made of control bytes and junk.
+  TestC3DSpec t = smallSpec(C3DProcessor::kIntel, true);
+  t.units = std::string("\x1b]0;owned\x07") + std::string(50, 'u');
+  const C3DClip clip = parseBytes(writeTestC3D(t));
+  ASSERT_EQ(clip.warnings().size(), 1u);
+  const std::string& w = clip.warnings()[0];
+  EXPECT_NE(w.find("unknown POINT:UNITS '\\x1b]0;owned\\x07uuu"), std::string::npos) << w;
+  EXPECT_NE(w.find("u...'"), std::string::npos) << w;
+  for (const char c : w) EXPECT_TRUE(static_cast<unsigned char>(c) >= 0x20 && static_cast<unsigned char>(c) < 0x7f) << w;
 }
 
 TEST(C3DReader, MoreThan65535FramesFromTrialFields) {
@@ -532,15 +816,63 @@ TEST(C3DRealData, DecIntegerPlugInGait) {
   }
   EXPECT_GE(gaps, 16u);
   EXPECT_LE(gaps, 134u);
-  // Power outputs contain exact zeros with residual 0: valid values, not gaps.
-  const int power = clip.findPoint("LAnklePower");
+  // Its modelled outputs (powers, ...) hold exact zeros with residual 0, the only such samples in
+  // the data set (1254, all in points 64-85, counted by an independent script over the raw
+  // bytes): gaps by default, valid origins with keep_zero_points. No physical marker has any.
+  std::size_t zero_gaps = 0;
+  for (std::size_t f = 0; f < clip.frameCount(); ++f) {
+    for (int p = 0; p < clip.pointCount(); ++p) {
+      if (clip.samples(f)[p] != C3DSample::kZeroGap) continue;
+      ++zero_gaps;
+      EXPECT_EQ(clip.pointKind(p), C3DPointKind::kModelled) << clip.labels()[static_cast<std::size_t>(p)];
+    }
+  }
+  EXPECT_EQ(zero_gaps, 1254u);
+  C3DReadOptions keep;
+  keep.keep_zero_points = true;
+  const C3DClip kept = C3DClip::load(path, keep);
+  const int power = kept.findPoint("LAnklePower");
   ASSERT_GE(power, 0);
   std::size_t zero_valid = 0;
-  for (std::size_t f = 0; f < clip.frameCount(); ++f) {
-    const float* x = clip.positions(f) + power * 3;
-    if (clip.isValid(f, power) && x[0] == 0.0f && x[1] == 0.0f && x[2] == 0.0f) ++zero_valid;
+  std::size_t power_zero_gaps = 0;
+  for (std::size_t f = 0; f < kept.frameCount(); ++f) {
+    const float* x = kept.positions(f) + power * 3;
+    if (kept.isValid(f, power) && x[0] == 0.0f && x[1] == 0.0f && x[2] == 0.0f) ++zero_valid;
+    power_zero_gaps += clip.samples(f)[power] == C3DSample::kZeroGap ? 1 : 0;
+    ASSERT_NE(kept.samples(f)[power], C3DSample::kZeroGap);
   }
   EXPECT_GT(zero_valid, 0u);
+  EXPECT_EQ(zero_valid, power_zero_gaps);
+}
+
+TEST(C3DRealData, DeclaringTooFewParameterBlocksReadsTheSame) {
+  // sample01's parameters fill 8.2 of their 9 declared blocks. Declaring fewer (down to 1) leaves
+  // LABELS and later entries past the declared end, as some writers do; the reader must still
+  // read them, up to the data start, and decode exactly what the honest file gives.
+  for (const char* name : {"pr", "vi", "si"}) {
+    TETRIG_REQUIRE_DATA(path, std::string("mocap/c3d.org/sample01_Eb015") + name + ".c3d");
+    const C3DClip honest = C3DClip::load(path);
+    std::ifstream in(path, std::ios::binary);
+    std::vector<std::uint8_t> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    ASSERT_EQ(bytes[512 + 2], 9);
+    for (std::uint8_t declared : {std::uint8_t{5}, std::uint8_t{1}}) {
+      bytes[512 + 2] = declared;
+      const C3DClip clip = C3DClip::parse(bytes, "fewer.c3d");
+      ASSERT_EQ(clip.parameters().size(), honest.parameters().size()) << name;
+      EXPECT_EQ(clip.labels(), honest.labels());
+      ASSERT_EQ(clip.frameCount(), honest.frameCount());
+      for (std::size_t f = 0; f < clip.frameCount(); f += 7) {
+        for (int p = 0; p < clip.pointCount(); ++p) {
+          ASSERT_EQ(clip.samples(f)[p], honest.samples(f)[p]);
+          for (int c = 0; c < 3; ++c) ASSERT_EQ(clip.positions(f)[p * 3 + c], honest.positions(f)[p * 3 + c]);
+        }
+      }
+      ASSERT_EQ(clip.warnings().size(), 1u);
+      EXPECT_NE(clip.warnings()[0].find("declares " + std::to_string(declared) + (declared == 1 ? " block (" : " blocks (")),
+                std::string::npos)
+          << clip.warnings()[0];
+    }
+  }
 }
 
 TEST(C3DRealData, PlugInGaitModelledOutputsAreRecognised) {

@@ -11,10 +11,21 @@
 // every point as (x, y, z, residual word) followed by the analog samples.
 //
 // Decisions where files disagree with the standard (see docs/drivers.md, "Playback"):
-//  - validity: a sample is invalid when its residual word is negative. x = y = z = 0 with a
-//    residual >= 0 is NOT invalid: in the reference data set no physical marker uses that for a
-//    gap (every gap has residual -1), while modelled outputs (e.g. PiG powers) are legitimately 0.
+//  - validity: the fourth word of a point is the residual word, an int16 whose high byte is the
+//    camera mask and low byte the residual (times |scale|); a negative word (bit 15 set) marks an
+//    invalid sample. Float files store that word's integer value as a float, and writers encode
+//    "invalid" either as the negative value (-1.0) or as the unsigned value of the same 16 bits
+//    (65535.0 for -1): a float word < 0 or >= 32768 is invalid (>= 65536 is not a 16-bit word at
+//    all), NaN or +Inf is non-finite. x = y = z = 0 with residual 0 (low byte 0) is a gap too
+//    (several writers fill gaps so; status kZeroGap) unless C3DReadOptions::keep_zero_points.
 //    Non-finite coordinates (float files) are invalid too and counted as non-finite.
+//  - processor type: a parameter section whose processor byte is not 84, 85 or 86 is refused.
+//    Only a file without a parameter section (header block pointer < 2) has its processor guessed.
+//  - parameter section extent: entries are read up to the data start (the header's data block
+//    when it lies after the parameter block, else the end of the file), not only the declared
+//    block count, which some writers set too small. Refused: an entry whose next-entry offset
+//    points backwards or into the entry's own data, a chain that leaves the section, and entries
+//    that run into the frames actually used.
 //  - data start: the header's word 9 wins over POINT:DATA_START (the header is what the writer
 //    laid the data out by, and the parameter is known to be written wrong, e.g. 0). The parameter
 //    is used only when the header's block is impossible (inside the header/parameter section) or
@@ -23,8 +34,11 @@
 //    give more than 65535 frames (TRIAL:ACTUAL_START_FIELD/ACTUAL_END_FIELD as two 16-bit words,
 //    POINT:LONG_FRAMES, or a float POINT:FRAMES), the parameter wins: the header cannot hold it.
 //  - no parameter section (e.g. PhaseSpace's header-only files): the header alone describes the
-//    data; no labels; units assumed mm (with a warning). If the processor byte is unreadable, the
-//    processor is guessed from the plausibility of the header's scale factor and frame rate.
+//    data; no labels; units assumed mm (with a warning). Without a parameter section header there
+//    is no processor byte: the processor is guessed from the plausibility of the header's scale
+//    factor and frame rate.
+//  - messages never print raw file bytes: names and labels are shown with non-printable bytes as
+//    \xNN and cut to 40 characters + "...".
 //
 // Ownership and threads: C3DClip owns the whole decoded clip (it reads the file once, at load).
 // Loading allocates and throws C3DError; after loading, every accessor is const, noexcept,
@@ -62,9 +76,21 @@ enum class C3DPointKind : std::uint8_t {
 
 // Per-sample status stored by the reader.
 enum class C3DSample : std::uint8_t {
-  kInvalid = 0,    // residual word < 0 (occluded / not reconstructed)
+  kInvalid = 0,    // residual word < 0, or (float files) its unsigned form >= 32768: occluded
   kValid = 1,
-  kNonFinite = 2,  // float file with NaN/Inf coordinates: invalid, and counted apart
+  kNonFinite = 2,  // float file with NaN/Inf coordinates or a NaN/+Inf residual word: invalid,
+                   // and counted apart
+  kZeroGap = 3,    // x = y = z = 0 with residual 0: a gap as several writers fill them (invalid;
+                   // C3DReadOptions::keep_zero_points reads it as kValid instead)
+};
+
+// How to read a clip. The defaults suit motion-capture markers.
+struct C3DReadOptions {
+  // false (default): a sample at exactly x = y = z = 0 whose residual (the low byte of the residual
+  // word) is 0 is a gap (kZeroGap), since writers that do not use the residual word fill gaps with
+  // zeros. true: such samples are valid points at the origin (e.g. modelled outputs that are
+  // legitimately 0). A zero position with a non-zero residual is always valid.
+  bool keep_zero_points = false;
 };
 
 // One parameter as read (numbers converted to host order; DEC floats converted to IEEE).
@@ -97,11 +123,12 @@ class C3DClip {
  public:
   // Reads the whole file into memory and decodes it. Throws C3DError (clear message with the
   // path) on an unreadable, truncated or corrupted file. Allocates; load-time only.
-  static C3DClip load(const std::filesystem::path& path);
+  static C3DClip load(const std::filesystem::path& path, const C3DReadOptions& options = {});
 
   // Same from bytes already in memory (the fuzz target's entry point). `source_name` is used in
   // error messages only. The clip copies what it keeps; `bytes` may be freed afterwards.
-  static C3DClip parse(std::span<const std::uint8_t> bytes, std::string_view source_name);
+  static C3DClip parse(std::span<const std::uint8_t> bytes, std::string_view source_name,
+                       const C3DReadOptions& options = {});
 
   // ---- clip description (const, noexcept, no allocation, any thread) ----
   [[nodiscard]] const std::string& sourceName() const noexcept { return source_name_; }
@@ -137,7 +164,8 @@ class C3DClip {
   [[nodiscard]] const C3DParameter* findParameter(std::string_view group, std::string_view name) const noexcept;
 
   // Human-readable notes about repaired inconsistencies (data start disagreement, assumed units,
-  // guessed processor...). Empty for a clean file.
+  // guessed processor, a parameter section longer than declared, how many zero samples were read
+  // as gaps...). Empty for a clean file. File text in them is escaped and cut short.
   [[nodiscard]] const std::vector<std::string>& warnings() const noexcept { return warnings_; }
 
   // ---- frame access (const, noexcept, no allocation, any thread) ----

@@ -37,6 +37,8 @@ struct SourceOpenOptions {
   std::uint64_t max_frames = 0;                         // c3d, synthetic (0: no limit)
   std::uint16_t rate_hz = 0;  // > 0: devices (hid, usb) ask for this rate with SET_RATE; c3d plays
                               // at this rate instead of the clip's; synthetic produces at it
+  bool c3d_keep_zero_points = false;  // c3d: C3DReadOptions::keep_zero_points (samples at x = y = z = 0
+                                      // with residual 0 stay valid instead of being gaps)
   std::vector<std::array<float, 3>> synthetic_rest_mm;  // synthetic: rest positions in mm (e.g. a rig's markers)
   std::vector<std::string> synthetic_labels;            // synthetic: one label per marker (default M0..)
 };
