@@ -207,6 +207,20 @@ typedef struct Run {
 
 static int64_t nowMs(void) { return tetrig_shm_now_ns() / INT64_C(1000000); }
 
+/* Text from the segment (the rig's name, set from a rig file by whichever process made the
+ * segment) printed with every control byte and every non-ASCII byte as \xNN, so that it cannot
+ * send escape sequences to the terminal (C99 and libc only: no UTF-8 decoding here). */
+static void writePrintable(FILE* f, const char* text) {
+  const unsigned char* p;
+  for (p = (const unsigned char*)text; *p != 0u; ++p) {
+    if (*p < 0x20u || *p >= 0x7Fu) {
+      fprintf(f, "\\x%02x", (unsigned)*p);
+    } else {
+      fputc(*p, f);
+    }
+  }
+}
+
 static void closeReader(Run* run) {
   if (run->open) {
     run->retries += run->reader.retries;
@@ -246,9 +260,10 @@ static int tryOpen(Run* run) {
     fprintf(stderr, "tetrig-shm-cat: producer restarted: instance %016" PRIx64 " (pid %ld) -> %016" PRIx64 " (pid %ld)\n",
             run->previous_instance, (long)run->previous_pid, run->reader.instance_id, (long)run->reader.producer_pid);
   }
-  fprintf(stderr, "tetrig-shm-cat: %s: rig '%s', %lu vertices, %lu triangles, %lu slots%s, instance %016" PRIx64
-          ", pid %ld, state %s\n",
-          run->opt.name, tetrig_shm_rig_name(&run->reader), (unsigned long)tetrig_shm_vertex_count(&run->reader),
+  fprintf(stderr, "tetrig-shm-cat: %s: rig '", run->opt.name);
+  writePrintable(stderr, tetrig_shm_rig_name(&run->reader));
+  fprintf(stderr, "', %lu vertices, %lu triangles, %lu slots%s, instance %016" PRIx64 ", pid %ld, state %s\n",
+          (unsigned long)tetrig_shm_vertex_count(&run->reader),
           (unsigned long)tetrig_shm_triangle_count(&run->reader), (unsigned long)tetrig_shm_slot_count(&run->reader),
           tetrig_shm_has_normals(&run->reader) ? ", normals" : "", run->reader.instance_id,
           (long)run->reader.producer_pid, stateName(tetrig_shm_state(&run->reader)));

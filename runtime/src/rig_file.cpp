@@ -4,6 +4,8 @@
 // runtime may not link tetrig::drivers (which has its own copy for the marker-stream protocol).
 #include "tetrig/rig_file.hpp"
 
+#include "tetrig/printable_text.hpp"
+
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -11,6 +13,8 @@
 #include <fstream>
 #include <limits>
 #include <sstream>
+#include <string_view>
+#include <unordered_map>
 
 namespace tetrig {
 namespace {
@@ -233,6 +237,13 @@ std::string validateRig(const Rig& rig) {
     return "pose transfer B: array sizes do not match its row offsets";
   }
   if (std::string e = validatePoseTransfer(b.view()); !e.empty()) return "pose transfer B: " + e;
+  for (std::int32_t r = 0; r < b.rows; ++r) {
+    double sum = 0.0;
+    for (std::int32_t k = b.row_offsets[static_cast<std::size_t>(r)]; k < b.row_offsets[static_cast<std::size_t>(r) + 1]; ++k) {
+      sum += b.weights[static_cast<std::size_t>(k)];
+    }
+    if (!(std::abs(sum - 1.0) <= 1e-6)) return "pose transfer B: row " + num(r) + " sums to " + std::to_string(sum) + ", not 1";
+  }
   const DeformerSetup& s = rig.setup;
   std::vector<std::uint8_t> used(static_cast<std::size_t>(nv), 0);
   for (std::size_t h = 0; h < s.vertex_handles.size(); ++h) {
@@ -272,24 +283,70 @@ std::string validateRig(const Rig& rig) {
       rig.point_handle_names.size() != s.point_handles.size() || rig.rigid_group_names.size() != s.rigid_groups.size()) {
     return "the handle name lists do not match the handle counts";
   }
+  // Markers: the tet vertices after the body ones, one per marker, each joined to the body by the
+  // invisible tets (the tets after the body ones, each with three body corners and one marker).
+  const std::int32_t marker_vertices = nv - rig.body_vertex_count;
+  if (static_cast<std::size_t>(marker_vertices) != rig.markers.size()) {
+    return "the tet mesh has " + num(marker_vertices) + " vertices after its " + num(rig.body_vertex_count) + " body vertices but the rig has " +
+           num(rig.markers.size()) + " markers (one vertex per marker)";
+  }
+  std::vector<std::int32_t> marker_of(static_cast<std::size_t>(marker_vertices), -1);
+  std::unordered_map<std::string_view, std::size_t> label_owner;  // linear in the marker count, even for a hostile file
+  label_owner.reserve(rig.markers.size());
   for (std::size_t m = 0; m < rig.markers.size(); ++m) {
     const RigMarker& mk = rig.markers[m];
-    if (mk.tet_vertex < 0 || mk.tet_vertex >= nv) return "marker " + mk.label + " names tet vertex " + num(mk.tet_vertex);
+    const std::string who = "marker " + num(m) + " (" + printableText(mk.label, 64) + ")";
+    if (mk.label.empty()) return "marker " + num(m) + " has an empty label";
+    if (!isWellFormedUtf8(mk.label)) return who + ": the label is not valid UTF-8";
+    if (mk.tet_vertex < rig.body_vertex_count || mk.tet_vertex >= nv) {
+      return who + " names tet vertex " + num(mk.tet_vertex) + ", not a marker vertex (" + num(rig.body_vertex_count) + ".." + num(nv - 1) + ")";
+    }
+    std::int32_t& owner = marker_of[static_cast<std::size_t>(mk.tet_vertex - rig.body_vertex_count)];
+    if (owner >= 0) return who + " and marker " + num(owner) + " name the same tet vertex " + num(mk.tet_vertex);
+    owner = static_cast<std::int32_t>(m);
     if (mk.vertex_handle < 0 || static_cast<std::size_t>(mk.vertex_handle) >= s.vertex_handles.size() ||
         s.vertex_handles[static_cast<std::size_t>(mk.vertex_handle)] != mk.tet_vertex) {
-      return "marker " + mk.label + " is not the vertex handle it names (" + num(mk.vertex_handle) + ")";
+      return who + " is not the vertex handle it names (" + num(mk.vertex_handle) + ")";
     }
-    if (!finite3(mk.rest_position) || !std::isfinite(mk.surface_distance)) return "marker " + mk.label + " has a non-finite rest position";
+    if (!finite3(mk.rest_position) || !std::isfinite(mk.surface_distance)) return who + " has a non-finite rest position";
+    if (mk.bound_faces < 0) return who + " has a negative bound-face count (" + num(mk.bound_faces) + ")";
+    if (const auto [it, fresh] = label_owner.emplace(mk.label, m); !fresh) {
+      return who + " has the label of marker " + num(it->second) + ": labels must be distinct";
+    }
+  }
+  std::vector<std::int32_t> bound(rig.markers.size(), 0);
+  for (std::int32_t t = 0; t < nt; ++t) {
+    std::int32_t markers_in_tet = 0, marker_vertex = -1;
+    for (int k = 0; k < 4; ++k) {
+      const std::int32_t v = rig.tet_mesh.tets(t, k);
+      if (v >= rig.body_vertex_count) {
+        ++markers_in_tet;
+        marker_vertex = v;
+      }
+    }
+    if (t < rig.body_tet_count && markers_in_tet != 0) return "body tet " + num(t) + " names marker vertex " + num(marker_vertex);
+    if (t >= rig.body_tet_count) {
+      if (markers_in_tet != 1) return "invisible tet " + num(t) + " has " + num(markers_in_tet) + " marker corners, not 1";
+      ++bound[static_cast<std::size_t>(marker_of[static_cast<std::size_t>(marker_vertex - rig.body_vertex_count)])];
+    }
+  }
+  for (std::size_t m = 0; m < rig.markers.size(); ++m) {
+    if (rig.markers[m].bound_faces != bound[m]) {
+      return "marker " + num(m) + " (" + printableText(rig.markers[m].label, 64) + ") says " + num(rig.markers[m].bound_faces) +
+             " bound faces but " + num(bound[m]) + " invisible tets join it to the body";
+    }
+    if (bound[m] == 0) return "marker " + num(m) + " (" + printableText(rig.markers[m].label, 64) + ") is joined to the body by no invisible tet";
   }
   const RigAlignment& a = rig.alignment;
   if (!a.linear.allFinite() || !a.translation.allFinite() || !std::isfinite(a.fit_scale) || !std::isfinite(a.rig_units_per_mm) ||
       std::abs(a.linear.determinant()) <= 0.0) {
     return "the alignment transform is not finite and invertible";
   }
+  if (!(a.fit_scale > 0.0) || !(a.rig_units_per_mm > 0.0)) return "the alignment's fit scale or unit conversion is not positive";
   std::vector<std::uint8_t> driven(s.region_handles.size(), 0);
   for (std::size_t p = 0; p < rig.pose_sensors.size(); ++p) {
     const RigPoseSensor& ps = rig.pose_sensors[p];
-    const std::string who = "pose sensor " + num(p) + (ps.sensor_label.empty() ? std::string() : " (" + ps.sensor_label + ")");
+    const std::string who = "pose sensor " + num(p) + (ps.sensor_label.empty() ? std::string() : " (" + printableText(ps.sensor_label, 64) + ")");
     if (ps.sensor_label.empty()) return who + " has an empty sensor label";
     if (ps.region_handle < 0 || static_cast<std::size_t>(ps.region_handle) >= s.region_handles.size()) {
       return who + " names region handle " + num(ps.region_handle) + " of " + num(s.region_handles.size());
@@ -303,6 +360,27 @@ std::string validateRig(const Rig& rig) {
     if (!(ps.translation_scale > 0.0) || !std::isfinite(ps.translation_scale)) {
       return who + " has a translation scale that is not a finite positive number";
     }
+  }
+  // Every string is UTF-8 (the format says so); printing escapes control characters (printable_text.hpp).
+  auto utf8 = [](const std::string& text, const std::string& what) -> std::string {
+    return isWellFormedUtf8(text) ? std::string() : what + " is not valid UTF-8 ('" + printableText(text, 64) + "')";
+  };
+  auto utf8_list = [&](const std::vector<std::string>& names, const char* what) -> std::string {
+    for (std::size_t i = 0; i < names.size(); ++i) {
+      if (std::string e = utf8(names[i], std::string(what) + " " + num(i)); !e.empty()) return e;
+    }
+    return {};
+  };
+  for (const std::string& e : {utf8(rig.name, "the rig name"), utf8(rig.unit, "the unit"), utf8(rig.builder, "the builder"),
+                               utf8(a.device_up, "the device up axis"), utf8(a.rig_up, "the rig up axis"),
+                               utf8_list(rig.vertex_handle_names, "the name of vertex handle"),
+                               utf8_list(rig.region_handle_names, "the name of region handle"),
+                               utf8_list(rig.point_handle_names, "the name of point handle"),
+                               utf8_list(rig.rigid_group_names, "the name of rigid group")}) {
+    if (!e.empty()) return e;
+  }
+  for (std::size_t p = 0; p < rig.pose_sensors.size(); ++p) {
+    if (std::string e = utf8(rig.pose_sensors[p].sensor_label, "the label of pose sensor " + num(p)); !e.empty()) return e;
   }
   const DeformerOptions& o = s.options;
   if (o.rotation_steps < 0 || o.rotation_steps > 64) return "rotation_steps " + num(o.rotation_steps) + " is not in [0, 64]";
@@ -530,16 +608,54 @@ Rig parseRig(std::span<const std::uint8_t> bytes, std::string_view source_name, 
   Cursor table(bytes.data() + kHeaderBytes, section_count * kTableEntryBytes, name + ": section table");
   for (std::uint32_t i = 0; i < section_count; ++i) {
     const std::uint32_t t = table.u32("tag");
-    (void)table.u32("reserved");
+    const std::uint32_t entry_reserved = table.u32("reserved");
     const std::uint64_t offset = table.u64("offset");
     const std::uint64_t size = table.u64("size");
+    const std::string entry = "section table entry " + std::to_string(i) + " (" + tagName(t) + ")";
+    for (int k = 0; k < 4; ++k) {
+      const std::uint32_t c = (t >> (8 * k)) & 0xFFu;
+      if (c < 0x20 || c > 0x7E) fail(entry + ": the tag is not four printable ASCII characters: the file is corrupt or not a rig");
+    }
+    if (entry_reserved != 0) {
+      fail(entry + ": reserved word is " + std::to_string(entry_reserved) + ", not 0: the file is corrupt or not a rig");
+    }
     if (offset < table_end || offset > bytes.size() || size > bytes.size() - offset) {
       fail("section " + tagName(t) + " lies outside the file (offset " + std::to_string(offset) + ", size " + std::to_string(size) + ")");
     }
+    if (offset % 8 != 0) fail("section " + tagName(t) + " starts at byte " + std::to_string(offset) + ", not on an 8-byte boundary");
     for (const Entry& e : entries) {
       if (e.tag == t) fail("section " + tagName(t) + " appears twice");
     }
     entries.push_back({t, static_cast<std::size_t>(offset), static_cast<std::size_t>(size)});
+  }
+  // Layout (docs/rig-format.md): in file order, the first section starts right after the table
+  // and each further one at the end of the one before rounded up to 8 bytes, with zero padding
+  // between them; the last one ends the file. No byte of the file is outside the header, the
+  // table, a section or that padding, and no two sections share a byte.
+  {
+    std::vector<Entry> by_offset = entries;
+    std::stable_sort(by_offset.begin(), by_offset.end(),
+                     [](const Entry& a, const Entry& b) { return a.offset != b.offset ? a.offset < b.offset : a.size < b.size; });
+    std::size_t end = table_end;
+    std::string previous = "the section table";
+    for (const Entry& e : by_offset) {
+      const std::string here = "section " + tagName(e.tag) + " (bytes " + std::to_string(e.offset) + ".." + std::to_string(e.offset + e.size) + ")";
+      if (e.offset < end) fail(here + " overlaps " + previous + ", which ends at byte " + std::to_string(end));
+      const std::size_t expected = (end + 7) / 8 * 8;
+      if (e.offset != expected) {
+        fail(here + " starts " + std::to_string(e.offset - end) + " bytes after the end of " + previous + " (byte " + std::to_string(end) +
+             "); only the zero padding up to the next 8-byte boundary (byte " + std::to_string(expected) + ") may lie between sections");
+      }
+      for (std::size_t at = end; at < e.offset; ++at) {
+        if (bytes[at] != 0) fail("padding byte " + std::to_string(at) + " before " + here + " is not 0");
+      }
+      end = e.offset + e.size;
+      previous = "section " + tagName(e.tag);
+    }
+    if (end != bytes.size()) {
+      fail(std::to_string(bytes.size() - end) + " bytes after the last section (" + previous + " ends at byte " + std::to_string(end) +
+           ", the file at " + std::to_string(bytes.size()) + "): the file is corrupt or was appended to");
+    }
   }
   auto has_section = [&](std::uint32_t t) {
     return std::any_of(entries.begin(), entries.end(), [t](const Entry& e) { return e.tag == t; });

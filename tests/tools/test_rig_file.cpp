@@ -1,21 +1,32 @@
 // The rig file (runtime/include/tetrig/rig_file.hpp) and the rig builder's tet-mesh, selection and
 // marker-binding paths, on a small generated rig: round trip, every truncation length, bit flips,
-// clear refusals, the rest pose as a fixed point, and the atomic writer. The fixture's rig carries
+// clear refusals, the rest pose as a fixed point, and the atomic writer; layouts the format forbids
+// (overlap, misalignment, gaps, trailing bytes, reserved words, bound-face counts, non-UTF-8
+// strings) refused behind a valid checksum; a rig's text escaped by `tetrig inspect` and errors;
+// rig-description integers range-checked on their full value. The fixture's rig carries
 // a pose sensor, so every sweep covers the optional PSNS section too; rigs without one still
 // write and read the thirteen required sections alone. The example puppet rig
 // (assets/puppet_hydra.json) is built here with the rig builder.
 #include "small_rig.hpp"
 #include "tetrig/deformer.hpp"
+#include "tetrig/printable_text.hpp"
 #include "tetrig/rig_file.hpp"
 #include "tetrig/rigbuild/boundary_surface.hpp"
+#include "tetrig/rigbuild/describe_rig.hpp"
 #include "tetrig/rigbuild/rig_description.hpp"
 #include "tetrig/rigbuild/write_file_atomic.hpp"
 
 #include <gtest/gtest.h>
 
+#include <sys/wait.h>
+
 #include <algorithm>
+#include <cstdlib>
 #include <cstring>
+#include <fstream>
+#include <functional>
 #include <limits>
+#include <sstream>
 #include <utility>
 #include <random>
 
@@ -537,7 +548,9 @@ TEST(RigBuild, PoseSensorsWithoutAClipTakeTheAlignmentFromTheDescription) {
   const TempDir dir;
   rigbuild::BuildRigInputs in;
   in.mesh = test::writeBlockTetMesh(dir, "block");
-  const std::string floor = R"("region_handles": [ { "name": "floor", "select": { "box": { "min": [-1, -0.01, -1], "max": [1, 0.01, 1] } } } ])";
+  // The floor's vertices lie in one plane, so no tet has four corners there: min_corners 3 (the default is 4).
+  const std::string floor =
+      R"("region_handles": [ { "name": "floor", "select": { "box": { "min": [-1, -0.01, -1], "max": [1, 0.01, 1] }, "min_corners": 3 } } ])";
   const std::string regions = floor + R"(,
       "pose_sensors": [ { "sensor": "hydra0", "region": "floor", "clutch_buttons": 4, "translation_scale": 0.5 } ])";
   // Axes and unit: device z up -> rig y up, mm -> m.
@@ -612,7 +625,7 @@ TEST(RigBuild, OverlappingHandlesAreRefusedByName) {
   in.mesh = test::writeBlockTetMesh(dir, "block");
   in.description = rigbuild::parseRigDescription(R"({
     "vertex_handles": [ { "name": "pin", "select": { "vertices": [0] } } ],
-    "region_handles": [ { "name": "floor", "select": { "box": { "min": [-1, -0.01, -1], "max": [1, 0.01, 1] } } } ] })",
+    "region_handles": [ { "name": "floor", "select": { "box": { "min": [-1, -0.01, -1], "max": [1, 0.01, 1] }, "min_corners": 3 } } ] })",
                                                  dir.path() / "r.json");
   try {
     (void)rigbuild::buildRig(in);
@@ -633,6 +646,372 @@ TEST(AtomicWrite, FailureLeavesNothing) {
   int files = 0;
   for ([[maybe_unused]] const auto& e : std::filesystem::directory_iterator(dir.path())) ++files;
   EXPECT_EQ(files, 1);
+}
+
+
+// ---- layouts docs/rig-format.md forbids: refused even behind a valid checksum ----
+
+struct TableEntry {
+  std::size_t at;  // byte offset of the entry in the table
+  std::string tag;
+  std::size_t offset, size;
+};
+
+std::vector<TableEntry> tableEntries(const std::vector<std::uint8_t>& b) {
+  std::vector<TableEntry> out;
+  const std::uint32_t n = static_cast<std::uint32_t>(b[12]) | (static_cast<std::uint32_t>(b[13]) << 8);
+  for (std::uint32_t i = 0; i < n; ++i) {
+    const std::size_t at = 32 + 24 * static_cast<std::size_t>(i);
+    std::uint64_t offset = 0, size = 0;
+    for (int k = 0; k < 8; ++k) {
+      offset |= static_cast<std::uint64_t>(b[at + 8 + static_cast<std::size_t>(k)]) << (8 * k);
+      size |= static_cast<std::uint64_t>(b[at + 16 + static_cast<std::size_t>(k)]) << (8 * k);
+    }
+    out.push_back({at, std::string(reinterpret_cast<const char*>(b.data() + at), 4), static_cast<std::size_t>(offset),
+                   static_cast<std::size_t>(size)});
+  }
+  std::sort(out.begin(), out.end(), [](const TableEntry& a, const TableEntry& c) { return a.offset < c.offset; });
+  return out;
+}
+
+// The fixture's bytes after `edit`, with the checksum recomputed: only the edit can trip the loader.
+template <typename Edit>
+std::string errorAfter(const std::vector<std::uint8_t>& bytes, Edit edit) {
+  std::vector<std::uint8_t> b = bytes;
+  edit(b);
+  fixChecksum(b);
+  return parseError(b);
+}
+
+TEST_F(SmallRig, ForbiddenLayoutsAreRefusedBehindAValidChecksum) {
+  const std::vector<TableEntry> sections = tableEntries(*bytes_);  // in file order
+  ASSERT_EQ(sections.size(), 14u);
+  ASSERT_EQ(sections.front().offset, 32u + 14u * 24u);     // right after the table
+  ASSERT_EQ(sections.back().offset + sections.back().size, bytes_->size());  // the last ends the file
+  const TableEntry& first = sections[0];
+  const TableEntry& second = sections[1];
+  const TableEntry& last = sections.back();
+  EXPECT_EQ(errorAfter(*bytes_, [](std::vector<std::uint8_t>&) {}), "");
+
+  // Overlapping sections: the first grown by 8 bytes into the second, or the second moved onto the first.
+  std::string e = errorAfter(*bytes_, [&](std::vector<std::uint8_t>& b) { putU64(b, first.at + 16, first.size + 8); });
+  EXPECT_CONTAINS(e, "section " + second.tag + " (bytes " + std::to_string(second.offset));
+  EXPECT_CONTAINS(e, "overlaps section " + first.tag + ", which ends at byte " + std::to_string(first.offset + first.size + 8));
+  e = errorAfter(*bytes_, [&](std::vector<std::uint8_t>& b) { putU64(b, second.at + 8, first.offset); });
+  EXPECT_CONTAINS(e, "overlaps section ");
+  // A section starting off an 8-byte boundary (the last one, 4 bytes later and 4 bytes shorter).
+  e = errorAfter(*bytes_, [&](std::vector<std::uint8_t>& b) {
+    putU64(b, last.at + 8, last.offset + 4);
+    putU64(b, last.at + 16, last.size - 4);
+  });
+  EXPECT_CONTAINS(e, "section " + last.tag + " starts at byte " + std::to_string(last.offset + 4) + ", not on an 8-byte boundary");
+  // Bytes after the last section (zeros, and a partial word), with the header's file size matching.
+  for (const std::size_t extra : {std::size_t{8}, std::size_t{3}}) {
+    e = errorAfter(*bytes_, [&](std::vector<std::uint8_t>& b) {
+      b.resize(b.size() + extra, 0);
+      putU64(b, 16, b.size());
+    });
+    EXPECT_CONTAINS(e, std::to_string(extra) + " bytes after the last section (section " + last.tag + " ends at byte " +
+                           std::to_string(bytes_->size()) + ", the file at " + std::to_string(bytes_->size() + extra) + ")");
+  }
+  // A gap of a whole word before the last section (more than alignment padding).
+  e = errorAfter(*bytes_, [&](std::vector<std::uint8_t>& b) {
+    b.insert(b.begin() + static_cast<std::ptrdiff_t>(last.offset), 8, 0);
+    putU64(b, last.at + 8, last.offset + 8);
+    putU64(b, 16, b.size());
+  });
+  EXPECT_CONTAINS(e, "section " + last.tag + " (bytes " + std::to_string(last.offset + 8));
+  EXPECT_CONTAINS(e, "only the zero padding up to the next 8-byte boundary");
+  // Padding that is not zero.
+  std::size_t padding_at = 0;
+  std::string padded_tag;
+  for (std::size_t i = 1; i < sections.size() && padding_at == 0; ++i) {
+    const std::size_t end = sections[i - 1].offset + sections[i - 1].size;
+    if (sections[i].offset > end) {
+      padding_at = end;
+      padded_tag = sections[i].tag;
+    }
+  }
+  ASSERT_NE(padding_at, 0u) << "the fixture has no padded section";
+  EXPECT_EQ((*bytes_)[padding_at], 0);
+  e = errorAfter(*bytes_, [&](std::vector<std::uint8_t>& b) { b[padding_at] = 0x5A; });
+  EXPECT_CONTAINS(e, "padding byte " + std::to_string(padding_at) + " before section " + padded_tag);
+  EXPECT_CONTAINS(e, "is not 0");
+  // A non-zero reserved word: in a section table entry, and in the header.
+  e = errorAfter(*bytes_, [&](std::vector<std::uint8_t>& b) { putU32(b, second.at + 4, 7); });
+  EXPECT_CONTAINS(e, "(" + second.tag + "): reserved word is 7, not 0");
+  e = errorAfter(*bytes_, [&](std::vector<std::uint8_t>& b) { putU32(b, 28, 1); });
+  EXPECT_CONTAINS(e, "reserved header word is not 0");
+  // A tag that is not four printable ASCII characters (an unknown tag would be skipped otherwise).
+  e = errorAfter(*bytes_, [&](std::vector<std::uint8_t>& b) { b[last.at + 2] = 0x1B; });
+  EXPECT_CONTAINS(e, "the tag is not four printable ASCII characters");
+  // An unknown tag of printable characters is a section like any other: skipped.
+  std::vector<std::uint8_t> unknown = *bytes_;
+  std::memcpy(unknown.data() + last.at, "ZZZZ", 4);
+  fixChecksum(unknown);
+  EXPECT_TRUE(parseRig(unknown, "unknown.rig").pose_sensors.empty());  // PSNS unknown now: no pose sensors
+}
+
+TEST_F(SmallRig, BoundFaceCountsMustBeTheInvisibleTets) {
+  // MARK: u32 n, then per marker str label, i32 tet vertex, i32 vertex handle, 3 f64, i32 bound faces, f64 distance.
+  const auto [offset, size] = findSection(*bytes_, "MARK");
+  ASSERT_GT(size, 0u);
+  const RigMarker& m0 = rig_->markers[0];
+  const std::size_t bound_at = offset + 4 + 4 + m0.label.size() + 4 + 4 + 24;
+  ASSERT_EQ(static_cast<std::int32_t>(bytes_->at(bound_at)), m0.bound_faces);
+  const std::string who = "marker 0 (" + m0.label + ")";
+  EXPECT_CONTAINS(errorAfter(*bytes_, [&](std::vector<std::uint8_t>& b) { putU32(b, bound_at, 0xFFFFFFFFu); }),
+                  who + " has a negative bound-face count (-1)");
+  EXPECT_CONTAINS(errorAfter(*bytes_, [&](std::vector<std::uint8_t>& b) { putU32(b, bound_at, static_cast<std::uint32_t>(m0.bound_faces + 1)); }),
+                  who + " says " + std::to_string(m0.bound_faces + 1) + " bound faces but " + std::to_string(m0.bound_faces) +
+                      " invisible tets join it to the body");
+  EXPECT_CONTAINS(errorAfter(*bytes_, [&](std::vector<std::uint8_t>& b) { putU32(b, bound_at, 0); }), who + " says 0 bound faces");
+}
+
+TEST_F(SmallRig, StringsMustBeUtf8) {
+  // META: str name ("small block") first: one byte of it replaced keeps every size.
+  const auto [offset, size] = findSection(*bytes_, "META");
+  ASSERT_EQ(rig_->name, "small block");
+  EXPECT_CONTAINS(errorAfter(*bytes_, [&](std::vector<std::uint8_t>& b) { b[offset + 4 + 5] = 0xFF; }),
+                  "the rig name is not valid UTF-8 ('small\\xffblock')");
+  // Well-formed UTF-8, even with control characters, loads (printing escapes them).
+  std::vector<std::uint8_t> b = *bytes_;
+  b[offset + 4 + 5] = 0x1B;
+  fixChecksum(b);
+  EXPECT_EQ(parseRig(b, "esc.rig").name, "small\x1b" "block");
+  auto fault = [&](auto edit) {
+    Rig bad = *rig_;
+    edit(bad);
+    EXPECT_THROW((void)serializeRig(bad), RigFileError);
+    return validateRig(bad);
+  };
+  EXPECT_CONTAINS(fault([](Rig& r) { r.unit = "m\xc3"; }), "the unit is not valid UTF-8");
+  EXPECT_CONTAINS(fault([](Rig& r) { r.region_handle_names[0] = "fl\xed\xa0\x80oor"; }), "the name of region handle 0 is not valid UTF-8");
+  EXPECT_CONTAINS(fault([](Rig& r) { r.rigid_group_names[0] = "\x9b"; }), "the name of rigid group 0 is not valid UTF-8 ('\\x9b')");
+  EXPECT_CONTAINS(fault([](Rig& r) { r.point_handle_names[0] = "\xc0\xaf"; }), "the name of point handle 0 is not valid UTF-8");
+  EXPECT_CONTAINS(fault([](Rig& r) { r.markers[2].label = "H\xfc" "fte"; }), "marker 2 (H\\xfcfte): the label is not valid UTF-8");
+  EXPECT_CONTAINS(fault([](Rig& r) { r.pose_sensors[0].sensor_label = "hydra\xff"; }), "the label of pose sensor 0 is not valid UTF-8");
+  EXPECT_CONTAINS(fault([](Rig& r) { r.alignment.device_up = "up\xff"; }), "the device up axis is not valid UTF-8");
+}
+
+TEST_F(SmallRig, MarkerVerticesAndInvisibleTetsFollowTheLayout) {
+  // TETV: body vertices first, then one per marker; TETS: body tets first, then invisible tets of
+  // three body corners and one marker; labels non-empty and distinct; B's rows sum to 1.
+  auto fault = [&](auto edit) {
+    Rig bad = *rig_;
+    edit(bad);
+    EXPECT_THROW((void)serializeRig(bad), RigFileError);
+    return validateRig(bad);
+  };
+  EXPECT_CONTAINS(fault([](Rig& r) { r.body_vertex_count -= 1; }), "the tet mesh has 6 vertices after its 35 body vertices but the rig has 5 markers");
+  EXPECT_CONTAINS(fault([](Rig& r) {
+                    r.markers[0].tet_vertex = 0;
+                    r.setup.vertex_handles[static_cast<std::size_t>(r.markers[0].vertex_handle)] = 0;
+                  }),
+                  "marker 0 (TOP) names tet vertex 0, not a marker vertex (36..40)");
+  EXPECT_CONTAINS(fault([](Rig& r) {
+                    r.markers[1].tet_vertex = r.markers[0].tet_vertex;
+                    r.markers[1].vertex_handle = r.markers[0].vertex_handle;
+                  }),
+                  "marker 1 (LEFT) and marker 0 name the same tet vertex 36");
+  EXPECT_CONTAINS(fault([](Rig& r) { r.markers[3].label = r.markers[1].label; }), "marker 3 (LEFT) has the label of marker 1: labels must be distinct");
+  EXPECT_CONTAINS(fault([](Rig& r) { r.markers[4].label.clear(); }), "marker 4 has an empty label");
+  EXPECT_CONTAINS(fault([](Rig& r) { r.body_tet_count += 1; }), "body tet 72 names marker vertex");
+  EXPECT_CONTAINS(fault([](Rig& r) { r.body_tet_count -= 1; }), "invisible tet 71 has 0 marker corners, not 1");
+  EXPECT_CONTAINS(fault([](Rig& r) { r.pose_transfer.weights[0] += 0.5; }), "pose transfer B: row 0 sums to 1.5");
+  EXPECT_CONTAINS(fault([](Rig& r) { r.alignment.fit_scale = 0.0; }), "fit scale or unit conversion is not positive");
+  EXPECT_CONTAINS(fault([](Rig& r) { r.alignment.rig_units_per_mm = -1e-3; }), "fit scale or unit conversion is not positive");
+}
+
+// ---- terminal safety: text from a file never reaches the terminal raw ----
+
+struct CliRun {
+  int status = -1;
+  std::string out, err;
+};
+
+CliRun runTetrig(const std::string& args, const TempDir& dir) {
+  const std::string out = (dir.path() / "stdout.txt").string(), err = (dir.path() / "stderr.txt").string();
+  const std::string cmd = std::string("'") + TETRIG_EXE + "' " + args + " >'" + out + "' 2>'" + err + "'";
+  CliRun r;
+  const int raw = std::system(cmd.c_str());
+  r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
+  auto slurp = [](const std::string& p) {
+    std::ifstream in(p, std::ios::binary);
+    std::stringstream s;
+    s << in.rdbuf();
+    return s.str();
+  };
+  r.out = slurp(out);
+  r.err = slurp(err);
+  return r;
+}
+
+// Bytes a terminal acts on: C0 controls other than the line ends, DEL, C1 (raw or in UTF-8), and
+// anything that is not UTF-8.
+void expectTerminalSafe(const std::string& text) {
+  EXPECT_TRUE(isWellFormedUtf8(text)) << printableText(text);
+  for (std::size_t i = 0; i < text.size(); ++i) {
+    const auto b = static_cast<unsigned char>(text[i]);
+    EXPECT_FALSE((b < 0x20 && b != '\n') || b == 0x7F) << "byte " << int(b) << " at " << i << " in: " << printableText(text);
+    if (b == 0xC2 && i + 1 < text.size()) {
+      EXPECT_GT(static_cast<unsigned char>(text[i + 1]), 0x9F) << printableText(text);
+    }
+  }
+}
+
+Rig hostileRig(const Rig& base) {
+  Rig evil = base;
+  evil.name = "evil\x1b[2J\nname";
+  evil.unit = "m\x1b]0;pwned\x07";
+  evil.builder = "tetrig\r\x1b[1A";
+  evil.region_handle_names[0] = "floor\xc2\x9b" "31m";  // U+009B (CSI) in UTF-8
+  evil.rigid_group_names[0] = "core\xe2\x80\xae";      // right-to-left override
+  evil.point_handle_names[0] = "in\x7fside";
+  evil.markers[0].label = "TOP\x1b[8m";
+  evil.pose_sensors[0].sensor_label = "hydra\x1b[5m1";
+  evil.alignment.device_up = "y\x1b[0m";
+  return evil;
+}
+
+TEST_F(SmallRig, InspectEscapesTheFilesText) {
+  const TempDir dir;
+  const Rig evil = hostileRig(*rig_);
+  ASSERT_EQ(validateRig(evil), "");  // well-formed UTF-8: a valid rig, whatever its names hold
+  const std::filesystem::path path = dir.path() / "evil.rig";
+  rigbuild::writeFileAtomically(path, serializeRig(evil));
+  const CliRun r = runTetrig("inspect '" + path.string() + "' --markers", dir);
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_CONTAINS(r.out, "rig:           evil\\x1b[2J\\nname\n");
+  EXPECT_CONTAINS(r.out, "built by:      tetrig\\r\\x1b[1A (format version 1)");
+  EXPECT_CONTAINS(r.out, "unit:          m\\x1b]0;pwned\\x07, up axis y");
+  EXPECT_CONTAINS(r.out, "region handle 'floor\\xc2\\x9b31m'");
+  EXPECT_CONTAINS(r.out, "rigid group 'core\\xe2\\x80\\xae'");
+  EXPECT_CONTAINS(r.out, "point handle 'in\\x7fside'");
+  EXPECT_CONTAINS(r.out, "pose sensor 'hydra\\x1b[5m1' drives region 'floor\\xc2\\x9b31m'");
+  EXPECT_CONTAINS(r.out, "  TOP\\x1b[8m ");
+  EXPECT_CONTAINS(r.out, "device mm (up y\\x1b[0m) -> rig m\\x1b]0;pwned\\x07");
+  expectTerminalSafe(r.out);
+  // The name's newline did not make a line: as many lines as the plain rig's summary.
+  const std::string plain = rigbuild::describeRig(*rig_, 0, true);
+  EXPECT_EQ(std::count(r.out.begin(), r.out.end(), '\n'), std::count(plain.begin(), plain.end(), '\n'));
+}
+
+TEST_F(SmallRig, DescribeEscapesMalformedTextAndCutsLongNames) {
+  // A rig in memory (not from a file) may hold anything: bytes that are not UTF-8 are escaped too.
+  Rig odd = *rig_;
+  odd.name = std::string(1000, 'n');
+  odd.region_handle_names[0] = "raw\x9b" "csi\xff";
+  const std::string text = rigbuild::describeRig(odd, 0, true);
+  EXPECT_CONTAINS(text, "rig:           " + std::string(256, 'n') + "... (1000 bytes)\n");
+  EXPECT_CONTAINS(text, "region handle 'raw\\x9bcsi\\xff'");
+  expectTerminalSafe(text);
+}
+
+TEST(TerminalSafety, ErrorsEscapeTheFilesText) {
+  // A JSON key holding an escape sequence ("\u001b" decodes to ESC): the one-line error shows it escaped.
+  const TempDir dir;
+  const std::filesystem::path json = dir.write("evil.json", R"({"\u001b[2J\u009b": 1})");
+  const std::string out = (dir.path() / "x.rig").string();
+  const CliRun r = runTetrig("build-rig --mesh /nonexistent/m.obj --rig '" + json.string() + "' --out '" + out + "' --quiet", dir);
+  EXPECT_NE(r.status, 0);
+  EXPECT_EQ(r.err.rfind("tetrig build-rig: error: ", 0), 0u) << r.err;
+  EXPECT_CONTAINS(r.err, "unknown key '\\x1b[2J\\xc2\\x9b'");
+  EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+  expectTerminalSafe(r.err);
+  EXPECT_FALSE(std::filesystem::exists(out));
+}
+
+// ---- rig description integers: the full value is range-checked, never cast first ----
+
+struct IntegerField {
+  std::string path;                     // JSON path in messages
+  std::function<std::string(const std::string&)> json;  // a description with the value in place
+  std::int64_t lo, hi;
+  std::function<std::int64_t(const rigbuild::RigDescription&)> read;
+};
+
+std::vector<IntegerField> integerFields() {
+  using D = rigbuild::RigDescription;
+  const std::string region = R"("region_handles": [{"name": "r", "select": {"vertices": [0]}}])";
+  const std::int64_t i32_max = std::numeric_limits<std::int32_t>::max(), i32_min = std::numeric_limits<std::int32_t>::min();
+  return {
+      {"deformer.rotation_steps", [](const std::string& v) { return R"({"deformer": {"rotation_steps": )" + v + "}}"; }, 0, 64,
+       [](const D& d) { return std::int64_t{d.rotation_steps}; }},
+      {"tet_vertices", [](const std::string& v) { return R"({"tet_vertices": )" + v + "}"; }, 4, 10'000'000,
+       [](const D& d) { return std::int64_t{d.tet_vertices}; }},
+      {"pose_transfer.max_nonzeros_per_row", [](const std::string& v) { return R"({"pose_transfer": {"max_nonzeros_per_row": )" + v + "}}"; },
+       0, i32_max, [](const D& d) { return std::int64_t{d.pose_max_nonzeros}; }},
+      {"vertex_handles[0].select.vertices[0]",
+       [](const std::string& v) { return R"({"vertex_handles": [{"select": {"vertices": [)" + v + "]}}]}"; }, 0, i32_max,
+       [](const D& d) { return std::int64_t{d.vertex_handles[0].select.vertices[0]}; }},
+      {"vertex_handles[0].select.sel_values[0]",
+       [](const std::string& v) { return R"({"vertex_handles": [{"select": {"sel_file": "a.sel", "sel_values": [)" + v + "]}}]}"; },
+       i32_min, i32_max, [](const D& d) { return std::int64_t{d.vertex_handles[0].select.sel_values[0]}; }},
+      {"region_handles[0].select.min_corners",
+       [](const std::string& v) { return R"({"region_handles": [{"select": {"vertices": [0], "min_corners": )" + v + "}}]}"; }, 1, 4,
+       [](const D& d) { return std::int64_t{d.region_handles[0].select.min_corners}; }},
+      {"markers.frame", [](const std::string& v) { return R"({"markers": {"frame": )" + v + "}}"; }, 0, 100'000'000,
+       [](const D& d) { return d.markers.frame; }},
+      {"markers.icp_iterations", [](const std::string& v) { return R"({"markers": {"icp_iterations": )" + v + "}}"; }, 0, 10000,
+       [](const D& d) { return std::int64_t{d.markers.icp_iterations}; }},
+      {"markers.faces_per_marker", [](const std::string& v) { return R"({"markers": {"faces_per_marker": )" + v + "}}"; }, 1, 16,
+       [](const D& d) { return std::int64_t{d.markers.faces_per_marker}; }},
+      {"pose_sensors[0].clutch_buttons",
+       [region](const std::string& v) { return "{" + region + R"(, "pose_sensors": [{"sensor": "h", "region": "r", "clutch_buttons": )" + v + "}]}"; },
+       1, 255, [](const D& d) { return std::int64_t{d.pose_sensors[0].clutch_buttons}; }},
+  };
+}
+
+std::string descriptionError(const std::string& json) {
+  try {
+    (void)rigbuild::parseRigDescription(json, "i.json");
+  } catch (const rigbuild::RigBuildError& e) {
+    return e.what();
+  }
+  return {};
+}
+
+TEST(RigDescription, IntegersAreRangeCheckedOnTheFullValue) {
+  // The issue's case: 4294967298 cast to int is 2, which was accepted as 2 rotation steps.
+  EXPECT_CONTAINS(descriptionError(R"({"deformer": {"rotation_steps": 4294967298}})"),
+                  "i.json: deformer.rotation_steps: expected an integer in [0, 64], got 4294967298");
+  for (const IntegerField& f : integerFields()) {
+    SCOPED_TRACE(f.path);
+    const std::string expected = "i.json: " + f.path + ": expected an integer in [" + std::to_string(f.lo) + ", " + std::to_string(f.hi) + "]";
+    // Both ends of the range are read exactly.
+    for (const std::int64_t v : {f.lo, f.hi}) {
+      const std::string json = f.json(std::to_string(v));
+      ASSERT_EQ(descriptionError(json), "") << json;
+      EXPECT_EQ(f.read(rigbuild::parseRigDescription(json, "i.json")), v);
+    }
+    // Values whose low 32 bits (or whose wrap to 64 bits) land inside the range, and values just outside it.
+    const std::vector<std::string> refused = {
+        std::to_string(f.lo + (std::int64_t{1} << 32)), std::to_string(f.hi + (std::int64_t{1} << 32)),
+        std::to_string(f.lo - 1), std::to_string(f.hi + 1),
+        "18446744073709551615",                              // 2^64 - 1: -1 as int64
+        std::to_string((std::uint64_t{1} << 63) + static_cast<std::uint64_t>(f.lo)),  // wraps to a negative int64
+        "-9223372036854775808"};
+    for (const std::string& v : refused) {
+      const std::string e = descriptionError(f.json(v));
+      EXPECT_CONTAINS(e, expected);
+      EXPECT_CONTAINS(e, "got " + v);
+    }
+    // Numbers that are not integers, and integers beyond 64 bits (read as floating point).
+    for (const std::string v : {"2.5", "2.0", "1e1", "-0.5", "18446744073709551616", "1e300"}) {
+      const std::string e = descriptionError(f.json(v));
+      EXPECT_CONTAINS(e, expected);
+      EXPECT_CONTAINS(e, "write integers without a fraction or exponent");
+    }
+    for (const std::string v : {"true", "null", "[1]"}) EXPECT_CONTAINS(descriptionError(f.json(v)), expected);
+  }
+  EXPECT_CONTAINS(descriptionError(R"({"deformer": {"rotation_steps": "3"}})"), "deformer.rotation_steps: expected an integer in [0, 64]");
+  EXPECT_CONTAINS(descriptionError(R"({"pose_transfer": {"max_nonzeros_per_row": 3}})"),
+                  "pose_transfer.max_nonzeros_per_row: must be 0 (no cap) or at least 4");
+  EXPECT_EQ(descriptionError(R"({"version": 1})"), "");
+  for (const std::string v : {"4294967297", "18446744073709551617", "1.0", "2"}) {
+    EXPECT_CONTAINS(descriptionError(R"({"version": )" + v + "}"), "i.json: version: ");
+  }
 }
 
 }  // namespace

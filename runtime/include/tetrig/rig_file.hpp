@@ -13,9 +13,12 @@
 // every byte after the header) + a section table (tag, offset, size per section) + sections.
 // Thirteen sections are required; optional ones (PSNS: pose sensors) are written only when the
 // rig has something to put in them, and a file without them loads as before.
-// The loader checks magic, version, file size, checksum, every section's bounds and exact size,
-// every count against the bytes present (before allocating), every index range and every float
-// for finiteness, then that the tet mesh has no inverted or degenerate tet. Any mismatch throws
+// The loader checks magic, version, file size, checksum, the layout (every section on an 8-byte
+// boundary, no overlap, only zero padding between sections, nothing after the last, reserved
+// words 0), every section's bounds and exact size, every count against the bytes present (before
+// allocating), every index range and every float for finiteness, every string for UTF-8, then that
+// the tet mesh has no inverted or degenerate tet and the markers' vertices and invisible tets are
+// as the format says. Any mismatch throws
 // RigFileError with one line naming the file, the section and what was wrong; a truncated or
 // corrupted file never crashes the loader (tested at every truncation length and fuzzed).
 //
@@ -130,10 +133,13 @@ Rig loadRigFile(const std::filesystem::path& path);
 // source sways these). Load time: allocates; any thread.
 std::vector<std::array<float, 3>> markerRestPositionsMm(const Rig& rig);
 
-// Checks a rig's internal consistency (sizes, index ranges, finite values, orientation, marker
-// handles, pose sensors: label non-empty, region in range and oriented, one sensor per region,
-// clutch buttons non-zero in clutch mode, finite positive translation scale). Returns "" when valid, else a one-line
-// description of the first fault.
+// Checks a rig's internal consistency (sizes, index ranges, finite values, orientation, B's rows
+// summing to 1, marker handles, one marker vertex per marker after the body vertices, invisible
+// tets of three body corners and one marker, bound-face counts = invisible tets, marker labels
+// non-empty and distinct, positive alignment scales, every string well-formed UTF-8, pose sensors:
+// label non-empty, region in range and oriented, one sensor per region, clutch buttons non-zero in
+// clutch mode, finite positive translation scale). Returns "" when valid, else a one-line
+// description of the first fault (file text in it escaped with printableText).
 std::string validateRig(const Rig& rig);
 
 // Bytes the rig's arrays occupy in memory (positions, tets, B, handles; excluding the Deformer).

@@ -1,5 +1,6 @@
 // Human-readable summary of a rig (`tetrig inspect`): counts, bounding box, handles, markers,
-// alignment, memory. Offline, any thread, allocates.
+// alignment, memory. Text from the rig (names, unit, labels, axes) is escaped for a terminal
+// (tetrig/printable_text.hpp) and cut at 256 bytes. Offline, any thread, allocates.
 #pragma once
 
 #include "tetrig/rig_file.hpp"
