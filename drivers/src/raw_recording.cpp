@@ -1,5 +1,6 @@
-// Raw device stream recordings ("TETRIGRW" v1, docs/recording.md): writer, reader, CRC-32
-// (IEEE 802.3 polynomial, the table-driven reflected algorithm) and the replay's time table.
+// Raw device stream recordings ("TETRIGRW" v1, docs/recording.md): writer (through
+// tetrig::AtomicFile: a temporary renamed over the target at close), reader, CRC-32 (IEEE 802.3
+// polynomial, the table-driven reflected algorithm) and the replay's time table.
 #include "tetrig/drivers/raw_recording.hpp"
 
 #include <algorithm>
@@ -53,11 +54,14 @@ RawRecorder::RawRecorder(const std::filesystem::path& path, const RawRecordingHe
     throw RawRecordingError(path_ + ": description is " + std::to_string(header.description.size()) +
                             " bytes, the format allows " + std::to_string(kRawRecordingMaxDescription));
   }
-  file_ = std::fopen(path_.c_str(), "wb");
-  if (file_ == nullptr) {
-    throw RawRecordingError(path_ + ": cannot create the recording: " + std::strerror(errno));
+  try {
+    file_ = std::make_unique<AtomicFile>(path);
+    stream_ = file_->stream();
+  } catch (const AtomicFileError& e) {
+    file_.reset();
+    throw RawRecordingError(std::string("cannot create the recording: ") + e.what());
   }
-  std::setvbuf(file_, nullptr, _IOFBF, 1u << 20);
+  std::setvbuf(stream_, nullptr, _IOFBF, 1u << 20);
   std::vector<std::uint8_t> h(kFixedHeader + header.description.size() + 4);
   std::memcpy(h.data(), kRawRecordingMagic, 8);
   putLe(&h[8], kRawRecordingVersion, 2);
@@ -69,22 +73,27 @@ RawRecorder::RawRecorder(const std::filesystem::path& path, const RawRecordingHe
   std::memcpy(&h[kFixedHeader], header.description.data(), header.description.size());
   const std::uint32_t crc = recordingCrc32(std::span<const std::uint8_t>(h.data(), h.size() - 4));
   putLe(&h[h.size() - 4], crc, 4);
-  try {
-    put(h.data(), h.size());
-  } catch (...) {
-    std::fclose(file_);
-    file_ = nullptr;
-    throw;
-  }
+  put(h.data(), h.size());
 }
 
 RawRecorder::~RawRecorder() {
-  if (file_ != nullptr) std::fclose(file_);
+  try {
+    close();
+  } catch (...) {  // close() removed the temporary; the target is untouched
+  }
+}
+
+std::filesystem::path RawRecorder::temporaryPath() const { return file_ != nullptr ? file_->temporaryPath() : std::filesystem::path(); }
+
+void RawRecorder::abandon(const std::string& what) {
+  file_.reset();  // removes the temporary
+  stream_ = nullptr;
+  throw RawRecordingError(path_ + ": " + what + "; the recording is abandoned (" + path_ + " is untouched)");
 }
 
 void RawRecorder::put(const void* data, std::size_t size) {
-  if (size != 0 && std::fwrite(data, 1, size, file_) != size) {
-    throw RawRecordingError(path_ + ": write failed at byte " + std::to_string(bytes_) + ": " + std::strerror(errno));
+  if (size != 0 && std::fwrite(data, 1, size, stream_) != size) {
+    abandon("write failed at byte " + std::to_string(bytes_) + ": " + std::strerror(errno));
   }
   bytes_ += size;
 }
@@ -111,19 +120,17 @@ void RawRecorder::write(std::uint32_t channel, std::int64_t receive_ns, std::spa
 }
 
 void RawRecorder::flush() {
-  if (file_ != nullptr && std::fflush(file_) != 0) {
-    throw RawRecordingError(path_ + ": flush failed: " + std::strerror(errno));
-  }
+  if (file_ != nullptr && std::fflush(stream_) != 0) abandon(std::string("flush failed: ") + std::strerror(errno));
 }
 
 void RawRecorder::close() {
   if (file_ == nullptr) return;
-  const bool flushed = std::fflush(file_) == 0;
-  const int saved = errno;
-  const bool closed = std::fclose(file_) == 0;
-  file_ = nullptr;
-  if (!flushed || !closed) {
-    throw RawRecordingError(path_ + ": closing the recording failed: " + std::strerror(flushed ? errno : saved));
+  std::unique_ptr<AtomicFile> file = std::move(file_);
+  stream_ = nullptr;
+  try {
+    file->commit();  // flushes the stream, fsync, rename over the target; removes the temporary on failure
+  } catch (const AtomicFileError& e) {
+    throw RawRecordingError(std::string("closing the recording failed: ") + e.what());
   }
 }
 

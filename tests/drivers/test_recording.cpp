@@ -1,18 +1,26 @@
 // Tests of the raw stream recorder and replay: CRC-32 check value, bit-exact round trip, the
 // replay's timing schedule (fake clock), damage detection (CRC, sync, truncation at every
-// length) and the documented header layout.
+// length), the documented header layout, and how the recorder writes its file (a temporary
+// renamed at close: modes, planted links, failures).
 #include <gtest/gtest.h>
+
+#include <sys/resource.h>
+#include <sys/stat.h>
+
+#include <csignal>
 
 #include <atomic>
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <random>
 #include <string>
 #include <vector>
 
 #include "fake_clock.hpp"
+#include "temp_dir.hpp"
 #include "tetrig/drivers/raw_recording.hpp"
 
 namespace tetrig::drivers {
@@ -43,12 +51,10 @@ std::vector<Rec> makeRecords(std::uint32_t seed, int count) {
 class RecordingTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    dir_ = std::filesystem::temp_directory_path() /
-           ("tetrig_rec_" + std::to_string(::testing::UnitTest::GetInstance()->random_seed()) + "_" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    std::filesystem::create_directories(dir_);
+    tmp_ = std::make_unique<test::TempDir>("tetrig-rec");
+    dir_ = tmp_->path();
   }
-  void TearDown() override { std::filesystem::remove_all(dir_); }
+  void TearDown() override { tmp_.reset(); }
 
   std::filesystem::path write(const std::vector<Rec>& recs, const RawRecordingHeader& h, const char* name = "a.trr") {
     const auto path = dir_ / name;
@@ -64,6 +70,7 @@ class RecordingTest : public ::testing::Test {
     return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
   }
 
+  std::unique_ptr<test::TempDir> tmp_;  // a fresh private directory per test (tests/support/temp_dir.hpp)
   std::filesystem::path dir_;
 };
 
@@ -252,6 +259,113 @@ TEST_F(RecordingTest, RecorderRejectsBadInput) {
   const std::uint8_t b[1] = {0};
   EXPECT_THROW(rec.write(0, 0, b), RawRecordingError);
   EXPECT_THROW(RawReplay(RawRecording::load(dir_ / "ok.trr"), {Pacing::kRealTime, 0.0, false}), std::invalid_argument);
+}
+
+// Names in `dir` that look like temporaries of the writer (".NAME.tmp-XXXXXX").
+std::vector<std::string> temporaries(const std::filesystem::path& dir) {
+  std::vector<std::string> out;
+  for (const auto& e : std::filesystem::directory_iterator(dir)) {
+    const std::string n = e.path().filename().string();
+    if (n.find(".tmp-") != std::string::npos) out.push_back(n);
+  }
+  return out;
+}
+
+mode_t modeOf(const std::filesystem::path& p) {
+  struct stat st {};
+  EXPECT_EQ(::lstat(p.c_str(), &st), 0) << p;
+  return st.st_mode & 07777;
+}
+
+TEST_F(RecordingTest, AnExistingRecordingStaysWholeUntilClose) {
+  const auto recs = makeRecords(7, 20);
+  const auto path = write(recs, {}, "session.trr");
+  const std::vector<std::uint8_t> old_bytes = readAll(path);
+  {
+    RawRecorder rec(path, {});
+    EXPECT_EQ(rec.temporaryPath().parent_path(), dir_);
+    EXPECT_NE(rec.temporaryPath(), path);
+    for (int i = 0; i < 5; ++i) rec.write(1, 1000 + i, recs[static_cast<std::size_t>(i)].bytes);
+    rec.flush();
+    EXPECT_EQ(readAll(path), old_bytes);  // not truncated, not half-written
+    EXPECT_TRUE(std::filesystem::exists(rec.temporaryPath()));
+    rec.close();
+    EXPECT_TRUE(rec.temporaryPath().empty());
+  }
+  const RawRecording r = RawRecording::load(path);
+  ASSERT_EQ(r.size(), 5u);
+  EXPECT_EQ(r.record(4).receive_ns, 1004);
+  EXPECT_TRUE(temporaries(dir_).empty());
+  // Destroyed without close(): finished all the same.
+  {
+    RawRecorder rec(dir_ / "dropped.trr", {});
+    rec.write(2, 7, recs[0].bytes);
+  }
+  EXPECT_EQ(RawRecording::load(dir_ / "dropped.trr").size(), 1u);
+  EXPECT_TRUE(temporaries(dir_).empty());
+}
+
+TEST_F(RecordingTest, RecorderHonoursTheUmaskAndKeepsAnExistingMode) {
+  const mode_t old_mask = ::umask(077);
+  { RawRecorder(dir_ / "private.trr", {}).close(); }
+  EXPECT_EQ(modeOf(dir_ / "private.trr"), 0600u);
+  ::umask(022);
+  { RawRecorder(dir_ / "shared.trr", {}).close(); }
+  EXPECT_EQ(modeOf(dir_ / "shared.trr"), 0644u);
+  ASSERT_EQ(::chmod((dir_ / "shared.trr").c_str(), 0640), 0);
+  ::umask(077);
+  { RawRecorder(dir_ / "shared.trr", {}).close(); }
+  EXPECT_EQ(modeOf(dir_ / "shared.trr"), 0640u);
+  ::umask(old_mask);
+}
+
+TEST_F(RecordingTest, RecorderDoesNotWriteThroughPlantedLinks) {
+  const std::vector<std::uint8_t> secret = {'s', 'e', 'c', 'r', 'e', 't'};
+  {
+    std::ofstream(dir_ / "victim", std::ios::binary).write(reinterpret_cast<const char*>(secret.data()), 6);
+  }
+  std::filesystem::create_symlink(dir_ / "victim", dir_ / "rec.trr");      // at the target
+  std::filesystem::create_symlink(dir_ / "victim", dir_ / "rec.trr.tmp");  // at a predictable temporary name
+  RawRecorder rec(dir_ / "rec.trr", {});
+  rec.write(1, 1, secret);
+  rec.close();
+  EXPECT_EQ(readAll(dir_ / "victim"), secret);
+  EXPECT_FALSE(std::filesystem::is_symlink(dir_ / "rec.trr"));
+  EXPECT_TRUE(std::filesystem::is_symlink(dir_ / "rec.trr.tmp"));
+  EXPECT_EQ(RawRecording::load(dir_ / "rec.trr").size(), 1u);
+}
+
+TEST_F(RecordingTest, AFailedRecordingLeavesNoTemporaryAndTheOldFile) {
+  const auto recs = makeRecords(9, 4);
+  const auto path = write(recs, {}, "keep.trr");
+  const std::vector<std::uint8_t> old_bytes = readAll(path);
+  {
+    RawRecorder rec(path, {});
+    const std::vector<std::uint8_t> big(256 * 1024, 0x5a);
+    // The disk fills up: files of this process may not grow beyond 64 KiB (SIGXFSZ ignored, so
+    // write(2) fails with EFBIG).
+    void (*old_handler)(int) = std::signal(SIGXFSZ, SIG_IGN);
+    rlimit old_limit{};
+    ::getrlimit(RLIMIT_FSIZE, &old_limit);
+    rlimit limit = old_limit;
+    limit.rlim_cur = 64 * 1024;
+    ::setrlimit(RLIMIT_FSIZE, &limit);
+    std::string what;
+    try {
+      for (int i = 0; i < 8; ++i) rec.write(1, i, big);
+      rec.close();
+    } catch (const RawRecordingError& e) {
+      what = e.what();
+    }
+    ::setrlimit(RLIMIT_FSIZE, &old_limit);
+    std::signal(SIGXFSZ, old_handler);
+    EXPECT_NE(what.find("the recording is abandoned"), std::string::npos) << what;
+    EXPECT_TRUE(rec.temporaryPath().empty());
+    EXPECT_THROW(rec.write(1, 1, recs[0].bytes), RawRecordingError);  // abandoned: no more writes
+    EXPECT_NO_THROW(rec.close());
+  }
+  EXPECT_EQ(readAll(path), old_bytes);
+  EXPECT_TRUE(temporaries(dir_).empty());
 }
 
 }  // namespace

@@ -19,6 +19,7 @@
 #include <gtest/gtest.h>
 
 #include "shm_dump.hpp"
+#include "temp_dir.hpp"
 
 #include <atomic>
 #include <chrono>
@@ -29,6 +30,7 @@
 #include <fstream>
 #include <functional>
 #include <iostream>
+#include <memory>
 #include <set>
 #include <sstream>
 #include <string>
@@ -1048,6 +1050,7 @@ TEST(ShmProcess, ReaderKilledMidReadLeavesTheWriterUnaffected) {
 
 struct CatRun {
   pid_t pid = -1;
+  std::unique_ptr<tetrig::test::TempDir> tmp;  // a fresh private directory (tests/support/temp_dir.hpp), removed last
   std::filesystem::path dir;
   int exit_code = -1;
   ~CatRun() {
@@ -1055,7 +1058,6 @@ struct CatRun {
       kill(pid, SIGKILL);
       waitpid(pid, nullptr, 0);
     }
-    if (!dir.empty()) std::filesystem::remove_all(dir);
   }
   [[nodiscard]] std::filesystem::path file(const std::string& f) const { return dir / f; }
   [[nodiscard]] std::string read(const std::string& f) const {
@@ -1083,10 +1085,8 @@ struct CatRun {
 };
 
 ::testing::AssertionResult spawnCat(CatRun& run, const std::vector<std::string>& args) {
-  static std::atomic<int> counter{0};
-  run.dir = std::filesystem::temp_directory_path() /
-            ("tetrig_shm_cat_" + std::to_string(getpid()) + "_" + std::to_string(counter.fetch_add(1)));
-  std::filesystem::create_directories(run.dir);
+  run.tmp = std::make_unique<tetrig::test::TempDir>("tetrig-shm-cat");
+  run.dir = run.tmp->path();
   std::vector<std::string> all{TETRIG_SHM_CAT_PATH};
   for (const auto& a : args) all.push_back(a == "@dump" ? run.file("dump.bin").string() : a == "@json" ? run.file("out.json").string() : a);
   std::vector<char*> argv;

@@ -1,6 +1,7 @@
 // Tests for the TetGen (.node/.ele) and MEDIT (.mesh) readers and for checkTetMesh.
 #include "tetrig/tet_mesh.hpp"
 #include "tetrig/tet_mesh_io.hpp"
+#include "temp_dir.hpp"
 #include "test_data.hpp"
 
 #include <gtest/gtest.h>
@@ -343,7 +344,8 @@ TEST(CheckTetMesh, ReportsInvertedAndZeroVolumeTets) {
 // ---- files on disk ----
 
 TEST(TetMeshIoFiles, MissingFileAndUnknownExtension) {
-  const auto dir = std::filesystem::temp_directory_path();
+  const test::TempDir tmp("tetrig-io");  // a fresh private directory: nothing of that name can be there
+  const auto dir = tmp.path();
   std::string msg = errorOf([&] { (void)readTetMesh(dir / "tetrig_no_such_file_4711.mesh"); });
   EXPECT_CONTAINS(msg, "tetrig_no_such_file_4711.mesh: cannot open file");
   msg = errorOf([&] { (void)readTetMesh(dir / "whatever.obj"); });
@@ -351,14 +353,13 @@ TEST(TetMeshIoFiles, MissingFileAndUnknownExtension) {
 }
 
 TEST(TetMeshIoFiles, TetGenStemOrEitherFile) {
-  const auto dir = std::filesystem::temp_directory_path() / ("tetrig_io_test_" + std::to_string(::getpid()));
-  std::filesystem::create_directories(dir);
+  const test::TempDir tmp("tetrig-io");
+  const auto dir = tmp.path();
   { std::ofstream(dir / "cube.1.node") << kCubeNode1; }
   { std::ofstream(dir / "cube.1.ele") << kCubeEle1; }
   expectCube(readTetGen(dir / "cube.1"));
   expectCube(readTetMesh(dir / "cube.1.node"));
   expectCube(readTetMesh(dir / "cube.1.ele"));
-  std::filesystem::remove_all(dir);
 }
 
 TEST(TetMeshIoData, PbdArmadillo4k) {

@@ -39,6 +39,7 @@
 #include "tetrig/live_rig.hpp"
 #include "tetrig/rig_file.hpp"
 #include "tetrig/rigbuild/build_rig.hpp"
+#include "temp_dir.hpp"
 #include "test_data.hpp"
 #include "umockdev_devices.hpp"
 
@@ -274,23 +275,9 @@ std::vector<std::vector<std::uint8_t>> messageReports(std::span<const std::uint8
   return out;
 }
 
-std::filesystem::path makeTempDir() {
-  std::string pattern = (std::filesystem::temp_directory_path() / "tetrig-e2e-XXXXXX").string();
-  if (mkdtemp(pattern.data()) == nullptr) return {};
-  return pattern;
-}
-
-struct TempDir {
-  std::filesystem::path path = makeTempDir();
-  ~TempDir() {
-    std::error_code ec;
-    if (!path.empty() && std::getenv("TETRIG_E2E_KEEP") == nullptr) std::filesystem::remove_all(path, ec);
-  }
-};
-
 // Everything the device sends and the host should decode, built once per binary.
 struct Scene {
-  TempDir dir;
+  tetrig::test::TempDir dir{"tetrig-e2e"};  // fresh and private (tests/support/temp_dir.hpp); TETRIG_KEEP_TEMP keeps it
   std::filesystem::path rig_path;
   std::size_t rig_markers = 0;
   std::vector<std::vector<std::uint8_t>> descriptor_reports;
@@ -302,7 +289,6 @@ struct Scene {
 
 // Builds the scene (the rig takes about a second). Fails the calling test on error.
 void buildScene(const std::filesystem::path& man_path, const std::filesystem::path& clip_path, Scene& s) {
-  ASSERT_FALSE(s.dir.path.empty()) << "mkdtemp: " << std::strerror(errno);
   const auto t0 = Clock::now();
   // 1. The rig (as bench/tools/bench_rig_frame.cpp), written with serializeRig. Built before any
   //    umockdev testbed exists: the rig builder forks for TetGen.
@@ -314,7 +300,7 @@ void buildScene(const std::filesystem::path& man_path, const std::filesystem::pa
   in.check_deformer = false;
   const tetrig::Rig built = tetrig::rigbuild::buildRig(in);
   s.rig_markers = built.markers.size();
-  s.rig_path = s.dir.path / "smpl_hdm05.rig";
+  s.rig_path = s.dir.path() / "smpl_hdm05.rig";
   {
     const std::vector<std::uint8_t> bytes = tetrig::serializeRig(built);
     std::ofstream out(s.rig_path, std::ios::binary);
@@ -428,7 +414,7 @@ void runEndToEnd(const Scene& s, const std::string& tag, const std::vector<std::
 
   // 5. The consumer first (it waits for the segment), then the producer.
   const std::string segment = "tetrig-e2e-" + tag + "-" + std::to_string(getpid());
-  const std::filesystem::path base = s.dir.path / tag;
+  const std::filesystem::path base = s.dir.path() / tag;
   const std::filesystem::path dump_path = base.string() + ".dump", cat_json = base.string() + ".cat.json",
                               stats_json = base.string() + ".stats.json", cat_out = base.string() + ".cat.out",
                               cat_err = base.string() + ".cat.err", run_out = base.string() + ".run.out",

@@ -1,8 +1,12 @@
-// Surface import (assimp + welding) and validation/repair of the rig builder.
+// Surface import (assimp + welding), the hostile-file check in front of it and its child process,
+// and validation/repair of the rig builder.
+#include "tetrig/rigbuild/check_surface_file.hpp"
 #include "tetrig/rigbuild/file_vertex_list.hpp"
 #include "tetrig/rigbuild/import_surface.hpp"
+#include "tetrig/rigbuild/run_in_child_process.hpp"
 #include "tetrig/rigbuild/validate_surface.hpp"
 #include "tetrig/rigbuild/weld_vertices.hpp"
+#include "temp_dir.hpp"
 #include "test_data.hpp"
 
 #include <gtest/gtest.h>
@@ -11,6 +15,11 @@
 #include <array>
 #include <bit>
 #include <cctype>
+#include <chrono>
+#include <cmath>
+#include <csignal>
+#include <cstdio>
+#include <cstdlib>
 #include <cstdint>
 #include <limits>
 #include <cstring>
@@ -67,23 +76,7 @@ int addVertex(SurfaceMesh& m, const Eigen::RowVector3d& p) {
   return m.vertexCount() - 1;
 }
 
-class TempDir {
- public:
-  TempDir() : path_(std::filesystem::temp_directory_path() / ("tetrig_rigbuild_" + std::to_string(::getpid()))) {
-    std::filesystem::create_directories(path_);
-  }
-  ~TempDir() {
-    std::error_code ec;
-    std::filesystem::remove_all(path_, ec);
-  }
-  std::filesystem::path write(const std::string& name, const std::string& text) const {
-    std::ofstream(path_ / name, std::ios::binary) << text;
-    return path_ / name;
-  }
-
- private:
-  std::filesystem::path path_;
-};
+using tetrig::test::TempDir;  // a fresh private directory per test (tests/support/temp_dir.hpp)
 
 std::string base64(const std::vector<unsigned char>& bytes) {
   static const char* kAlphabet = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
@@ -382,6 +375,308 @@ TEST(ImportSurface, MissingAndUnreadableFiles) {
   }
   EXPECT_THROW((void)importSurface(dir.write("garbage.ply", "ply\nthis is not a ply file\n")), RigBuildError);
   EXPECT_THROW((void)importSurface(dir.write("points.obj", "v 0 0 0\nv 1 0 0\n")), RigBuildError);
+}
+
+// ---- hostile files: refused by the check before assimp, with one line, at once ----
+
+// Imports a crafted file that must be refused. Returns the message after checking that it is one
+// line naming the file and that the refusal came quickly (these files cost assimp gigabytes,
+// minutes or a crash before the check).
+std::string refusal(const std::filesystem::path& path, const ImportOptions& options = {}) {
+  const auto t0 = std::chrono::steady_clock::now();
+  std::string msg;
+  try {
+    (void)importSurface(path, options);
+    ADD_FAILURE() << path.filename() << " was imported";
+  } catch (const RigBuildError& e) {
+    msg = e.what();
+  }
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 5.0) << path.filename();
+  EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
+  EXPECT_EQ(msg.rfind(path.string() + ": ", 0), 0u) << msg;
+  return msg;
+}
+
+// A tetrahedron, outward: OFF/PLY text pieces.
+const char* kTetVertices = "0 0 0\n1 0 0\n0 1 0\n0 0 1\n";
+const char* kTetFaces = "3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n";
+const char* kPlyTetHeader = "element vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+                            "element face 4\nproperty list uchar int vertex_indices\nend_header\n";
+
+template <class T>
+void appendLe(std::string& out, T v) {
+  unsigned char b[sizeof(T)];
+  std::memcpy(b, &v, sizeof(T));
+  out.append(reinterpret_cast<const char*>(b), sizeof(T));  // the host is little-endian
+}
+
+// Binary little-endian PLY of the tetrahedron (float x y z, uchar count + int indices); the
+// header's counts and the last face's list length can be overridden.
+std::string binaryPlyTet(const std::string& vertex_count = "4", const std::string& face_count = "4", std::uint8_t last_list = 3) {
+  std::string b = "ply\nformat binary_little_endian 1.0\nelement vertex " + vertex_count +
+                  "\nproperty float x\nproperty float y\nproperty float z\nelement face " + face_count +
+                  "\nproperty list uchar int vertex_indices\nend_header\n";
+  const float v[4][3] = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  const std::int32_t f[4][3] = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
+  for (const auto& p : v) {
+    for (const float x : p) appendLe(b, x);
+  }
+  for (int i = 0; i < 4; ++i) {
+    appendLe(b, static_cast<std::uint8_t>(i == 3 ? last_list : 3));
+    for (const std::int32_t x : f[i]) appendLe(b, x);
+  }
+  return b;
+}
+
+TEST(HostileSurfaceFiles, OffCountsBeyondTheData) {
+  const TempDir dir("tetrig-hostile");
+  // Controls: the same tetrahedron, honest, imports (also with comments before the counts).
+  EXPECT_EQ(importSurface(dir.write("ok.off", std::string("OFF\n# c\n4 4 6\n") + kTetVertices + kTetFaces)).triangleCount(), 4);
+  // 42 bytes declaring 9 faces and holding 1 (assimp: assertion abort).
+  const auto short_faces = dir.write("short_faces.off", "OFF\n4 9 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 1 2\n");
+  std::string msg = refusal(short_faces);
+  EXPECT_CONTAINS(msg, "declares 4 vertices and 9 faces, but the data ends after the vertices and 1 faces");
+  // 2^28 vertices or faces in 44 bytes (assimp: 3-6 GB, then an abort or bad_alloc).
+  msg = refusal(dir.write("huge_v.off", "OFF\n268435456 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"));
+  EXPECT_CONTAINS(msg, "declares 268435456 vertices and 1 faces, but the data ends after 4 vertices");  // the face line read as one
+  msg = refusal(dir.write("huge_f.off", "OFF\n3 268435456 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"));
+  EXPECT_CONTAINS(msg, "268435456 faces");
+  // Counts beyond 32 bits (assimp would wrap them).
+  EXPECT_CONTAINS(refusal(dir.write("wrap.off", "OFF\n4294967300 4 0\n")), "vertex count 4294967300 is too large");
+  // Two vertices on one line: assimp reads one per line, so its faces run out.
+  EXPECT_CONTAINS(refusal(dir.write("two_per_line.off", std::string("OFF\n4 4 0\n0 0 0 1 0 0\n0 1 0\n0 0 1\n") + kTetFaces)),
+                  "one vertex or face per line");
+  EXPECT_CONTAINS(refusal(dir.write("nv_word.off", "OFF\nfour 4 0\n")), "vertex count is 'four', not a number");
+}
+
+TEST(HostileSurfaceFiles, OffStructureTheImporterMisreads) {
+  const TempDir dir("tetrig-hostile");
+  const std::string head = "OFF\n4 4 0\n";
+  // An out-of-range corner (assimp clamps it to the last vertex: a wrong surface, no error).
+  EXPECT_CONTAINS(refusal(dir.write("range.off", head + kTetVertices + "3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 7\n")),
+                  "line 10 (face 3): corner '7' is not a vertex index in [0, 3]");
+  // A comment line inside the data (assimp reads it as a vertex).
+  EXPECT_CONTAINS(refusal(dir.write("comment.off", head + "0 0 0\n# note\n1 0 0\n0 1 0\n0 0 1\n" + kTetFaces)),
+                  "line 4 (vertex 1) is a comment inside the vertex list");
+  // A face of 12 corners (assimp drops faces of more than 9 corners: a hole, no error).
+  std::string prism = "OFF\n24 14 0\n";
+  for (int z = 0; z < 2; ++z) {
+    for (int i = 0; i < 12; ++i) prism += std::to_string(std::cos(i * M_PI / 6)) + " " + std::to_string(std::sin(i * M_PI / 6)) + " " + std::to_string(z) + "\n";
+  }
+  prism += "12 11 10 9 8 7 6 5 4 3 2 1 0\n12 12 13 14 15 16 17 18 19 20 21 22 23\n";
+  for (int i = 0; i < 12; ++i) prism += "4 " + std::to_string(i) + " " + std::to_string((i + 1) % 12) + " " + std::to_string(12 + (i + 1) % 12) + " " + std::to_string(12 + i) + "\n";
+  EXPECT_CONTAINS(refusal(dir.write("prism12.off", prism)), "face 0) has 12 corners; the OFF importer reads faces of at most 9 corners");
+  // A line longer than assimp's 4096-byte line buffer (it overflows it and splits the line).
+  std::string long_line = head + kTetVertices + "3 0 2 1" + std::string(5000, ' ') + "\n3 0 1 3\n3 0 3 2\n3 1 2 3\n";
+  EXPECT_CONTAINS(refusal(dir.write("long.off", long_line)), "bytes long; the OFF importer reads lines of at most 4095 bytes");
+  // A face with fewer corners than it says, and variants assimp reads differently.
+  EXPECT_CONTAINS(refusal(dir.write("few.off", head + kTetVertices + "3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2\n")), "says 3 corners but lists 2");
+  EXPECT_CONTAINS(refusal(dir.write("h.off", std::string("4OFF\n4 4 0\n") + kTetVertices + kTetFaces)), "not supported");
+  EXPECT_CONTAINS(refusal(dir.write("b.off", "OFF BINARY\n")), "binary OFF is not supported");
+  EXPECT_CONTAINS(refusal(dir.write("nul.off", std::string("OFF\n4 4 0\n0 0 0\n1 0", 18) + std::string(1, '\0') + " 0\n")), "control character");
+}
+
+TEST(HostileSurfaceFiles, PlyCountsBeyondTheData) {
+  const TempDir dir("tetrig-hostile");
+  EXPECT_EQ(importSurface(dir.write("ok.ply", std::string("ply\nformat ascii 1.0\n") + kPlyTetHeader + kTetVertices + kTetFaces)).triangleCount(), 4);
+  EXPECT_EQ(importSurface(dir.write("ok_bin.ply", binaryPlyTet())).triangleCount(), 4);
+  // Empty elements (with or without properties) hold no data, in either format.
+  std::string empty_bin = binaryPlyTet();
+  empty_bin.insert(empty_bin.find("element vertex"), "element nothing 0\nelement edge 0\nproperty int vertex1\n");
+  EXPECT_EQ(importSurface(dir.write("empty_bin.ply", empty_bin)).triangleCount(), 4);
+  // Under 200 bytes claiming 2^28 vertices or faces (assimp: 3-5 GB and minutes, or bad_alloc).
+  std::string msg = refusal(dir.write("huge_v_ascii.ply", "ply\nformat ascii 1.0\nelement vertex 268435456\nproperty float x\nproperty float y\n"
+                                                          "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n"));
+  EXPECT_CONTAINS(msg, "the file ends before element 'vertex' item 1 (line 11)");
+  msg = refusal(dir.write("huge_f_ascii.ply", std::string("ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+                                                          "element face 268435456\nproperty list uchar int vertex_indices\nend_header\n") + kTetVertices + kTetFaces));
+  EXPECT_CONTAINS(msg, "the file ends before element 'face' item 4");
+  msg = refusal(dir.write("huge_v_bin.ply", binaryPlyTet("268435456")));
+  EXPECT_CONTAINS(msg, "element 'vertex' declares 268435456 items of 12 bytes but only");
+  msg = refusal(dir.write("huge_f_bin.ply", binaryPlyTet("4", "268435456")));
+  EXPECT_CONTAINS(msg, "the file ends inside element 'face' item 4");
+  // A list longer than the data (assimp reads past its buffer: a segmentation fault).
+  msg = refusal(dir.write("long_list.ply", binaryPlyTet("4", "4", 200)));
+  EXPECT_CONTAINS(msg, "element 'face' item 3");
+  EXPECT_CONTAINS(msg, "lists 200 values of 4 bytes but only 12 bytes remain");
+  // Too few items on an ascii line (assimp fills in zeros), blank lines (assimp reads an empty item).
+  EXPECT_CONTAINS(refusal(dir.write("short_line.ply", std::string("ply\nformat ascii 1.0\n") + kPlyTetHeader + "0 0 0\n1 0\n0 1 0\n0 0 1\n" + kTetFaces)),
+                  "property 'z' is missing");
+  EXPECT_CONTAINS(refusal(dir.write("blank.ply", std::string("ply\nformat ascii 1.0\n") + kPlyTetHeader + "0 0 0\n1 0 0\n\n0 1 0\n0 0 1\n" + kTetFaces)),
+                  "element 'vertex' item 2 (line 12) is empty");
+}
+
+TEST(HostileSurfaceFiles, PlyStructureTheImporterMisreads) {
+  const TempDir dir("tetrig-hostile");
+  const std::string ascii = "ply\nformat ascii 1.0\n";
+  // Out-of-range and negative corners (assimp keeps them: reads outside its vertex array).
+  EXPECT_CONTAINS(refusal(dir.write("range.ply", ascii + kPlyTetHeader + kTetVertices + "3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 9\n")),
+                  "element 'face' item 3 (line 17): corner 9 is not a vertex index in [0, 3]");
+  EXPECT_CONTAINS(refusal(dir.write("negative.ply", ascii + kPlyTetHeader + kTetVertices + "3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 -1\n")),
+                  "corner -1 is not a vertex index");
+  // An element assimp does not know, holding data (assimp reads its count as 0 and misreads the rest: an abort).
+  EXPECT_CONTAINS(refusal(dir.write("unknown.ply", ascii + "element foo 2\nproperty float a\n" + kPlyTetHeader + "5\n6\n" + kTetVertices + kTetFaces)),
+                  "element 'foo' holds 2 items, but the PLY importer only reads");
+  // ... which is fine when it holds nothing.
+  EXPECT_EQ(importSurface(dir.write("unknown_empty.ply", ascii + "element foo 0\nproperty float a\n" + kPlyTetHeader + kTetVertices + kTetFaces)).triangleCount(), 4);
+  // Triangle strips (assimp keeps one triangle per strip).
+  EXPECT_CONTAINS(refusal(dir.write("strips.ply", ascii + "element vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+                                                  "element tristrips 1\nproperty list int int vertex_indices\nend_header\n" + kTetVertices + "6 0 1 2 3 0 1\n")),
+                  "triangle strips (element 'tristrips') are read wrongly");
+  // A face of no corners (assimp: an assertion abort), a list in element vertex, more texture
+  // coordinates than corners (assimp reads past the face's corners).
+  EXPECT_CONTAINS(refusal(dir.write("zero.ply", ascii + kPlyTetHeader + kTetVertices + "3 0 2 1\n3 0 1 3\n3 0 3 2\n0\n")), "a face with no corners");
+  EXPECT_CONTAINS(refusal(dir.write("vlist.ply", ascii + "element vertex 4\nproperty float x\nproperty float y\nproperty float z\nproperty list uchar float w\n"
+                                                 "element face 4\nproperty list uchar int vertex_indices\nend_header\n0 0 0 0\n1 0 0 0\n0 1 0 0\n0 0 1 0\n" + kTetFaces)),
+                  "list property 'w' is not read safely");
+  EXPECT_CONTAINS(refusal(dir.write("uv.ply", ascii + "element vertex 4\nproperty float x\nproperty float y\nproperty float z\nelement face 4\n"
+                                              "property list uchar int vertex_indices\nproperty list uchar float texcoord\nend_header\n" + kTetVertices +
+                                              "3 0 2 1 6 0 0 0 0 0 0\n3 0 1 3 6 0 0 0 0 0 0\n3 0 3 2 6 0 0 0 0 0 0\n3 1 2 3 8 0 0 0 0 0 0 0 0\n")),
+                  "8 texture coordinates for 3 corners");
+  // A binary header with CR LF line ends (assimp starts the data one byte early).
+  std::string crlf = binaryPlyTet();
+  const std::size_t end = crlf.find("end_header\n") + 11;
+  std::string header = crlf.substr(0, end), fixed;
+  for (const char c : header) fixed += c == '\n' ? std::string("\r\n") : std::string(1, c);
+  EXPECT_CONTAINS(refusal(dir.write("crlf.ply", fixed + crlf.substr(end))), "line feed alone");
+  // Header lines the importer reads differently, and names shown escaped.
+  // A comment between two properties (assimp drops the properties after it: y and z read as 0).
+  EXPECT_CONTAINS(refusal(dir.write("comment.ply", ascii + "element vertex 4\nproperty float x\ncomment c\nproperty float y\nproperty float z\n"
+                                                   "element face 4\nproperty list uchar int vertex_indices\nend_header\n" + kTetVertices + kTetFaces)),
+                  "header line 6: a property after a comment or obj_info line");
+  EXPECT_CONTAINS(refusal(dir.write("lead.ply", ascii + " element vertex 4\n")), "starts with a blank");
+  EXPECT_CONTAINS(refusal(dir.write("type.ply", ascii + "element vertex 4\nproperty int64 x\n")), "unknown property type 'int64'");
+  EXPECT_CONTAINS(refusal(dir.write("esc.ply", ascii + "element \x1b[2J 3\nproperty float x\nend_header\n")), "holds a control character (\\x1b)");
+  EXPECT_CONTAINS(refusal(dir.write("bytes.ply", ascii + "element \xff\xfe 3\nproperty float x\nend_header\n")), "element '\\xff\\xfe' holds 3 items");
+}
+
+TEST(HostileSurfaceFiles, StlSizeAndObjPolygons) {
+  const TempDir dir("tetrig-hostile");
+  // A binary STL whose triangle count does not match its size.
+  std::string stl(80, ' ');
+  appendLe(stl, std::uint32_t{1} << 28);
+  stl += std::string(50, '\0');
+  EXPECT_CONTAINS(refusal(dir.write("huge.stl", stl)), "header says 268435456 triangles must be 13421772884 bytes, the file has 134");
+  EXPECT_CONTAINS(refusal(dir.write("tiny.stl", "abc")), "neither a binary STL");
+  // One face of 100k corners (assimp triangulates it in quadratic time: minutes).
+  std::ostringstream big;
+  for (int i = 0; i < 100000; ++i) big << "v " << std::cos(i * 2e-5 * M_PI) << ' ' << std::sin(i * 2e-5 * M_PI) << " 0\n";
+  big << "f";
+  for (int i = 1; i <= 100000; ++i) big << ' ' << i;
+  big << "\n";
+  EXPECT_CONTAINS(refusal(dir.write("big_face.obj", big.str())),
+                  "line 100001 (face statement) has 100000 corners, more than the 1024 a face may have");
+  // The same through line continuations.
+  std::string split = "v 0 0 0\nf";
+  for (int i = 0; i < 1100; ++i) split += i % 100 == 99 ? " 1 \\\n" : " 1";
+  EXPECT_CONTAINS(refusal(dir.write("split.obj", split + "\n")), "line 2 (face statement) has 1100 corners");
+  // Many polygons within the per-face limit add up (the triangulation budget).
+  std::string many = "v 0 0 0\n";
+  for (int f = 0; f < 300; ++f) {
+    many += "f";
+    for (int i = 0; i < 300; ++i) many += " 1";
+    many += "\n";
+  }
+  EXPECT_CONTAINS(refusal(dir.write("many.obj", many)), "add up to more triangulation work than allowed");
+  // Within the limits a polygon imports: a 64-sided prism (two 64-gons and 64 quads).
+  std::ostringstream prism;
+  for (int z = 0; z < 2; ++z) {
+    for (int i = 0; i < 64; ++i) prism << "v " << std::cos(i * M_PI / 32) << ' ' << std::sin(i * M_PI / 32) << ' ' << z << "\n";
+  }
+  prism << "f";
+  for (int i = 64; i >= 1; --i) prism << ' ' << i;
+  prism << "\nf";
+  for (int i = 65; i <= 128; ++i) prism << ' ' << i;
+  prism << "\n";
+  for (int i = 0; i < 64; ++i) prism << "f " << i + 1 << ' ' << (i + 1) % 64 + 1 << ' ' << (i + 1) % 64 + 65 << ' ' << i + 65 << "\n";
+  SurfaceMesh m = importSurface(dir.write("prism64.obj", prism.str()));
+  EXPECT_EQ(m.triangleCount(), 2 * 62 + 2 * 64);
+  const SurfaceReport r = validateSurface(m);
+  EXPECT_TRUE(r.ok()) << r.summary();
+  // An extension assimp does not know: refused, not guessed from the content by every importer.
+  EXPECT_CONTAINS(refusal(dir.write("mesh.xyz", "v 0 0 0\n")), "unknown mesh file extension '.xyz'");
+  EXPECT_CONTAINS(refusal(dir.write("mesh", "v 0 0 0\n")), "no file extension");
+}
+
+// ---- the importer runs in a child process: what the check cannot foresee ends as an error ----
+
+TEST(ImportIsolation, ChildOutcomes) {
+  // A crash, an abort, the CPU limit and the memory limit each come back as an outcome.
+  ChildOutcome c = runInChildProcess([](int) -> bool {
+    std::signal(SIGSEGV, SIG_DFL);  // (sanitizer builds catch SIGSEGV themselves)
+    std::raise(SIGSEGV);
+    return true;
+  });
+  EXPECT_FALSE(c.ok());
+  EXPECT_EQ(c.signal_number, SIGSEGV);
+  EXPECT_CONTAINS(c.describe(), "crashed with signal 11");
+  c = runInChildProcess([](int) -> bool { std::abort(); });
+  EXPECT_EQ(c.signal_number, SIGABRT);
+  ChildLimits cpu;
+  cpu.cpu_seconds = 1;
+  c = runInChildProcess([](int) -> bool {
+    volatile std::uint64_t x = 0;
+    for (;;) x = x + 1;
+  }, cpu);
+  EXPECT_EQ(c.signal_number, SIGXCPU) << c.describe();
+  EXPECT_CONTAINS(c.describe(), "CPU time limit");
+#if !defined(__SANITIZE_ADDRESS__)
+  ChildLimits memory;
+  memory.memory_bytes = 64u << 20;
+  c = runInChildProcess([](int fd) -> bool {
+    try {
+      std::vector<char> big(std::size_t{1} << 30, 1);  // 1 GiB against a 64 MiB limit
+      return big[12345] == 0;
+    } catch (const std::bad_alloc&) {
+      return writeAllToFd(fd, "bad_alloc", 9);
+    }
+  }, memory);
+  EXPECT_TRUE(c.ok()) << c.describe();
+  EXPECT_EQ(std::string(c.output.begin(), c.output.end()), "bad_alloc");
+#endif
+  // Output, exit codes and captured stdout.
+  c = runInChildProcess([](int fd) -> bool {
+    std::printf("to the log\n");
+    return writeAllToFd(fd, "result", 6);
+  }, {}, true);
+  EXPECT_TRUE(c.ok());
+  EXPECT_EQ(std::string(c.output.begin(), c.output.end()), "result");
+  EXPECT_EQ(c.log, "to the log\n");
+  c = runInChildProcess([](int) -> bool { return false; });
+  EXPECT_TRUE(c.exited);
+  EXPECT_EQ(c.exit_code, 1);
+  c = runInChildProcess([](int) -> bool { throw std::runtime_error("x"); });
+  EXPECT_EQ(c.exit_code, 2);
+}
+
+TEST(ImportIsolation, SameMeshThroughTheChildAndLimitsReported) {
+  const TempDir dir("tetrig-isolation");
+  std::ostringstream obj;
+  obj.precision(17);
+  for (int v = 0; v < 8; ++v) obj << "v " << corner(v) * 0.3 + Eigen::RowVector3d::Constant(0.1) << "\n";
+  for (const auto& q : kQuads) obj << "f " << q[0] + 1 << ' ' << q[1] + 1 << ' ' << q[2] + 1 << ' ' << q[3] + 1 << "\n";
+  const auto path = dir.write("cube.obj", obj.str());
+  ImportOptions in_process;
+  in_process.isolate = false;
+  ImportStats a_stats, b_stats;
+  const SurfaceMesh a = importSurface(path, {}, &a_stats);
+  const SurfaceMesh b = importSurface(path, in_process, &b_stats);
+  EXPECT_EQ(a.vertices, b.vertices);  // bit for bit through the pipe
+  EXPECT_EQ(a.triangles, b.triangles);
+  EXPECT_EQ(a_stats.file_to_vertex, b_stats.file_to_vertex);
+  EXPECT_TRUE(a_stats.file_order);
+  // An error inside the child comes back as the same one line.
+  const auto glb = dir.write("broken.glb", "glTF not really");
+  const std::string isolated = refusal(glb);
+  EXPECT_EQ(isolated, refusal(glb, in_process));
+  EXPECT_CONTAINS(isolated, "cannot import");
+#if !defined(__SANITIZE_ADDRESS__)
+  // The memory limit: far too small for assimp, reported as such (in the child, not a crash here).
+  ImportOptions tight;
+  tight.memory_limit_bytes = 1u << 20;
+  const std::string msg = refusal(path, tight);
+  EXPECT_CONTAINS(msg, "the import needs more memory than its limit of 1 MB");
+#endif
 }
 
 TEST(WeldVertices, MergesWithinToleranceOnly) {

@@ -12,6 +12,7 @@
 #include <cstdint>
 #include <fstream>
 #include <sstream>
+#include <streambuf>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -44,7 +45,7 @@ std::optional<Vertices> fromRows(const std::vector<std::array<double, 3>>& rows)
   return v;
 }
 
-std::optional<Vertices> readObj(std::ifstream& in) {
+std::optional<Vertices> readObj(std::istream& in) {
   std::vector<std::array<double, 3>> rows;
   std::string line;
   while (std::getline(in, line)) {
@@ -58,7 +59,7 @@ std::optional<Vertices> readObj(std::ifstream& in) {
   return fromRows(rows);
 }
 
-std::optional<Vertices> readOff(std::ifstream& in, std::uintmax_t file_bytes) {
+std::optional<Vertices> readOff(std::istream& in, std::uintmax_t file_bytes) {
   std::string line;
   auto nextLine = [&](std::string& out) {
     while (std::getline(in, out)) {
@@ -151,7 +152,7 @@ bool plyType(const std::string& t, int& size, bool& is_float, bool& is_signed) {
 }
 
 // One binary scalar as a double; false at the end of the file.
-bool readBinary(std::ifstream& in, int size, bool is_float, bool is_signed, bool big, double& out) {
+bool readBinary(std::istream& in, int size, bool is_float, bool is_signed, bool big, double& out) {
   std::array<unsigned char, 8> b{};
   if (size < 1 || size > 8 || !in.read(reinterpret_cast<char*>(b.data()), size)) return false;
   std::uint64_t u = 0;  // the value's bits, most significant byte first
@@ -166,7 +167,7 @@ bool readBinary(std::ifstream& in, int size, bool is_float, bool is_signed, bool
   return true;
 }
 
-std::optional<Vertices> readPly(std::ifstream& in, std::uintmax_t file_bytes) {
+std::optional<Vertices> readPly(std::istream& in, std::uintmax_t file_bytes) {
   std::string line;
   auto headerLine = [&]() {
     if (!std::getline(in, line)) return false;
@@ -274,6 +275,21 @@ std::optional<Vertices> readPly(std::ifstream& in, std::uintmax_t file_bytes) {
   return std::nullopt;  // no vertex element
 }
 
+// A read-only stream over bytes in memory (no copy).
+class ViewBuffer : public std::streambuf {
+ public:
+  explicit ViewBuffer(std::string_view bytes) {
+    char* p = const_cast<char*>(bytes.data());  // only read: the get area is never written
+    setg(p, p, p + bytes.size());
+  }
+};
+
+std::optional<Vertices> readList(std::istream& in, std::string_view ext, std::uintmax_t bytes) {
+  if (ext == ".obj") return readObj(in);
+  if (ext == ".off") return readOff(in, bytes);
+  return readPly(in, bytes);
+}
+
 }  // namespace
 
 std::optional<Vertices> readFileVertexList(const std::filesystem::path& path) {
@@ -283,9 +299,14 @@ std::optional<Vertices> readFileVertexList(const std::filesystem::path& path) {
   const std::uintmax_t bytes = std::filesystem::file_size(path, ec);
   std::ifstream in(path, std::ios::binary);
   if (ec || !in) return std::nullopt;
-  if (ext == ".obj") return readObj(in);
-  if (ext == ".off") return readOff(in, bytes);
-  return readPly(in, bytes);
+  return readList(in, ext, bytes);
+}
+
+std::optional<Vertices> readFileVertexList(std::string_view bytes, std::string_view extension) {
+  if (extension != ".obj" && extension != ".off" && extension != ".ply") return std::nullopt;
+  ViewBuffer buffer(bytes);
+  std::istream in(&buffer);
+  return readList(in, extension, bytes.size());
 }
 
 }  // namespace tetrig::rigbuild

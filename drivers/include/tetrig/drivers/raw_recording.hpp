@@ -24,12 +24,14 @@
 #include <cstdint>
 #include <cstdio>
 #include <filesystem>
+#include <memory>
 #include <span>
 #include <stdexcept>
 #include <string>
 #include <string_view>
 #include <vector>
 
+#include "tetrig/atomic_file.hpp"
 #include "tetrig/drivers/pacing.hpp"
 
 namespace tetrig::drivers {
@@ -65,31 +67,44 @@ struct RawRecordView {
   std::span<const std::uint8_t> bytes;
 };
 
+// Writes a recording under a temporary name beside `path` (tetrig::AtomicFile: a fresh
+// ".<name>.tmp-XXXXXX", never an existing file or a planted link) and renames it over `path` at
+// close(): an existing recording at `path` stays whole until the new one is complete, and
+// readers never see a half-written file there. The file gets 0666 minus the umask, or the mode
+// of the file it replaces. A write error abandons the recording (the temporary is removed,
+// `path` is untouched). A process killed while recording leaves its data in the temporary (a
+// valid prefix plus at most one partial record: RawRecording::load with tolerate_truncated_tail).
 class RawRecorder {
  public:
-  // Creates (truncates) `path` and writes the header. Throws RawRecordingError when the file
+  // Creates the temporary and writes the header. Throws RawRecordingError when the file
   // cannot be created or the description is longer than kRawRecordingMaxDescription.
   RawRecorder(const std::filesystem::path& path, const RawRecordingHeader& header);
   RawRecorder(const RawRecorder&) = delete;
   RawRecorder& operator=(const RawRecorder&) = delete;
-  // Flushes and closes (errors at this point are swallowed: call close() to see them).
+  // Finishes like close() (errors at this point are swallowed, and then `path` is untouched:
+  // call close() to see them).
   ~RawRecorder();
 
-  // Appends one record (buffered). Throws RawRecordingError on a write error, on a payload
-  // larger than kRawRecordingMaxPayload, or after close().
+  // Appends one record (buffered). Throws RawRecordingError on a write error (the recording is
+  // then abandoned), on a payload larger than kRawRecordingMaxPayload, or after close().
   void write(std::uint32_t channel, std::int64_t receive_ns, std::span<const std::uint8_t> bytes);
-  // Pushes buffered records to the operating system. Throws on error.
+  // Pushes buffered records to the operating system (into the temporary). Throws on error.
   void flush();
-  // Flushes and closes; throws RawRecordingError on error. Idempotent.
+  // Flushes, syncs and renames the recording to `path`; throws RawRecordingError on error (the
+  // temporary is removed, `path` untouched). Idempotent.
   void close();
 
   [[nodiscard]] std::uint64_t recordCount() const noexcept { return records_; }
   [[nodiscard]] std::uint64_t bytesWritten() const noexcept { return bytes_; }
+  // Where the data goes until close() (empty after close() or after a failure).
+  [[nodiscard]] std::filesystem::path temporaryPath() const;
 
  private:
   void put(const void* data, std::size_t size);
+  [[noreturn]] void abandon(const std::string& what);
   std::string path_;
-  std::FILE* file_ = nullptr;
+  std::unique_ptr<AtomicFile> file_;
+  std::FILE* stream_ = nullptr;  // file_'s stream
   std::uint64_t records_ = 0;
   std::uint64_t bytes_ = 0;
 };

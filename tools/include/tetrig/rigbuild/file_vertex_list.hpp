@@ -10,6 +10,7 @@
 
 #include <filesystem>
 #include <optional>
+#include <string_view>
 
 namespace tetrig::rigbuild {
 
@@ -18,5 +19,8 @@ namespace tetrig::rigbuild {
 // .obj, .off, .ply, case-insensitive) and for files this small reader cannot parse (then the
 // caller keeps the importer's order).
 std::optional<Vertices> readFileVertexList(const std::filesystem::path& path);
+
+// The same on the file's bytes in memory; `extension` is lower case with its dot (".off").
+std::optional<Vertices> readFileVertexList(std::string_view bytes, std::string_view extension);
 
 }  // namespace tetrig::rigbuild

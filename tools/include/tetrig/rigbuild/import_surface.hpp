@@ -12,9 +12,19 @@
 // ImportStats::file_to_vertex and SurfaceReport::vertex_map give the exact mapping in every case.
 // Other formats (STL, glTF, FBX, ...) get assimp's order with seams welded (first use wins).
 //
-// Offline, any thread, allocates, throws RigBuildError (file missing, unreadable, no triangles).
+// Hostile files. A mesh file is input from anyone and assimp trusts it, so: the extension must be
+// one assimp reads (its signature guessing for unknown extensions is not used); OFF, PLY, OBJ and
+// STL files are read once, checked (checkSurfaceFile: counts against the data, indices, face
+// sizes; check_surface_file.hpp) and then parsed by assimp from those same bytes in memory; and
+// assimp runs in a child process (runInChildProcess) with a memory and a CPU-time limit, so
+// that whatever the check cannot foresee in any format (a crash, an abort, a runaway allocation
+// or loop) ends as a RigBuildError, never as a crash of the tool.
+//
+// Offline, any thread, allocates, throws RigBuildError (file missing, unreadable, refused by the
+// check, refused or crashed importer, limits exceeded, no triangles).
 #pragma once
 
+#include "tetrig/rigbuild/check_surface_file.hpp"
 #include "tetrig/rigbuild/surface_mesh.hpp"
 
 #include <cstdint>
@@ -27,6 +37,16 @@ struct ImportOptions {
   // Vertices closer than weld_tolerance * (bounding-box diagonal) are merged into one (the first
   // one seen keeps its position). 0 merges only bit-identical positions.
   double weld_tolerance = 1e-7;
+  // Limits of the pre-import check of OFF, PLY, OBJ and STL files (face size, triangulation work).
+  SurfaceFileLimits file_limits;
+  // true: assimp runs in a child process with the limits below. false: in this process (for the
+  // fuzz target, which must see a crash as a crash; never for files from users).
+  bool isolate = true;
+  // The child's memory beyond what it inherits, bytes; 0: 2 GiB + 32 x the file size (the file
+  // itself: a glTF's external buffers count against the 2 GiB).
+  std::uint64_t memory_limit_bytes = 0;
+  // The child's CPU time, seconds; 0: 30 s + 2 s per MB of file.
+  std::uint64_t cpu_limit_seconds = 0;
 };
 
 struct ImportStats {
