@@ -70,8 +70,10 @@ int runDemo(const DemoOptions& options) {
     run.source = "synthetic";
     run.frames = options.frames != 0 ? options.frames : 600;
   } else {
+    // "-checked": rigs cached by builders before the alignment checks (and the relative distance
+    // limit that 0 now means) are not reused.
     const std::filesystem::path cached =
-        cacheDir() / (cacheKey(options.mesh, options.c3d) + "-" + std::to_string(options.max_marker_distance) + ".rig");
+        cacheDir() / (cacheKey(options.mesh, options.c3d) + "-" + std::to_string(options.max_marker_distance) + "-checked.rig");
     if (std::filesystem::exists(cached)) {
       if (!options.quiet) std::printf("tetrig demo: reusing the rig %s\n", cached.string().c_str());
     } else {

@@ -103,9 +103,15 @@ Eigen::Vector3d axisVector(const std::string& axis) {
 
 AlignmentResult alignMarkers(const std::vector<Eigen::Vector3d>& device_mm, const SurfaceMesh& surface,
                              const AlignmentOptions& options) {
-  if (device_mm.empty()) throw RigBuildError("marker alignment: no markers");
   if (surface.triangleCount() == 0) throw RigBuildError("marker alignment: the surface has no triangles");
   const SurfaceQuery query(surface.vertices, surface.triangles);
+  return alignMarkers(device_mm, surface, options, [&query](const Eigen::Vector3d& p) { return query.closest(p); });
+}
+
+AlignmentResult alignMarkers(const std::vector<Eigen::Vector3d>& device_mm, const SurfaceMesh& surface,
+                             const AlignmentOptions& options, const ClosestPointFunction& closest) {
+  if (device_mm.empty()) throw RigBuildError("marker alignment: no markers");
+  if (surface.triangleCount() == 0) throw RigBuildError("marker alignment: the surface has no triangles");
   const std::size_t n = device_mm.size();
 
   AlignmentResult result;
@@ -132,7 +138,7 @@ AlignmentResult alignMarkers(const std::vector<Eigen::Vector3d>& device_mm, cons
   auto evaluate = [&](const Similarity& t, std::vector<Eigen::Vector3d>* targets, std::vector<double>* dist) {
     double sum = 0;
     for (std::size_t i = 0; i < n; ++i) {
-      const ClosestPoint c = query.closest(t.apply(p[i]));
+      const ClosestPoint c = closest(t.apply(p[i]));
       if (targets) (*targets)[i] = c.point + options.marker_offset * c.normal;
       if (dist) (*dist)[i] = c.distance;
       sum += c.distance;
@@ -269,7 +275,7 @@ AlignmentResult alignMarkers(const std::vector<Eigen::Vector3d>& device_mm, cons
   double sum = 0;
   for (std::size_t i = 0; i < n; ++i) {
     result.rig_positions[i] = out.apply(device_mm[i]);
-    result.distances[i] = query.closest(result.rig_positions[i]).distance;
+    result.distances[i] = closest(result.rig_positions[i]).distance;
     sum += result.distances[i];
   }
   result.mean_distance = sum / static_cast<double>(n);

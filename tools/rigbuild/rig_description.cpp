@@ -8,6 +8,7 @@
 #include <limits>
 #include <set>
 #include <sstream>
+#include <type_traits>
 
 namespace tetrig::rigbuild {
 namespace {
@@ -41,9 +42,27 @@ class Reader {
     if (!std::isfinite(v)) fail(where, "expected a finite number");
     return v;
   }
-  std::int64_t integer(const json& j, const std::string& where) const {
-    if (!j.is_number_integer()) fail(where, "expected an integer");
-    return j.get<std::int64_t>();
+  // A JSON integer in [lo, hi], checked on the full value before any conversion: a number beyond
+  // 64 bits, a fraction, or a number written with a fraction or an exponent (2.0, 1e3) is refused,
+  // never wrapped or truncated ("rotation_steps": 4294967298 must not become 2).
+  template <typename T>
+  T integer(const json& j, const std::string& where, T lo, T hi) const {
+    static_assert(std::is_integral_v<T> && sizeof(T) <= sizeof(std::int64_t));
+    const std::string range = "an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) + "]";
+    if (j.is_number_unsigned()) {
+      const std::uint64_t v = j.get<std::uint64_t>();
+      if (hi < 0 || v > static_cast<std::uint64_t>(hi) || (lo > 0 && v < static_cast<std::uint64_t>(lo))) {
+        fail(where, "expected " + range + ", got " + std::to_string(v));
+      }
+      return static_cast<T>(v);
+    }
+    if (j.is_number_integer()) {
+      const std::int64_t v = j.get<std::int64_t>();
+      if (v < static_cast<std::int64_t>(lo) || v > static_cast<std::int64_t>(hi)) fail(where, "expected " + range + ", got " + std::to_string(v));
+      return static_cast<T>(v);
+    }
+    if (j.is_number()) fail(where, "expected " + range + ", got " + j.dump() + " (write integers without a fraction or exponent)");
+    fail(where, "expected " + range);
   }
   std::string string(const json& j, const std::string& where) const {
     if (!j.is_string()) fail(where, "expected a string");
@@ -80,9 +99,8 @@ class Reader {
       const json& v = j["vertices"];
       if (!v.is_array() || v.empty()) fail(where + ".vertices", "expected a non-empty array of vertex ids");
       for (std::size_t i = 0; i < v.size(); ++i) {
-        const std::int64_t id = integer(v[i], where + ".vertices[" + std::to_string(i) + "]");
-        if (id < 0 || id > std::numeric_limits<std::int32_t>::max()) fail(where + ".vertices", "negative or huge vertex id");
-        s.vertices.push_back(static_cast<std::int32_t>(id));
+        s.vertices.push_back(integer<std::int32_t>(v[i], where + ".vertices[" + std::to_string(i) + "]", 0,
+                                                   std::numeric_limits<std::int32_t>::max()));
       }
     }
     if (j.contains("sel_file")) {
@@ -93,7 +111,8 @@ class Reader {
       const json& v = j["sel_values"];
       if (!v.is_array() || v.empty()) fail(where + ".sel_values", "expected a non-empty array of integers");
       for (std::size_t i = 0; i < v.size(); ++i) {
-        s.sel_values.push_back(static_cast<std::int32_t>(integer(v[i], where + ".sel_values[" + std::to_string(i) + "]")));
+        s.sel_values.push_back(integer<std::int32_t>(v[i], where + ".sel_values[" + std::to_string(i) + "]",
+                                                     std::numeric_limits<std::int32_t>::min(), std::numeric_limits<std::int32_t>::max()));
       }
     } else if (j.contains("sel_values")) {
       fail(where, "sel_values without sel_file");
@@ -128,9 +147,7 @@ class Reader {
     }
     if (kinds != 1) fail(where, "give exactly one of vertices, sel_file, box, sphere, near_marker");
     if (j.contains("min_corners")) {
-      const std::int64_t c = integer(j["min_corners"], where + ".min_corners");
-      if (c < 1 || c > 4) fail(where + ".min_corners", "must be 1, 2, 3 or 4");
-      s.min_corners = static_cast<int>(c);
+      s.min_corners = integer<int>(j["min_corners"], where + ".min_corners", 1, 4);
     }
     return s;
   }
@@ -191,7 +208,9 @@ RigDescription parseRigDescription(const std::string& json_text, const std::file
   if (root.contains("format") && r.string(root["format"], "format") != "tetrig-rig") {
     r.fail("format", "expected \"tetrig-rig\"");
   }
-  if (root.contains("version") && r.integer(root["version"], "version") != 1) r.fail("version", "this program reads version 1");
+  if (root.contains("version") && r.integer<std::int64_t>(root["version"], "version", 0, std::numeric_limits<std::int32_t>::max()) != 1) {
+    r.fail("version", "this program reads version 1");
+  }
   RigDescription d;
   d.source = source;
   if (root.contains("name")) d.name = r.string(root["name"], "name");
@@ -207,9 +226,7 @@ RigDescription parseRigDescription(const std::string& json_text, const std::file
   }
   if (root.contains("mesh_up")) d.mesh_up = r.string(root["mesh_up"], "mesh_up");
   if (root.contains("tet_vertices")) {
-    const std::int64_t n = r.integer(root["tet_vertices"], "tet_vertices");
-    if (n < 4 || n > 10'000'000) r.fail("tet_vertices", "must be in [4, 10000000]");
-    d.tet_vertices = static_cast<std::int32_t>(n);
+    d.tet_vertices = r.integer<std::int32_t>(root["tet_vertices"], "tet_vertices", 4, 10'000'000);
   }
   if (root.contains("pose_transfer")) {
     const json& p = root["pose_transfer"];
@@ -217,7 +234,9 @@ RigDescription parseRigDescription(const std::string& json_text, const std::file
     if (p.contains("radius_fraction")) d.pose_radius_fraction = r.number(p["radius_fraction"], "pose_transfer.radius_fraction");
     if (!(d.pose_radius_fraction > 0)) r.fail("pose_transfer.radius_fraction", "must be positive");
     if (p.contains("max_nonzeros_per_row")) {
-      d.pose_max_nonzeros = static_cast<std::int32_t>(r.integer(p["max_nonzeros_per_row"], "pose_transfer.max_nonzeros_per_row"));
+      d.pose_max_nonzeros = r.integer<std::int32_t>(p["max_nonzeros_per_row"], "pose_transfer.max_nonzeros_per_row", 0,
+                                                    std::numeric_limits<std::int32_t>::max());
+      if (d.pose_max_nonzeros > 0 && d.pose_max_nonzeros < 4) r.fail("pose_transfer.max_nonzeros_per_row", "must be 0 (no cap) or at least 4");
     }
   }
   d.vertex_handles = r.list(root, "vertex_handles", false, false);
@@ -240,12 +259,18 @@ RigDescription parseRigDescription(const std::string& json_text, const std::file
   if (root.contains("markers")) {
     const json& m = root["markers"];
     r.allowKeys(m, "markers", {"clip", "frame", "labels", "exclude", "device_up", "alignment", "matrix", "icp_iterations", "icp_scale",
-                               "max_scale_change", "marker_offset", "fit_power", "max_distance", "faces_per_marker", "invisible_stiffness"});
+                               "max_scale_change", "marker_offset", "fit_power", "max_distance", "max_distance_fraction", "checks",
+                               "faces_per_marker", "invisible_stiffness"});
     MarkerOptions& o = d.markers;
     if (m.contains("clip")) o.clip = r.path(m["clip"], "markers.clip");
     if (m.contains("frame")) {
-      o.frame = r.integer(m["frame"], "markers.frame");
-      if (o.frame < 0) r.fail("markers.frame", "must be >= 0");
+      if (m["frame"].is_string()) {
+        // "auto": the frame that best fits the mesh's rest pose (rest_frame_search.hpp).
+        if (m["frame"].get<std::string>() != "auto") r.fail("markers.frame", "expected an integer in [0, 100000000] or \"auto\"");
+        o.frame_auto = true;
+      } else {
+        o.frame = r.integer<std::int64_t>(m["frame"], "markers.frame", 0, 100'000'000);
+      }
     }
     if (m.contains("labels")) o.labels = r.strings(m["labels"], "markers.labels");
     if (m.contains("exclude")) o.exclude = r.strings(m["exclude"], "markers.exclude");
@@ -262,18 +287,39 @@ RigDescription parseRigDescription(const std::string& json_text, const std::file
       for (std::size_t i = 0; i < 12; ++i) o.matrix.push_back(r.number(a[i], "markers.matrix[" + std::to_string(i) + "]"));
     }
     if (o.alignment == "matrix" && o.matrix.empty()) r.fail("markers", "alignment \"matrix\" needs markers.matrix");
-    if (m.contains("icp_iterations")) o.icp_iterations = static_cast<int>(r.integer(m["icp_iterations"], "markers.icp_iterations"));
-    if (o.icp_iterations < 0 || o.icp_iterations > 10000) r.fail("markers.icp_iterations", "must be in [0, 10000]");
+    if (m.contains("icp_iterations")) o.icp_iterations = r.integer<int>(m["icp_iterations"], "markers.icp_iterations", 0, 10000);
     if (m.contains("icp_scale")) o.icp_scale = r.boolean(m["icp_scale"], "markers.icp_scale");
     if (m.contains("max_scale_change")) o.max_scale_change = r.number(m["max_scale_change"], "markers.max_scale_change");
     if (!(o.max_scale_change >= 0 && o.max_scale_change < 1)) r.fail("markers.max_scale_change", "must be in [0, 1)");
     if (m.contains("marker_offset")) o.marker_offset = r.number(m["marker_offset"], "markers.marker_offset");
     if (m.contains("fit_power")) o.fit_power = r.number(m["fit_power"], "markers.fit_power");
     if (!(o.fit_power >= 1.0 && o.fit_power <= 16.0)) r.fail("markers.fit_power", "must be in [1, 16]");
-    if (m.contains("max_distance")) o.max_distance = r.number(m["max_distance"], "markers.max_distance");
-    if (!(o.max_distance > 0)) r.fail("markers.max_distance", "must be positive");
-    if (m.contains("faces_per_marker")) o.faces_per_marker = static_cast<int>(r.integer(m["faces_per_marker"], "markers.faces_per_marker"));
-    if (o.faces_per_marker < 1 || o.faces_per_marker > 16) r.fail("markers.faces_per_marker", "must be in [1, 16]");
+    if (m.contains("max_distance")) {
+      o.max_distance = r.number(m["max_distance"], "markers.max_distance");
+      if (!(*o.max_distance > 0)) r.fail("markers.max_distance", "must be positive");
+    }
+    if (m.contains("max_distance_fraction")) o.max_distance_fraction = r.number(m["max_distance_fraction"], "markers.max_distance_fraction");
+    if (!(o.max_distance_fraction > 0 && o.max_distance_fraction <= 1)) r.fail("markers.max_distance_fraction", "must be in (0, 1]");
+    if (m.contains("checks")) {
+      const json& c = m["checks"];
+      r.allowKeys(c, "markers.checks",
+                  {"scale", "pose", "min_fit_scale", "max_fit_scale", "max_extent_gap", "far_distance_fraction", "max_far_fraction"});
+      AlignmentCheckLimits& k = o.checks;
+      if (c.contains("scale")) k.check_scale = r.boolean(c["scale"], "markers.checks.scale");
+      if (c.contains("pose")) k.check_pose = r.boolean(c["pose"], "markers.checks.pose");
+      if (c.contains("min_fit_scale")) k.min_fit_scale = r.number(c["min_fit_scale"], "markers.checks.min_fit_scale");
+      if (c.contains("max_fit_scale")) k.max_fit_scale = r.number(c["max_fit_scale"], "markers.checks.max_fit_scale");
+      if (!(k.min_fit_scale > 0 && k.min_fit_scale <= k.max_fit_scale)) {
+        r.fail("markers.checks", "min_fit_scale must be positive and at most max_fit_scale");
+      }
+      if (c.contains("max_extent_gap")) k.max_extent_gap = r.number(c["max_extent_gap"], "markers.checks.max_extent_gap");
+      if (!(k.max_extent_gap > 0 && k.max_extent_gap <= 1)) r.fail("markers.checks.max_extent_gap", "must be in (0, 1]");
+      if (c.contains("far_distance_fraction")) k.far_distance_fraction = r.number(c["far_distance_fraction"], "markers.checks.far_distance_fraction");
+      if (!(k.far_distance_fraction > 0 && k.far_distance_fraction <= 1)) r.fail("markers.checks.far_distance_fraction", "must be in (0, 1]");
+      if (c.contains("max_far_fraction")) k.max_far_fraction = r.number(c["max_far_fraction"], "markers.checks.max_far_fraction");
+      if (!(k.max_far_fraction >= 0 && k.max_far_fraction <= 1)) r.fail("markers.checks.max_far_fraction", "must be in [0, 1]");
+    }
+    if (m.contains("faces_per_marker")) o.faces_per_marker = r.integer<int>(m["faces_per_marker"], "markers.faces_per_marker", 1, 16);
     if (m.contains("invisible_stiffness")) o.invisible_stiffness = r.number(m["invisible_stiffness"], "markers.invisible_stiffness");
     if (!(o.invisible_stiffness > 0)) r.fail("markers.invisible_stiffness", "must be positive");
   }
@@ -321,9 +367,7 @@ RigDescription parseRigDescription(const std::string& json_text, const std::file
         }
       }
       if (arr[i].contains("clutch_buttons")) {
-        const std::int64_t b = r.integer(arr[i]["clutch_buttons"], where + ".clutch_buttons");
-        if (b < 1 || b > 255) r.fail(where + ".clutch_buttons", "must be a button bit mask in [1, 255]");
-        p.clutch_buttons = static_cast<std::uint8_t>(b);
+        p.clutch_buttons = static_cast<std::uint8_t>(r.integer<int>(arr[i]["clutch_buttons"], where + ".clutch_buttons", 1, 255));
       }
       if (arr[i].contains("translation_scale")) p.translation_scale = r.number(arr[i]["translation_scale"], where + ".translation_scale");
       if (!(p.translation_scale > 0)) r.fail(where + ".translation_scale", "must be positive");
@@ -333,8 +377,7 @@ RigDescription parseRigDescription(const std::string& json_text, const std::file
   if (root.contains("deformer")) {
     const json& m = root["deformer"];
     r.allowKeys(m, "deformer", {"rotation_steps", "point_handle_weight"});
-    if (m.contains("rotation_steps")) d.rotation_steps = static_cast<int>(r.integer(m["rotation_steps"], "deformer.rotation_steps"));
-    if (d.rotation_steps < 0 || d.rotation_steps > 64) r.fail("deformer.rotation_steps", "must be in [0, 64]");
+    if (m.contains("rotation_steps")) d.rotation_steps = r.integer<int>(m["rotation_steps"], "deformer.rotation_steps", 0, 64);
     if (m.contains("point_handle_weight")) d.point_handle_weight = r.number(m["point_handle_weight"], "deformer.point_handle_weight");
     if (!(d.point_handle_weight > 0)) r.fail("deformer.point_handle_weight", "must be positive");
   }

@@ -13,11 +13,13 @@
 //      candidate; the candidate with the smallest mean distance wins (a free scale would shrink
 //      the marker cloud onto the surface: distances -> 0 as scale -> 0). Phase B: similarity ICP
 //      from there, the scale kept within max_scale_change of the height estimate.
+// Whether the result is plausible (scale, pose, distances) is judged by alignment_checks.hpp.
 //
 // Offline, any thread, allocates, throws RigBuildError.
 #pragma once
 
 #include "tetrig/rig_file.hpp"
+#include "tetrig/rigbuild/closest_point.hpp"
 #include "tetrig/rigbuild/surface_mesh.hpp"
 
 #include <Eigen/Core>
@@ -56,5 +58,15 @@ Eigen::Vector3d axisVector(const std::string& axis);
 
 AlignmentResult alignMarkers(const std::vector<Eigen::Vector3d>& device_mm, const SurfaceMesh& surface,
                              const AlignmentOptions& options);
+
+// Closest point on the surface to a rig-space point.
+using ClosestPointFunction = std::function<ClosestPoint(const Eigen::Vector3d&)>;
+
+// The same with the caller's closest-point function instead of the exact SurfaceQuery (e.g. an
+// approximate one when many clip frames are screened, rest_frame_search.hpp); `surface` still
+// gives the coarse estimate (bounding box, principal horizontal axis). Distances in the result
+// are `closest`'s.
+AlignmentResult alignMarkers(const std::vector<Eigen::Vector3d>& device_mm, const SurfaceMesh& surface,
+                             const AlignmentOptions& options, const ClosestPointFunction& closest);
 
 }  // namespace tetrig::rigbuild

@@ -10,6 +10,7 @@
 #pragma once
 
 #include "tetrig/rig_file.hpp"
+#include "tetrig/rigbuild/alignment_checks.hpp"
 #include "tetrig/rigbuild/surface_mesh.hpp"
 
 #include <Eigen/Core>
@@ -32,7 +33,7 @@ struct Selection {
   Eigen::Vector3d center = Eigen::Vector3d::Zero();                             // kSphere
   double radius = 0.0;                     // kSphere, kNearMarker (rig units)
   std::string marker;                      // kNearMarker: label
-  int min_corners = 3;                     // a tet is selected when >= this many corners are (1..4)
+  int min_corners = 4;                     // a tet is selected when >= this many corners are (1..4); 4: the region never grows past the selection
   std::string where;                       // JSON path, for messages
 };
 
@@ -51,6 +52,7 @@ struct PointHandleSpec {
 struct MarkerOptions {
   std::filesystem::path clip;              // C3D file; empty = no markers (the CLI's --markers wins)
   std::int64_t frame = 0;                  // rest frame, 0-based index into the clip
+  bool frame_auto = false;                 // "frame": "auto": the frame that best fits the mesh's rest pose (rest_frame_search.hpp)
   std::vector<std::string> labels;         // empty = every labelled physical marker
   std::vector<std::string> exclude;
   std::string device_up = "z";             // C3D convention
@@ -61,9 +63,13 @@ struct MarkerOptions {
   double max_scale_change = 0.25;          // ICP scale kept within (1 +- this) of the height-based estimate
   double marker_offset = 0.0;              // expected marker height above the skin (rig units) during ICP
   double fit_power = 2.0;                  // ICP minimises sum |r|^p (2: least squares; IRLS otherwise)
-  double max_distance = 0.10;              // rig units; a marker further from the surface stops the build
+  std::optional<double> max_distance;      // rig units; a marker further from the surface stops the build
+  double max_distance_fraction = 0.06;     // ... without max_distance: this fraction of the mesh's bounding-box diagonal
+  AlignmentCheckLimits checks;             // plausibility of an automatic alignment (alignment_checks.hpp)
   int faces_per_marker = 3;                // invisible tets per marker (closest qualifying boundary faces)
   double invisible_stiffness = 0.1;        // stiffness weight of invisible tets (body tets: 1)
+  bool keep_zero_points = false;           // C3D samples at x = y = z = 0 with residual 0 are valid, not
+                                           // gaps (drivers::C3DReadOptions; CLI --keep-zero-markers)
 };
 
 // A pose sensor (e.g. "hydra1", one Razer Hydra controller) driving an oriented region handle of
