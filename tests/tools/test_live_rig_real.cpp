@@ -66,8 +66,11 @@ const Scene& cachedScene(const std::string& key, const SceneBuilder& build) {
   return *s;
 }
 
+// accept_pose_mismatch: the rig frame is not in the mesh's T-pose, or the markers cover only part of
+// it (the occlusion tests below need a rig, not a good one; the build refuses such a frame otherwise).
 std::unique_ptr<Scene> buildScene(const std::filesystem::path& mesh, const std::filesystem::path& rig_clip, std::int64_t frame,
-                                  double max_distance, std::vector<std::string> exclude, const std::filesystem::path& drive_clip) {
+                                  double max_distance, std::vector<std::string> exclude, const std::filesystem::path& drive_clip,
+                                  bool accept_pose_mismatch = false) {
   rigbuild::BuildRigInputs in;
   in.mesh = mesh;
   in.clip = rig_clip;
@@ -75,6 +78,7 @@ std::unique_ptr<Scene> buildScene(const std::filesystem::path& mesh, const std::
   in.tet_vertices = 1500;
   in.max_marker_distance = max_distance;
   in.description.markers.exclude = std::move(exclude);
+  in.accept_pose_mismatch = accept_pose_mismatch;
   in.check_deformer = false;
   auto scene = std::make_unique<Scene>(Scene{rigbuild::buildRig(in), drivers::C3DClip::load(drive_clip), {}});
   scene->labels = pointLabels(scene->clip);
@@ -313,8 +317,10 @@ TEST(LiveRigReal, Hdm05OccludedMarkersAgainstTheUnoccludedRun) {
     EXPECT_GE(near[w].size(), 10u);
     EXPECT_LE(jump[w], reference_motion) << windows[w].name;
   }
-  // Measured bounds (docs/live.md, "Occlusion"), with a margin over the printed values.
-  EXPECT_LE(error[0], 0.015);
+  // Measured bounds (docs/live.md, "Occlusion"), with a margin over the printed values. They
+  // belong to one tessellation: across five tet meshes of the same budget (issue 13's decimation
+  // and interior points, docs/live.md) the wrist error ranged 14-30 mm, the knee 5-8, the head 57-98.
+  EXPECT_LE(error[0], 0.035);
   EXPECT_LE(error[1], 0.012);
   EXPECT_LE(error[2], 0.085);  // all four head markers: nothing measures the head's own turn
   EXPECT_LE(extra[0], 0.0025);
@@ -325,9 +331,9 @@ TEST(LiveRigReal, Hdm05OccludedMarkersAgainstTheUnoccludedRun) {
   EXPECT_LE(final_difference, 0.002);
   // Keeping the offset (in the anchor's frame) follows the unoccluded run closer where the
   // occluded markers pulled the body away from their rest offsets (the head, the knee).
-  EXPECT_LE(kept_error[0], 0.015);
+  EXPECT_LE(kept_error[0], 0.030);
   EXPECT_LE(kept_error[1], 0.7 * error[1]);
-  EXPECT_LE(kept_error[2], 0.5 * error[2]);
+  EXPECT_LE(kept_error[2], 0.7 * error[2]);
 }
 
 TEST(LiveRigReal, Hdm05NoAllocationPerFrame) {
@@ -376,7 +382,7 @@ TEST(LiveRigReal, Sample20ShortGapsAgainstInterpolatedGaps) {
   // from frame 20 (all 39 points valid; median marker distance 5.3 cm, max 12.4 cm after the
   // automatic alignment); point39 is never valid and left out. The points have no labels: the rig
   // and the source both call them "point<p>".
-  const Scene& scene = cachedScene("sample20", [&] { return buildScene(man, clip, 20, 0.15, {"point39"}, clip); });
+  const Scene& scene = cachedScene("sample20", [&] { return buildScene(man, clip, 20, 0.15, {"point39"}, clip, true); });
   ASSERT_EQ(scene.rig.markers.size(), 39u);
   const drivers::C3DClip& c = scene.clip;
   // The reference: every gap with samples on both sides filled by linear interpolation (gaps are
@@ -483,7 +489,7 @@ TEST(LiveRigReal, PigWalkLfhdGapRigFromTheStaticTrial) {
   // arm markers (arms hang down there, the mesh's are horizontal; with them the automatic heading
   // comes out 180 degrees off). The walk's arm markers are then unknown labels, ignored.
   const std::vector<std::string> arms{"LELB", "LWRA", "LWRB", "LFIN", "RELB", "RWRA", "RWRB", "RFIN"};
-  const Scene& scene = cachedScene("pig", [&] { return buildScene(man, still, 0, 0.10, arms, walk); });
+  const Scene& scene = cachedScene("pig", [&] { return buildScene(man, still, 0, 0.10, arms, walk, true); });
   ASSERT_EQ(scene.rig.markers.size(), 27u);
   ClipRun run(scene);
   EXPECT_EQ(run.binding().matched, 27);

@@ -5,6 +5,7 @@
 #include "tetrig/rigbuild/bind_markers.hpp"
 #include "tetrig/rigbuild/boundary_surface.hpp"
 #include "tetrig/rigbuild/import_surface.hpp"
+#include "tetrig/rigbuild/tet_quality.hpp"
 #include "tetrig/rigbuild/tetrahedralize_surface.hpp"
 #include "tetrig/rigbuild/validate_surface.hpp"
 #include "tetrig/tet_mesh_io.hpp"
@@ -53,15 +54,21 @@ struct MarkerSet {
   std::vector<Eigen::Vector3d> device_mm;
 };
 
-MarkerSet readMarkers(const std::filesystem::path& clip_path, std::int64_t frame, const MarkerOptions& options) {
-  const drivers::C3DClip clip = drivers::C3DClip::load(clip_path);
+// A clip and the points of it that become markers (markers.labels, or every labelled physical
+// marker; minus markers.exclude), named without the subject prefix.
+struct MarkerClip {
+  std::filesystem::path path;
+  drivers::C3DClip clip;
+  std::vector<int> points;
+  std::vector<std::string> labels;
+};
+
+MarkerClip openMarkerClip(const std::filesystem::path& clip_path, const MarkerOptions& options) {
+  drivers::C3DReadOptions read;
+  read.keep_zero_points = options.keep_zero_points;
+  MarkerClip mc{clip_path, drivers::C3DClip::load(clip_path, read), {}, {}};
+  const drivers::C3DClip& clip = mc.clip;
   if (clip.frameCount() == 0) throw RigBuildError(clip_path.string() + ": the clip has no frames");
-  if (frame < 0 || static_cast<std::size_t>(frame) >= clip.frameCount()) {
-    throw RigBuildError(clip_path.string() + ": rest frame " + std::to_string(frame) + " is outside the clip (0.." +
-                        std::to_string(clip.frameCount() - 1) + ")");
-  }
-  MarkerSet set;
-  const float* pos = clip.positions(static_cast<std::size_t>(frame));
   std::vector<std::string> wanted = options.labels;
   for (int p = 0; p < clip.pointCount(); ++p) {
     std::string label = clip.labels()[static_cast<std::size_t>(p)];
@@ -76,19 +83,47 @@ MarkerSet readMarkers(const std::filesystem::path& clip_path, std::int64_t frame
       continue;
     }
     if (std::find(options.exclude.begin(), options.exclude.end(), label) != options.exclude.end()) continue;
-    if (!clip.isValid(static_cast<std::size_t>(frame), p)) {
-      throw RigBuildError(clip_path.string() + ": marker " + label + " is not valid in rest frame " + std::to_string(frame) +
-                          ": choose another frame (--frame) or exclude the marker");
-    }
-    if (std::find(set.labels.begin(), set.labels.end(), label) != set.labels.end()) {
+    if (std::find(mc.labels.begin(), mc.labels.end(), label) != mc.labels.end()) {
       throw RigBuildError(clip_path.string() + ": two markers are labelled " + label + ": exclude one");
     }
-    const double k = clip.unitsToMm();
-    set.labels.push_back(label);
-    set.device_mm.emplace_back(k * pos[3 * p], k * pos[3 * p + 1], k * pos[3 * p + 2]);
+    mc.points.push_back(p);
+    mc.labels.push_back(label);
   }
   if (!wanted.empty()) throw RigBuildError(clip_path.string() + ": marker " + wanted.front() + " named in markers.labels is not in the clip");
-  if (set.labels.empty()) throw RigBuildError(clip_path.string() + ": no labelled markers to bind");
+  if (mc.labels.empty()) throw RigBuildError(clip_path.string() + ": no labelled markers to bind");
+  return mc;
+}
+
+// The selected markers of `frame` in device mm; false (and the first invalid marker's index in
+// *invalid) when one is not valid there.
+bool markersAt(const MarkerClip& mc, std::int64_t frame, std::vector<Eigen::Vector3d>& out, std::size_t* invalid = nullptr) {
+  const std::size_t f = static_cast<std::size_t>(frame);
+  const float* pos = mc.clip.positions(f);
+  const double k = mc.clip.unitsToMm();
+  out.clear();
+  for (std::size_t i = 0; i < mc.points.size(); ++i) {
+    const int p = mc.points[i];
+    if (!mc.clip.isValid(f, p)) {
+      if (invalid) *invalid = i;
+      return false;
+    }
+    out.emplace_back(k * pos[3 * p], k * pos[3 * p + 1], k * pos[3 * p + 2]);
+  }
+  return true;
+}
+
+MarkerSet readMarkers(const MarkerClip& mc, std::int64_t frame) {
+  if (frame < 0 || static_cast<std::size_t>(frame) >= mc.clip.frameCount()) {
+    throw RigBuildError(mc.path.string() + ": rest frame " + std::to_string(frame) + " is outside the clip (0.." +
+                        std::to_string(mc.clip.frameCount() - 1) + ")");
+  }
+  MarkerSet set;
+  set.labels = mc.labels;
+  std::size_t invalid = 0;
+  if (!markersAt(mc, frame, set.device_mm, &invalid)) {
+    throw RigBuildError(mc.path.string() + ": marker " + mc.labels[invalid] + " is not valid in rest frame " + std::to_string(frame) +
+                        ": choose another frame (--frame) or exclude the marker");
+  }
   return set;
 }
 
@@ -193,7 +228,15 @@ std::vector<std::uint8_t> resolveVertices(const Context& ctx, const Selection& s
 }
 
 std::vector<std::int32_t> resolveTets(const Context& ctx, const Selection& s, const std::string& what) {
-  const std::vector<std::uint8_t> mask = resolveVertices(ctx, s, what);
+  std::vector<std::uint8_t> mask = resolveVertices(ctx, s, what);
+  // A selection of surface vertices reaches TetGen's interior points under it (extendSelectionInward).
+  if (!ctx.tet_input && (s.kind == Selection::Kind::kVertices || s.kind == Selection::Kind::kSelFile)) {
+    std::vector<std::uint8_t> is_surface(mask.size(), 0);
+    for (const std::int32_t t : ctx.fine_to_tet) {
+      if (t >= 0) is_surface[static_cast<std::size_t>(t)] = 1;
+    }
+    extendSelectionInward(*ctx.body, is_surface, mask);
+  }
   std::vector<std::int32_t> tets;
   for (std::int32_t t = 0; t < ctx.body->tetCount(); ++t) {
     int corners = 0;
@@ -268,6 +311,12 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
 
   if (!std::filesystem::exists(inputs.mesh)) {
     throw RigBuildError(inputs.mesh.string() + ": no such file (--mesh)");
+  }
+  // Nothing would drive a rig without handles: say so before any heavy work.
+  const std::optional<std::filesystem::path> clip = inputs.clip ? inputs.clip : (mopt.clip.empty() ? std::nullopt : std::optional(mopt.clip));
+  if (!clip && desc.vertex_handles.empty() && desc.region_handles.empty() && desc.point_handles.empty()) {
+    throw RigBuildError("the rig would have no handles, so nothing could move it: add markers (--markers CLIP.c3d) or a rig description "
+                        "(--rig RIG.json) with vertex_handles, region_handles or point_handles (docs/rig-format.md)");
   }
   if (isTetMeshPath(inputs.mesh)) {
     report.tet_input = true;
@@ -368,8 +417,165 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
       for (std::int32_t v = 0; v < fine.vertexCount(); ++v) ctx.file_to_fine[static_cast<std::size_t>(v)] = v;
       report.notes.push_back("vertex ids refer to the repaired surface's order (the format has no shared vertex list)");
     }
-    t0 = Clock::now();
-    prog.begin("decimating to " + std::to_string(target) + " vertices and tetrahedralizing (TetGen)");
+  }
+  // Unit and axes of the rig.
+  std::string unit = desc.mesh_unit;
+  if (unit == "auto") {
+    const Eigen::Vector3d up = axisVector(desc.mesh_up).cwiseAbs();
+    const double height = (fine.vertices.colwise().maxCoeff() - fine.vertices.colwise().minCoeff()).dot(up);
+    unit = height > 100 ? "mm" : height > 10 ? "cm" : "m";
+    report.notes.push_back("mesh unit taken as " + unit + " from its height " + fmt("%.4g", height));
+  }
+  rig.unit = unit;
+  rig.alignment.rig_units_per_mm = rigUnitsPerMm(unit);
+  rig.alignment.linear = rig.alignment.rig_units_per_mm * Eigen::Matrix3d::Identity();
+  rig.alignment.rig_up = desc.mesh_up;
+  rig.alignment.device_up = mopt.device_up;
+
+  // Markers: rest frame (given or searched), alignment, plausibility and distance checks, all
+  // before decimation and TetGen: a clip that does not fit the mesh stops the build in seconds.
+  MarkerSet markers;
+  std::vector<Eigen::Vector3d> marker_rig;
+  std::vector<double> marker_distance;
+  if (clip) {
+    auto t0 = Clock::now();
+    const MarkerClip source = openMarkerClip(*clip, mopt);
+    AlignmentOptions aopt;
+    aopt.device_up = mopt.device_up;
+    aopt.rig_up = desc.mesh_up;
+    aopt.rig_units_per_mm = rig.alignment.rig_units_per_mm;
+    aopt.mode = mopt.alignment;
+    aopt.matrix = mopt.matrix;
+    aopt.icp_iterations = mopt.icp_iterations;
+    aopt.icp_scale = mopt.icp_scale;
+    aopt.max_scale_change = mopt.max_scale_change;
+    aopt.marker_offset = mopt.marker_offset;
+    aopt.fit_power = mopt.fit_power;
+    // The scale and pose checks judge an automatic fit; "units" and "matrix" are the user's own
+    // transform (the distance limit below still applies to them).
+    const bool automatic = aopt.mode == "auto";
+    AlignmentCheckLimits all_checks = mopt.checks;
+    if (inputs.min_fit_scale) all_checks.min_fit_scale = *inputs.min_fit_scale;
+    if (inputs.max_fit_scale) all_checks.max_fit_scale = *inputs.max_fit_scale;
+    if (!(all_checks.min_fit_scale > 0 && all_checks.min_fit_scale <= all_checks.max_fit_scale)) {
+      throw RigBuildError("the fit scale range " + fmt("%.4g", all_checks.min_fit_scale) + ".." + fmt("%.4g", all_checks.max_fit_scale) +
+                          " is empty: --min-fit-scale must be positive and at most --max-fit-scale");
+    }
+    all_checks.check_scale = automatic;
+    all_checks.check_pose = automatic;
+    AlignmentCheckLimits limits = all_checks;
+    limits.check_scale = automatic && mopt.checks.check_scale && !inputs.accept_implausible_alignment;
+    limits.check_pose = automatic && mopt.checks.check_pose && !inputs.accept_implausible_alignment && !inputs.accept_pose_mismatch;
+
+    const bool frame_auto = inputs.frame_auto || (!inputs.frame && mopt.frame_auto);
+    std::int64_t frame = inputs.frame.value_or(mopt.frame);
+    std::string frame_text = "frame " + std::to_string(frame);
+    if (frame_auto) {
+      prog.begin("searching " + clip->filename().string() + " for the frame that fits the mesh's rest pose");
+      RestFrameSearchOptions sopt;
+      sopt.progress = [&prog](double f) { prog.update(f); };
+      RestFrameSearch found;
+      try {
+        found = searchRestFrame(
+            static_cast<std::int64_t>(source.clip.frameCount()),
+            [&source](std::int64_t f, std::vector<Eigen::Vector3d>& out) { return markersAt(source, f, out); }, source.labels, fine, aopt,
+            desc.mesh_up, limits, sopt);
+      } catch (const RigBuildError& e) {
+        throw RigBuildError(clip->string() + ": --frame auto: " + e.what());
+      }
+      frame = found.frame;
+      frame_text = "frame " + std::to_string(frame) + " (chosen by --frame auto)";
+      const double rate = source.clip.frameRate();
+      const std::string when = rate > 0 ? " (" + fmt("%.3f", static_cast<double>(frame) / rate) + " s)" : std::string();
+      const std::string line = "--frame auto chose frame " + std::to_string(frame) + when + " of " + std::to_string(found.clip_frames) +
+                               ": fit scale " + fmt("%.4g", found.chosen.fit_scale) + ", median marker distance about " +
+                               fmt("%.3g", found.chosen.median_distance) + " " + unit + " (searched " + std::to_string(found.searched) +
+                               " frames, " + std::to_string(found.plausible) + " plausible)";
+      prog.end("frame " + std::to_string(frame) + when + ", fit scale " + fmt("%.4g", found.chosen.fit_scale) + " (" +
+               std::to_string(found.plausible) + " of " + std::to_string(found.searched) + " frames searched fit)");
+      report.notes.push_back(line);
+      report.frame_search = found;
+    }
+    report.rest_frame = frame;
+    prog.begin("aligning markers of " + clip->filename().string() + " (frame " + std::to_string(frame) + ")");
+    markers = readMarkers(source, frame);
+    aopt.progress = [&prog](double f) { prog.update(f); };
+    AlignmentResult aligned = alignMarkers(markers.device_mm, fine, aopt);
+    rig.alignment = aligned.alignment;
+    marker_rig = aligned.rig_positions;
+    marker_distance = aligned.distances;
+    report.align_seconds = since(t0);
+    prog.end(std::to_string(markers.labels.size()) + " markers, distance to surface median " + fmt("%.4g", aligned.median_distance) +
+             " max " + fmt("%.4g", aligned.max_distance) + " " + unit + ", scale " + fmt("%.4f", aligned.alignment.fit_scale));
+    report.alignment = aligned;
+
+    // Plausibility: every check measured; those not overridden decide.
+    const AlignmentCheck measured =
+        checkAlignment(fine, desc.mesh_up, marker_rig, marker_distance, markers.labels, aligned.alignment.fit_scale, all_checks);
+    const AlignmentCheck decided =
+        checkAlignment(fine, desc.mesh_up, marker_rig, marker_distance, markers.labels, aligned.alignment.fit_scale, limits);
+    report.alignment_check = measured;
+    if (automatic) report.notes.push_back("alignment checks: " + measured.summary());
+    if (!decided.ok()) {
+      std::string what;
+      for (const auto* list : {&decided.scale_failures, &decided.pose_failures}) {
+        for (const std::string& f : *list) what += (what.empty() ? "" : "; ") + f;
+      }
+      std::string todo;
+      if (!decided.scale_failures.empty()) {
+        const Eigen::Vector3d up = axisVector(desc.mesh_up).cwiseAbs();
+        const double height = (fine.vertices.colwise().maxCoeff() - fine.vertices.colwise().minCoeff()).dot(up);
+        const Eigen::Vector3d device_up = axisVector(mopt.device_up).cwiseAbs();
+        double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+        for (const Eigen::Vector3d& m : markers.device_mm) {
+          lo = std::min(lo, m.dot(device_up));
+          hi = std::max(hi, m.dot(device_up));
+        }
+        todo += "check the mesh's unit (taken as " + unit + ": the mesh is " + fmt("%.4g", height) + " " + unit + " tall, the markers span " +
+                fmt("%.4g", hi - lo) + " mm; --mesh-unit) and that the markers belong to a body like this mesh (--min-fit-scale / "
+                "--max-fit-scale widen the range)";
+      }
+      if (!decided.pose_failures.empty()) {
+        todo += std::string(todo.empty() ? "" : "; ") + "the clip's " + frame_text +
+                " is not in the mesh's rest pose (e.g. arms down on a T-pose mesh) or the markers cover only part of the body: choose a "
+                "frame in the mesh's pose (--frame N, or --frame auto) or a calibration clip, or pass --accept-pose-mismatch for a "
+                "partial marker set";
+      }
+      throw RigBuildError(clip->string() + ": " + frame_text + ": the marker alignment is implausible: " + what + ". To fix: " + todo +
+                          " (--accept-implausible-alignment builds anyway)");
+    }
+    if (!measured.ok()) {
+      std::string what;
+      for (const auto* list : {&measured.scale_failures, &measured.pose_failures}) {
+        for (const std::string& f : *list) what += (what.empty() ? "" : "; ") + f;
+      }
+      report.notes.push_back("implausible alignment accepted as asked: " + what);
+    }
+
+    // Distance limit: explicit (absolute) or a fraction of the mesh's size.
+    const double diagonal = (fine.vertices.colwise().maxCoeff() - fine.vertices.colwise().minCoeff()).norm();
+    const std::optional<double> absolute = inputs.max_marker_distance ? inputs.max_marker_distance : mopt.max_distance;
+    const double limit = absolute ? *absolute : mopt.max_distance_fraction * diagonal;
+    const std::string limit_text = fmt("%.4g", limit) + " " + unit +
+                                   (absolute ? std::string() : " (" + fmt("%.3g", 100.0 * mopt.max_distance_fraction) + " % of the mesh's diagonal)");
+    report.marker_distance_limit = limit;
+    std::string far;
+    std::size_t worst = 0;
+    for (std::size_t i = 0; i < marker_distance.size(); ++i) {
+      if (marker_distance[i] > marker_distance[worst]) worst = i;
+      if (marker_distance[i] > limit) far += (far.empty() ? "" : ", ") + markers.labels[i] + " (" + fmt("%.4g", marker_distance[i]) + ")";
+    }
+    if (!far.empty()) {
+      throw RigBuildError("marker " + markers.labels[worst] + " is " + fmt("%.4g", marker_distance[worst]) + " " + unit +
+                          " from the surface after alignment, beyond the limit " + limit_text + " (too far: " + far +
+                          "); check the clip's rest frame and axes, exclude the marker, or raise --max-marker-distance");
+    }
+  }
+
+  // Surface input: the coarse tet mesh and B.
+  if (!report.tet_input) {
+    auto t0 = Clock::now();
+    prog.begin("decimating and tetrahedralizing (TetGen) to " + std::to_string(target) + " tet vertices");
     DecimateOptions dec;
     dec.target_vertices = target;
     CoarseRig coarse = buildCoarseTetMesh(fine, dec);
@@ -385,7 +591,8 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
                              fmt("%.4g", coarse.repair.max_displacement) + ")");
     }
     report.tetrahedralize_seconds = since(t0);
-    prog.end(std::to_string(body.vertexCount()) + " vertices, " + std::to_string(body.tetCount()) + " tets");
+    prog.end(std::to_string(body.vertexCount()) + " vertices (" + std::to_string(body.vertexCount() - coarse.tets.interior_vertices) +
+             " on the surface), " + std::to_string(body.tetCount()) + " tets; " + tetQuality(body).summary());
     t0 = Clock::now();
     prog.begin("pose-transfer weights B");
     PoseTransferOptions popt;
@@ -402,63 +609,6 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
   report.body_vertices = body.vertexCount();
   report.body_tets = body.tetCount();
 
-  // Unit and axes of the rig.
-  std::string unit = desc.mesh_unit;
-  if (unit == "auto") {
-    const Eigen::Vector3d up = axisVector(desc.mesh_up).cwiseAbs();
-    const double height = (fine.vertices.colwise().maxCoeff() - fine.vertices.colwise().minCoeff()).dot(up);
-    unit = height > 100 ? "mm" : height > 10 ? "cm" : "m";
-    report.notes.push_back("mesh unit taken as " + unit + " from its height " + fmt("%.4g", height));
-  }
-  rig.unit = unit;
-  rig.alignment.rig_units_per_mm = rigUnitsPerMm(unit);
-  rig.alignment.linear = rig.alignment.rig_units_per_mm * Eigen::Matrix3d::Identity();
-  rig.alignment.rig_up = desc.mesh_up;
-  rig.alignment.device_up = mopt.device_up;
-
-  // Markers: rest frame, alignment, distance check.
-  MarkerSet markers;
-  std::vector<Eigen::Vector3d> marker_rig;
-  std::vector<double> marker_distance;
-  const std::optional<std::filesystem::path> clip = inputs.clip ? inputs.clip : (mopt.clip.empty() ? std::nullopt : std::optional(mopt.clip));
-  if (clip) {
-    auto t0 = Clock::now();
-    const std::int64_t frame = inputs.frame.value_or(mopt.frame);
-    prog.begin("aligning markers of " + clip->filename().string() + " (frame " + std::to_string(frame) + ")");
-    markers = readMarkers(*clip, frame, mopt);
-    AlignmentOptions aopt;
-    aopt.device_up = mopt.device_up;
-    aopt.rig_up = desc.mesh_up;
-    aopt.rig_units_per_mm = rig.alignment.rig_units_per_mm;
-    aopt.mode = mopt.alignment;
-    aopt.matrix = mopt.matrix;
-    aopt.icp_iterations = mopt.icp_iterations;
-    aopt.icp_scale = mopt.icp_scale;
-    aopt.max_scale_change = mopt.max_scale_change;
-    aopt.marker_offset = mopt.marker_offset;
-    aopt.fit_power = mopt.fit_power;
-    aopt.progress = [&prog](double f) { prog.update(f); };
-    AlignmentResult aligned = alignMarkers(markers.device_mm, fine, aopt);
-    rig.alignment = aligned.alignment;
-    marker_rig = aligned.rig_positions;
-    marker_distance = aligned.distances;
-    report.align_seconds = since(t0);
-    prog.end(std::to_string(markers.labels.size()) + " markers, distance to surface median " + fmt("%.4g", aligned.median_distance) +
-             " max " + fmt("%.4g", aligned.max_distance) + " " + unit + ", scale " + fmt("%.4f", aligned.alignment.fit_scale));
-    report.alignment = aligned;
-    const double limit = inputs.max_marker_distance.value_or(mopt.max_distance);
-    std::string far;
-    std::size_t worst = 0;
-    for (std::size_t i = 0; i < marker_distance.size(); ++i) {
-      if (marker_distance[i] > marker_distance[worst]) worst = i;
-      if (marker_distance[i] > limit) far += (far.empty() ? "" : ", ") + markers.labels[i] + " (" + fmt("%.4g", marker_distance[i]) + ")";
-    }
-    if (!far.empty()) {
-      throw RigBuildError("marker " + markers.labels[worst] + " is " + fmt("%.4g", marker_distance[worst]) + " " + unit +
-                          " from the surface after alignment, beyond the limit " + fmt("%.4g", limit) + " " + unit + " (too far: " + far +
-                          "); check the clip's rest frame and axes, exclude the marker, or raise --max-marker-distance");
-    }
-  }
   if (!clip && !desc.pose_sensors.empty()) {
     rig.alignment = poseSensorAlignment(mopt, desc.mesh_up, rig.alignment.rig_units_per_mm);
     report.notes.push_back(mopt.alignment == "matrix"

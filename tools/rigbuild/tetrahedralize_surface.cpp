@@ -1,9 +1,12 @@
 // Face-constrained Delaunay tetrahedralization through TetGen 1.5 (H. Si, "TetGen, a
-// Delaunay-based quality tetrahedral mesh generator", ACM TOMS 41(2), 2015), switches "pQY".
+// Delaunay-based quality tetrahedral mesh generator", ACM TOMS 41(2), 2015), switches "pq2.0QY"
+// by default, with the tet-vertex budget shared between the decimated surface and TetGen's
+// interior points.
 // TetGen is AGPL-3: this translation unit is part of the offline tools only.
 #include "tetrig/rigbuild/tetrahedralize_surface.hpp"
 
 #include "tetrig/rigbuild/repair_self_intersections.hpp"
+#include "tetrig/rigbuild/run_in_child_process.hpp"
 
 #include <tetgen.h>
 
@@ -23,6 +26,9 @@
 
 namespace tetrig::rigbuild {
 namespace {
+
+constexpr double kBudgetTolerance = 0.03;  // accepted excess of tet vertices over the budget
+constexpr int kBudgetRounds = 5;           // decimate-and-tetrahedralize rounds to meet the budget
 
 std::string tetgenCodeMeaning(int code) {
   switch (code) {
@@ -46,123 +52,72 @@ struct TetgenOutput {
   std::vector<int> trifaces;  // with switch 'd': the faces found intersecting (3 ints each)
 };
 
-bool writeAll(int fd, const void* data, size_t bytes) {
-  const char* p = static_cast<const char*>(data);
-  while (bytes > 0) {
-    const ssize_t n = ::write(fd, p, bytes);
-    if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) return false;
-    p += n;
-    bytes -= static_cast<size_t>(n);
-  }
-  return true;
-}
-
-class PipeReader {
- public:
-  explicit PipeReader(int fd) : fd_(fd) {}
-  bool read(void* data, size_t bytes) {
-    char* p = static_cast<char*>(data);
-    while (bytes > 0) {
-      const ssize_t n = ::read(fd_, p, bytes);
-      if (n < 0 && errno == EINTR) continue;
-      if (n <= 0) return false;
-      p += n;
-      bytes -= static_cast<size_t>(n);
-    }
-    return true;
-  }
-
- private:
-  int fd_;
-};
-
-// Runs tetrahedralize() in a forked child. TetGen 1.5.0 frees its memory pools twice when it
-// throws an error code (terminatetetgen() frees them and the unwound tetgenmesh destructor frees
-// them again), which crashes the process on exactly the inputs we must refuse politely
-// (self-intersections). The child isolates that: a crash becomes an error message here.
+// Runs tetrahedralize() in a forked child (runInChildProcess). TetGen 1.5.0 frees its memory
+// pools twice when it throws an error code (terminatetetgen() frees them and the unwound
+// tetgenmesh destructor frees them again), which crashes the process on exactly the inputs we
+// must refuse politely (self-intersections). The child isolates that: a crash becomes an error
+// message here. TetGen's printf output is captured into `tetgen_text`.
 TetgenOutput runTetgenIsolated(tetgenio& in, const std::string& switch_text, std::string& tetgen_text,
                                int& signal_number) {
-  signal_number = 0;
-  std::FILE* log = std::tmpfile();
-  int fds[2];
-  if (::pipe(fds) != 0) {
-    if (log != nullptr) std::fclose(log);
-    throw RigBuildError(std::string("cannot create a pipe for TetGen: ") + std::strerror(errno));
-  }
-  std::fflush(stdout);
-  std::fflush(stderr);
-  const pid_t pid = ::fork();
-  if (pid < 0) {
-    ::close(fds[0]);
-    ::close(fds[1]);
-    if (log != nullptr) std::fclose(log);
-    throw RigBuildError(std::string("cannot fork for TetGen: ") + std::strerror(errno));
-  }
-  if (pid == 0) {
-    // Child: TetGen's printf output goes to the log file, results into the pipe.
-    ::close(fds[0]);
-    if (log != nullptr) ::dup2(::fileno(log), STDOUT_FILENO);
-    std::setvbuf(stdout, nullptr, _IONBF, 0);
-    std::vector<char> switches(switch_text.begin(), switch_text.end());
-    switches.push_back('\0');
-    tetgenio out;
-    int header[6] = {0, 0, 0, 4, 0, 0};
-    try {
-      tetrahedralize(switches.data(), &in, &out);
-    } catch (int code) {
-      header[0] = code == 0 ? -1 : code;
-    } catch (...) {
-      header[0] = -2;
-    }
-    if (header[0] == 0) {
-      header[1] = out.pointlist != nullptr ? out.numberofpoints : 0;
-      header[2] = out.tetrahedronlist != nullptr ? out.numberoftetrahedra : 0;
-      header[3] = out.numberofcorners;
-      header[4] = out.firstnumber;
-      header[5] = out.trifacelist != nullptr ? out.numberoftrifaces : 0;
-    }
-    bool ok = writeAll(fds[1], header, sizeof(header));
-    if (ok && header[0] == 0) {
-      ok = writeAll(fds[1], out.pointlist, sizeof(REAL) * 3 * static_cast<size_t>(header[1])) &&
-           writeAll(fds[1], out.tetrahedronlist, sizeof(int) * static_cast<size_t>(header[3]) * static_cast<size_t>(header[2])) &&
-           writeAll(fds[1], out.trifacelist, sizeof(int) * 3 * static_cast<size_t>(header[5]));
-    }
-    ::close(fds[1]);
-    ::_exit(ok ? 0 : 1);
-  }
-  // Parent.
-  ::close(fds[1]);
+  const ChildOutcome child = runInChildProcess(
+      [&](int fd) {
+        std::vector<char> switches(switch_text.begin(), switch_text.end());
+        switches.push_back('\0');
+        tetgenio* out = new tetgenio;  // never freed: the child ends with _exit
+        int header[6] = {0, 0, 0, 4, 0, 0};
+        try {
+          tetrahedralize(switches.data(), &in, out);
+        } catch (int code) {
+          header[0] = code == 0 ? -1 : code;
+        } catch (...) {
+          header[0] = -2;
+        }
+        if (header[0] == 0) {
+          header[1] = out->pointlist != nullptr ? out->numberofpoints : 0;
+          header[2] = out->tetrahedronlist != nullptr ? out->numberoftetrahedra : 0;
+          header[3] = out->numberofcorners;
+          header[4] = out->firstnumber;
+          header[5] = out->trifacelist != nullptr ? out->numberoftrifaces : 0;
+        }
+        bool ok = writeAllToFd(fd, header, sizeof(header));
+        if (ok && header[0] == 0) {
+          ok = writeAllToFd(fd, out->pointlist, sizeof(REAL) * 3 * static_cast<size_t>(header[1])) &&
+               writeAllToFd(fd, out->tetrahedronlist, sizeof(int) * static_cast<size_t>(header[3]) * static_cast<size_t>(header[2])) &&
+               writeAllToFd(fd, out->trifacelist, sizeof(int) * 3 * static_cast<size_t>(header[5]));
+        }
+        return ok;
+      },
+      {}, /*capture_stdout=*/true);
+  signal_number = child.exited ? 0 : child.signal_number;
+  tetgen_text = child.log;
   TetgenOutput result;
-  PipeReader reader(fds[0]);
+  const std::vector<std::uint8_t>& bytes = child.output;
   int header[6] = {0, 0, 0, 0, 0, 0};
-  bool complete = reader.read(header, sizeof(header));
+  bool complete = bytes.size() >= sizeof(header);
   if (complete) {
+    std::memcpy(header, bytes.data(), sizeof(header));
     result.error_code = header[0];
     result.corners = header[3];
     result.first_number = header[4];
     if (header[0] == 0 && header[1] >= 0 && header[2] >= 0 && header[3] >= 4 && header[3] <= 10 && header[5] >= 0) {
-      result.points.resize(static_cast<size_t>(header[1]) * 3);
-      result.tets.resize(static_cast<size_t>(header[2]) * static_cast<size_t>(header[3]));
-      result.trifaces.resize(static_cast<size_t>(header[5]) * 3);
-      complete = reader.read(result.points.data(), result.points.size() * sizeof(double)) &&
-                 reader.read(result.tets.data(), result.tets.size() * sizeof(int)) &&
-                 reader.read(result.trifaces.data(), result.trifaces.size() * sizeof(int));
+      const size_t points = static_cast<size_t>(header[1]) * 3;
+      const size_t tets = static_cast<size_t>(header[2]) * static_cast<size_t>(header[3]);
+      const size_t trifaces = static_cast<size_t>(header[5]) * 3;
+      complete = bytes.size() == sizeof(header) + points * sizeof(double) + (tets + trifaces) * sizeof(int);
+      if (complete) {
+        const std::uint8_t* p = bytes.data() + sizeof(header);
+        result.points.resize(points);
+        result.tets.resize(tets);
+        result.trifaces.resize(trifaces);
+        std::memcpy(result.points.data(), p, points * sizeof(double));
+        p += points * sizeof(double);
+        std::memcpy(result.tets.data(), p, tets * sizeof(int));
+        p += tets * sizeof(int);
+        std::memcpy(result.trifaces.data(), p, trifaces * sizeof(int));
+      }
     } else if (header[0] == 0) {
       complete = false;
     }
-  }
-  ::close(fds[0]);
-  int status = 0;
-  while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
-  }
-  if (WIFSIGNALED(status)) signal_number = WTERMSIG(status);
-  if (log != nullptr) {
-    std::rewind(log);
-    char buffer[4096];
-    size_t n = 0;
-    while ((n = std::fread(buffer, 1, sizeof(buffer), log)) > 0 && tetgen_text.size() < 65536) tetgen_text.append(buffer, n);
-    std::fclose(log);
   }
   if (!complete && result.error_code == 0) result.error_code = -3;  // crashed or truncated
   return result;
@@ -312,6 +267,65 @@ TetrahedralizeResult tetrahedralizeSurface(const SurfaceMesh& coarse, const Tetr
   return result;
 }
 
+void extendSelectionInward(const TetMesh& mesh, const std::vector<std::uint8_t>& is_surface, std::vector<std::uint8_t>& mask) {
+  const auto nv = static_cast<std::size_t>(mesh.vertexCount());
+  if (is_surface.size() != nv || mask.size() != nv) throw RigBuildError("extendSelectionInward: size mismatch");
+  // Tet-edge neighbours (CSR).
+  std::vector<std::pair<std::int32_t, std::int32_t>> edges;
+  edges.reserve(static_cast<std::size_t>(mesh.tetCount()) * 12);
+  for (std::int32_t t = 0; t < mesh.tetCount(); ++t) {
+    for (int i = 0; i < 4; ++i) {
+      for (int j = 0; j < 4; ++j) {
+        if (i != j) edges.emplace_back(mesh.tets(t, i), mesh.tets(t, j));
+      }
+    }
+  }
+  std::sort(edges.begin(), edges.end());
+  edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
+  std::vector<std::size_t> start(nv + 1, 0);
+  for (const auto& e : edges) ++start[static_cast<std::size_t>(e.first) + 1];
+  for (std::size_t v = 0; v < nv; ++v) start[v + 1] += start[v];
+  // (b) The fourth corner of a tet standing on three selected surface vertices.
+  for (std::int32_t t = 0; t < mesh.tetCount(); ++t) {
+    int selected_surface = 0;
+    std::int32_t apex = -1;
+    for (int k = 0; k < 4; ++k) {
+      const auto v = static_cast<std::size_t>(mesh.tets(t, k));
+      if (is_surface[v]) {
+        selected_surface += mask[v] ? 1 : 0;
+      } else {
+        apex = mesh.tets(t, k);
+      }
+    }
+    if (selected_surface == 3 && apex >= 0) mask[static_cast<std::size_t>(apex)] = 2;  // 2: joins, marked apart for now
+  }
+  // (a) The largest set of interior vertices whose neighbours are all selected or in the set.
+  std::vector<std::uint8_t> in = mask;
+  std::vector<std::int32_t> queue;
+  for (std::size_t v = 0; v < nv; ++v) {
+    if (!is_surface[v]) in[v] = 1;
+  }
+  // Remove interior vertices with an unselected neighbour, and propagate.
+  for (std::size_t v = 0; v < nv; ++v) {
+    if (!in[v]) queue.push_back(static_cast<std::int32_t>(v));
+  }
+  while (!queue.empty()) {
+    const auto u = static_cast<std::size_t>(queue.back());
+    queue.pop_back();
+    for (std::size_t k = start[u]; k < start[u + 1]; ++k) {
+      const auto w = static_cast<std::size_t>(edges[k].second);
+      if (!is_surface[w] && in[w] && !mask[w]) {
+        in[w] = 0;
+        queue.push_back(static_cast<std::int32_t>(w));
+      }
+    }
+  }
+  for (std::size_t v = 0; v < nv; ++v) {
+    if (!is_surface[v] && in[v]) mask[v] = 1;
+    if (mask[v] == 2) mask[v] = 1;
+  }
+}
+
 CoarseRig buildCoarseTetMesh(const SurfaceMesh& fine, const DecimateOptions& decimate,
                              const TetrahedralizeOptions& tetrahedralize, int retries,
                              const SelfIntersectionOptions& intersections) {
@@ -321,18 +335,31 @@ CoarseRig buildCoarseTetMesh(const SurfaceMesh& fine, const DecimateOptions& dec
     // 0, +3 %, -3 %, +6 %, -6 %, ...
     const int step = (attempt + 1) / 2;
     const double sign = attempt % 2 == 1 ? 1.0 : -1.0;
-    DecimateOptions d = decimate;
-    d.target_vertices = static_cast<std::int32_t>(std::lround(base * (1.0 + sign * 0.03 * step)));
+    const auto total_target = static_cast<std::int32_t>(std::lround(base * (1.0 + sign * 0.03 * step)));
+    std::int32_t surface_target = total_target;
     try {
-      rig.decimation = decimateSurface(fine, d);
-      rig.repair = repairSelfIntersections(rig.decimation.coarse, intersections);
-      if (!rig.repair.repaired()) {
-        throw RigBuildError(std::to_string(rig.repair.remaining_faces) + " of the decimated surface's faces still intersect "
-                            "after " + std::to_string(rig.repair.rounds) + " smoothing rounds (" +
-                            std::to_string(rig.repair.initial_faces) + " before)");
+      if (total_target < 4) throw RigBuildError("a tet-vertex budget of " + std::to_string(total_target) + " is below 4");
+      SurfaceDecimator decimator(fine, decimate);
+      for (int round = 1;; ++round) {
+        rig.decimation = decimator.decimateTo(surface_target);
+        rig.repair = repairSelfIntersections(rig.decimation.coarse, intersections);
+        if (!rig.repair.repaired()) {
+          throw RigBuildError(std::to_string(rig.repair.remaining_faces) + " of the decimated surface's faces still intersect "
+                              "after " + std::to_string(rig.repair.rounds) + " smoothing rounds (" +
+                              std::to_string(rig.repair.initial_faces) + " before)");
+        }
+        rig.tets = tetrahedralizeSurface(rig.decimation.coarse, tetrahedralize);
+        rig.budget_rounds = round;
+        const std::int32_t total = rig.tets.mesh.vertexCount();
+        if (total <= std::lround(total_target * (1.0 + kBudgetTolerance)) || round >= kBudgetRounds) break;
+        // TetGen's interior points took part of the budget: shrink the surface's share by the
+        // ratio found (the interior grows with the surface, so a few rounds settle it).
+        const auto next = static_cast<std::int32_t>(std::lround(static_cast<double>(surface_target) * total_target / total));
+        const std::int32_t kept = rig.decimation.coarse.vertexCount();
+        surface_target = std::max<std::int32_t>(4, std::min(next, std::min(surface_target, kept) - 1));
       }
-      rig.tets = tetrahedralizeSurface(rig.decimation.coarse, tetrahedralize);
-      rig.used_target = d.target_vertices;
+      rig.used_target = total_target;
+      rig.surface_target = surface_target;
       rig.tet_to_fine.assign(rig.tets.tet_to_coarse.size(), -1);
       for (size_t v = 0; v < rig.tet_to_fine.size(); ++v) {
         const std::int32_t c = rig.tets.tet_to_coarse[v];
@@ -340,8 +367,8 @@ CoarseRig buildCoarseTetMesh(const SurfaceMesh& fine, const DecimateOptions& dec
       }
       return rig;
     } catch (const RigBuildError& e) {
-      rig.failed_attempts.push_back("target " + std::to_string(d.target_vertices) + ": " + e.what());
-      if (fine.vertexCount() <= d.target_vertices && attempt > 0) break;  // no decimation to vary
+      rig.failed_attempts.push_back("target " + std::to_string(total_target) + " (surface " + std::to_string(surface_target) + "): " + e.what());
+      if (fine.vertexCount() <= surface_target && attempt > 0) break;  // no decimation to vary
     }
   }
   std::ostringstream msg;

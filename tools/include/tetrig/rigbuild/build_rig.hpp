@@ -4,8 +4,10 @@
 //   surface --import, validate--> fine mesh --decimate, TetGen--> body tet mesh
 //   ready tet mesh (.node/.ele, .mesh) --> body tet mesh, fine mesh = its boundary surface
 //   --> pose-transfer weights B (section 2.4)
-//   --> markers: rest frame of the clip, aligned to the fine surface (align_markers.hpp), checked
-//       against max_distance, bound by invisible tets (bind_markers.hpp), made vertex handles
+//   --> markers: rest frame of the clip (given, or --frame auto: rest_frame_search.hpp), aligned
+//       to the fine surface (align_markers.hpp), checked for plausibility (alignment_checks.hpp)
+//       and against the distance limit, all before decimation and TetGen; bound by invisible tets
+//       (bind_markers.hpp), made vertex handles
 //   --> selections of the description resolved onto tet vertices and tets
 //   --> per-tet stiffness, rigid groups, the Deformer built once as a check
 //
@@ -16,6 +18,7 @@
 #include "tetrig/rigbuild/align_markers.hpp"
 #include "tetrig/rigbuild/pose_transfer_weights.hpp"
 #include "tetrig/rigbuild/progress.hpp"
+#include "tetrig/rigbuild/rest_frame_search.hpp"
 #include "tetrig/rigbuild/rig_description.hpp"
 
 #include <cstdint>
@@ -31,8 +34,12 @@ struct BuildRigInputs {
   RigDescription description;                     // defaults when no JSON is given
   std::optional<std::filesystem::path> clip;      // overrides description.markers.clip
   std::optional<std::int32_t> tet_vertices;       // overrides description.tet_vertices
-  std::optional<std::int64_t> frame;              // overrides description.markers.frame
-  std::optional<double> max_marker_distance;      // overrides description.markers.max_distance
+  std::optional<std::int64_t> frame;              // overrides description.markers.frame (and "auto")
+  bool frame_auto = false;                        // search the clip for the rest frame (overrides frame)
+  std::optional<double> max_marker_distance;      // overrides description.markers.max_distance(_fraction)
+  bool accept_implausible_alignment = false;      // build although the scale or pose checks fail (noted in the report)
+  bool accept_pose_mismatch = false;              // ... although the pose checks fail (the scale is still checked)
+  std::optional<double> min_fit_scale, max_fit_scale;  // override description.markers.checks
   bool check_deformer = true;                     // build a Deformer from the result (factorizes once)
 };
 
@@ -43,12 +50,18 @@ struct BuildRigReport {
   std::int32_t markers = 0, invisible_tets = 0, markers_below_skin = 0;
   std::vector<std::string> marker_labels;
   std::optional<AlignmentResult> alignment;
+  std::optional<AlignmentCheck> alignment_check;  // measured whenever markers were aligned
+  std::optional<RestFrameSearch> frame_search;    // --frame auto
+  std::int64_t rest_frame = -1;                   // the clip frame the markers were bound from
+  double marker_distance_limit = 0;               // the limit applied (rig units)
   PoseTransferStats pose;
   double import_seconds = 0, tetrahedralize_seconds = 0, pose_seconds = 0, align_seconds = 0, bind_seconds = 0,
          check_seconds = 0, factorize_seconds = 0;
   std::vector<std::string> notes;                 // repairs and choices worth telling the user
 };
 
+// Throws RigBuildError before any heavy work when the rig would have no handle (no markers, no
+// vertex, region or point handle), and before decimation when the marker alignment fails a check.
 Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report = nullptr, Progress* progress = nullptr);
 
 // True for .node, .ele and .mesh (a ready tet mesh).
