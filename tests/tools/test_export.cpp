@@ -1,0 +1,663 @@
+// `tetrig export` (tools/export.hpp) on the small block rig (small_rig.hpp) and a 12-frame clip
+// (moving_clip.hpp, written by c3d_test_writer.hpp) in which the markers move and one marker is
+// occluded for four frames. Every file written is read back with an independent reader (PC2 and PLY parsed here
+// from the format facts, OBJ as text, glTF with tinygltf's loader) and compared with a LiveRig
+// fed the same clip frames (C3DPlayback::fillFrame, labels by point index) with the same budget.
+// Also: convergence, frame ranges, one-line errors, atomic output (a cancelled export leaves
+// nothing behind and never touches an existing file), and the command line.
+#include "export.hpp"
+#include "export_formats.hpp"
+#include "moving_clip.hpp"
+#include "small_rig.hpp"
+#include "tetrig/drivers/c3d_playback.hpp"
+#include "tetrig/drivers/c3d_reader.hpp"
+#include "tetrig/live_rig.hpp"
+
+#include <gtest/gtest.h>
+#include <tiny_gltf.h>
+
+#include <fcntl.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <thread>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <map>
+#include <sstream>
+#include <tuple>
+
+extern char** environ;
+
+namespace tetrig {
+namespace {
+
+using test::TempDir;
+
+constexpr std::size_t kFrames = 12;
+constexpr float kRate = test::kMovingClipRate;
+
+// The rig and clip, built once per binary (the directory is removed at exit).
+struct Scene {
+  Scene() : rig(test::buildSmallRig(dir)) {
+    rig_path = dir.writeBytes("small.rig", serializeRig(rig));
+    clip_path = dir.writeBytes("moving.c3d", test::movingClip());
+  }
+  TempDir dir;
+  Rig rig;
+  std::filesystem::path rig_path, clip_path;
+};
+const Scene& scene() {
+  static const Scene s;
+  return s;
+}
+
+// Reference: a LiveRig fed clip frames [first, end) with `iterations` per frame.
+std::vector<std::vector<float>> liveRigFrames(std::size_t first, std::size_t end, int iterations) {
+  const Scene& sc = scene();
+  const drivers::C3DClip clip = drivers::C3DClip::load(sc.clip_path);
+  drivers::C3DPlaybackOptions po;
+  po.pacing = drivers::Pacing::kAsFastAsPossible;
+  const drivers::C3DPlayback playback(clip, po);
+  LiveRig live(sc.rig);
+  EXPECT_EQ(live.bindLabels(clip.labels()).matched, 5);
+  std::vector<std::vector<float>> out;
+  MarkerFrame frame{};
+  for (std::size_t f = first; f < end; ++f) {
+    playback.fillFrame(f, f, frame);
+    std::vector<float> x(static_cast<std::size_t>(live.fineVertexCount()) * 3);
+    live.processFrame(frame, StepBudget{iterations}, x.data(), nullptr);
+    out.push_back(std::move(x));
+  }
+  return out;
+}
+
+std::vector<std::uint8_t> slurp(const std::filesystem::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  return std::vector<std::uint8_t>(std::istreambuf_iterator<char>(in), {});
+}
+
+template <class T>
+T readAt(const std::vector<std::uint8_t>& b, std::size_t offset) {
+  T v;
+  std::memcpy(&v, b.data() + offset, sizeof v);
+  return v;
+}
+
+struct Pc2 {
+  std::int32_t version = 0, points = 0, samples = 0;
+  float start = -1, rate = -1;
+  std::vector<std::vector<float>> frames;
+};
+Pc2 readPc2(const std::filesystem::path& p) {
+  const auto b = slurp(p);
+  Pc2 r;
+  EXPECT_GE(b.size(), 32u);
+  if (b.size() < 32) return r;
+  EXPECT_EQ(std::memcmp(b.data(), "POINTCACHE2\0", 12), 0);
+  r.version = readAt<std::int32_t>(b, 12);
+  r.points = readAt<std::int32_t>(b, 16);
+  r.start = readAt<float>(b, 20);
+  r.rate = readAt<float>(b, 24);
+  r.samples = readAt<std::int32_t>(b, 28);
+  const std::size_t per = static_cast<std::size_t>(r.points) * 3;
+  EXPECT_EQ(b.size(), 32 + static_cast<std::size_t>(r.samples) * per * 4);
+  for (std::int32_t s = 0; s < r.samples && b.size() >= 32 + (static_cast<std::size_t>(s) + 1) * per * 4; ++s) {
+    std::vector<float> f(per);
+    std::memcpy(f.data(), b.data() + 32 + static_cast<std::size_t>(s) * per * 4, per * 4);
+    r.frames.push_back(std::move(f));
+  }
+  return r;
+}
+
+struct TextMesh {
+  std::vector<float> v;
+  std::vector<std::int32_t> f;  // 0-based
+  std::vector<std::string> comments;
+};
+TextMesh readObj(const std::filesystem::path& p) {
+  std::ifstream in(p);
+  TextMesh m;
+  std::string line;
+  while (std::getline(in, line)) {
+    std::istringstream s(line);
+    std::string tag;
+    s >> tag;
+    if (tag == "#") {
+      m.comments.push_back(line.substr(2));
+    } else if (tag == "v") {
+      float x, y, z;
+      s >> x >> y >> z;
+      m.v.insert(m.v.end(), {x, y, z});
+    } else if (tag == "f") {
+      std::int32_t a, b, c;
+      s >> a >> b >> c;
+      m.f.insert(m.f.end(), {a - 1, b - 1, c - 1});
+    }
+  }
+  return m;
+}
+
+TextMesh readPly(const std::filesystem::path& p) {
+  const auto b = slurp(p);
+  const std::string text(b.begin(), b.end());
+  const std::size_t end = text.find("end_header\n");
+  EXPECT_NE(end, std::string::npos);
+  std::istringstream header(text.substr(0, end));
+  std::string line;
+  std::size_t vertices = 0, faces = 0;
+  TextMesh m;
+  std::getline(header, line);
+  EXPECT_EQ(line, "ply");
+  std::getline(header, line);
+  EXPECT_EQ(line, "format binary_little_endian 1.0");
+  while (std::getline(header, line)) {
+    if (line.rfind("element vertex ", 0) == 0) vertices = std::stoul(line.substr(15));
+    if (line.rfind("element face ", 0) == 0) faces = std::stoul(line.substr(13));
+    if (line.rfind("comment ", 0) == 0) m.comments.push_back(line.substr(8));
+  }
+  std::size_t at = end + 11;
+  EXPECT_EQ(b.size(), at + vertices * 12 + faces * 13);
+  if (b.size() != at + vertices * 12 + faces * 13) return m;
+  m.v.resize(vertices * 3);
+  std::memcpy(m.v.data(), b.data() + at, vertices * 12);
+  at += vertices * 12;
+  for (std::size_t i = 0; i < faces; ++i, at += 13) {
+    EXPECT_EQ(b[at], 3);
+    for (int c = 0; c < 3; ++c) m.f.push_back(readAt<std::int32_t>(b, at + 1 + 4 * static_cast<std::size_t>(c)));
+  }
+  return m;
+}
+
+std::vector<std::int32_t> rigTriangles() {
+  const LiveRig live(scene().rig);
+  return std::vector<std::int32_t>(live.fineTriangles().begin(), live.fineTriangles().end());
+}
+std::vector<float> rigRest() {
+  const LiveRig live(scene().rig);
+  return std::vector<float>(live.restPositions().begin(), live.restPositions().end());
+}
+
+tools::ExportOptions options(const std::filesystem::path& out, int iterations = 3) {
+  tools::ExportOptions o;
+  o.rig_path = scene().rig_path;
+  o.clip_path = scene().clip_path;
+  o.out = out;
+  o.iterations = iterations;
+  o.quiet = true;
+  return o;
+}
+
+double maxDifference(const std::vector<float>& a, const std::vector<float>& b) {
+  EXPECT_EQ(a.size(), b.size());
+  double worst = 0;
+  for (std::size_t i = 0; i < std::min(a.size(), b.size()); ++i) worst = std::max(worst, std::abs(static_cast<double>(a[i]) - b[i]));
+  return worst;
+}
+
+std::vector<std::string> listDir(const std::filesystem::path& dir) {
+  std::vector<std::string> names;
+  for (const auto& e : std::filesystem::directory_iterator(dir)) names.push_back(e.path().filename().string());
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
+#define EXPECT_THROW_CONTAINS(stmt, needle)                                          \
+  do {                                                                               \
+    try {                                                                            \
+      stmt;                                                                          \
+      ADD_FAILURE() << "no exception; expected one containing: " << (needle);       \
+    } catch (const std::exception& e) {                                              \
+      EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what(); \
+    }                                                                                \
+  } while (0)
+
+TEST(Export, Pc2HeaderAndSamplesAreTheLiveRigFrames) {
+  const TempDir out;
+  const tools::ExportReport r = tools::exportClip(options(out.path() / "anim.pc2"));
+  const auto reference = liveRigFrames(0, kFrames, 3);
+  const Pc2 pc2 = readPc2(out.path() / "anim.pc2");
+  EXPECT_EQ(pc2.version, 1);
+  EXPECT_EQ(pc2.points, static_cast<std::int32_t>(reference[0].size() / 3));
+  EXPECT_EQ(pc2.start, 0.0f);
+  EXPECT_EQ(pc2.rate, 1.0f);  // one sample per frame
+  ASSERT_EQ(pc2.samples, static_cast<std::int32_t>(kFrames));
+  ASSERT_EQ(pc2.frames.size(), kFrames);
+  for (std::size_t f = 0; f < kFrames; ++f) EXPECT_EQ(pc2.frames[f], reference[f]) << "frame " << f;
+  // The clip moves the mesh, and the occluded marker was predicted in frames 4..7.
+  EXPECT_GT(maxDifference(pc2.frames[kFrames - 1], rigRest()), 0.003);  // measured 6.7 mm
+  EXPECT_EQ(r.predicted_frames, 4u);
+  EXPECT_EQ(r.held_frames, 0u);
+  EXPECT_EQ(r.iterations, 3u * kFrames);
+  // The rest mesh beside it, in the same vertex order, with the machine-readable comment.
+  const TextMesh obj = readObj(out.path() / "anim.obj");
+  EXPECT_EQ(obj.v, rigRest());
+  EXPECT_EQ(obj.f, rigTriangles());
+  bool keys = false;
+  for (const std::string& c : obj.comments)
+    keys |= c.find("tetrig-export first_frame=0 frames=12 rate_hz=100 unit=m up=y vertices=" + std::to_string(pc2.points)) == 0;
+  EXPECT_TRUE(keys);
+  EXPECT_EQ(r.files, (std::vector<std::filesystem::path>{out.path() / "anim.obj", out.path() / "anim.pc2"}));
+  EXPECT_EQ(listDir(out.path()), (std::vector<std::string>{"anim.obj", "anim.pc2"}));  // no temporary left
+  EXPECT_EQ(r.bytes, std::filesystem::file_size(out.path() / "anim.obj") + std::filesystem::file_size(out.path() / "anim.pc2"));
+}
+
+TEST(Export, RangeStartsFromTheRestPoseAtItsFirstFrame) {
+  const TempDir out;
+  auto o = options(out.path() / "part.pc2", 2);
+  o.frames = "3:9";
+  (void)tools::exportClip(o);
+  const Pc2 pc2 = readPc2(out.path() / "part.pc2");
+  EXPECT_EQ(pc2.start, 3.0f);
+  ASSERT_EQ(pc2.samples, 6);
+  const auto reference = liveRigFrames(3, 9, 2);
+  for (std::size_t k = 0; k < 6; ++k) EXPECT_EQ(pc2.frames[k], reference[k]) << "sample " << k;
+  // Not the same as frames 3..8 of a run from frame 0 (the pose carries over between frames).
+  const auto whole = liveRigFrames(0, 9, 2);
+  EXPECT_GT(maxDifference(pc2.frames[0], whole[3]), 1e-6);
+}
+
+TEST(Export, ConvergenceGetsCloseToAVeryLongSolve) {
+  const TempDir out;
+  auto o = options(out.path() / "conv.pc2", 0);  // 0: iterate to convergence (the default)
+  const tools::ExportReport r = tools::exportClip(o);
+  auto tight = options(out.path() / "tight.pc2", 0);
+  tight.tolerance = 1e-6;
+  const tools::ExportReport rt = tools::exportClip(tight);
+  (void)tools::exportClip(options(out.path() / "one.pc2", 1));
+  const auto converged = readPc2(out.path() / "conv.pc2").frames, closer = readPc2(out.path() / "tight.pc2").frames,
+             one = readPc2(out.path() / "one.pc2").frames;
+  const auto reference = liveRigFrames(0, kFrames, 2000);
+  ASSERT_EQ(converged.size(), kFrames);
+  ASSERT_EQ(closer.size(), kFrames);
+  double worst_converged = 0, worst_closer = 0, worst_one = 0;
+  for (std::size_t f = 0; f < kFrames; ++f) {
+    worst_converged = std::max(worst_converged, maxDifference(converged[f], reference[f]));
+    worst_closer = std::max(worst_closer, maxDifference(closer[f], reference[f]));
+    worst_one = std::max(worst_one, maxDifference(one[f], reference[f]));
+  }
+  std::printf("largest difference from 2000 iterations per frame: tolerance 1e-4 %.3g m (%.2f iterations per frame), 1e-6 %.3g m "
+              "(%.2f), 1 iteration %.3g m\n",
+              worst_converged, static_cast<double>(r.iterations) / kFrames, worst_closer, static_cast<double>(rt.iterations) / kFrames,
+              worst_one);
+  // Measured: 9.6e-6 m at 8.3 iterations per frame (default 1e-4), 1.0e-6 m at 20.7 (1e-6), one iteration 3.7e-4 m.
+  EXPECT_LT(worst_converged, 5e-5);
+  EXPECT_LT(worst_closer, worst_converged / 3);
+  EXPECT_GT(worst_one, 10 * worst_converged);
+  EXPECT_GT(rt.iterations, r.iterations);
+  EXPECT_GT(r.iterations, kFrames * static_cast<std::uint64_t>(tools::kConvergeChunkIterations));
+  EXPECT_LE(r.max_frame_iterations, o.max_iterations);
+  EXPECT_EQ(r.capped_frames, 0u);
+  EXPECT_EQ(rt.capped_frames, 0u);
+}
+
+// Samples at exactly (0, 0, 0) with residual 0 are gaps (predicted), as in `tetrig run`, unless
+// keep_zero_markers (then measured there).
+TEST(Export, ZeroSamplesAreGapsUnlessKept) {
+  test::TestC3DSpec spec;
+  spec.floating = true;
+  spec.scale = 1.0f;
+  spec.rate = kRate;
+  spec.frames = 6;
+  spec.labels = {"TOP", "LEFT", "RIGHT", "FRONT", "BACK"};
+  for (std::size_t f = 0; f < spec.frames; ++f) {
+    for (std::size_t m = 0; m < 5; ++m) {
+      const bool zero = m == 0 && (f == 2 || f == 3);
+      spec.xyz.push_back(zero ? std::array<float, 3>{0, 0, 0} : test::smallMarkerPositionsMm()[m]);
+      spec.fourth_words.push_back(zero ? 0.0 : 515.0);  // residual word: 0 for the zero samples
+    }
+  }
+  const TempDir out;
+  auto o = options(out.path() / "z.pc2");
+  o.clip_path = out.writeBytes("zero.c3d", test::writeTestC3D(spec));
+  EXPECT_EQ(tools::exportClip(o).predicted_frames, 2u);
+  o.keep_zero_markers = true;
+  EXPECT_EQ(tools::exportClip(o).predicted_frames, 0u);
+}
+
+TEST(Export, ObjSequenceHoldsEveryFrame) {
+  const TempDir out;
+  const tools::ExportReport r = tools::exportClip(options(out.path() / "anim_###.obj"));
+  const auto reference = liveRigFrames(0, kFrames, 3);
+  const auto tris = rigTriangles();
+  std::vector<std::string> expected;
+  for (std::size_t f = 0; f < kFrames; ++f) {
+    char name[32];
+    std::snprintf(name, sizeof name, "anim_%03zu.obj", f);
+    expected.push_back(name);
+    const TextMesh m = readObj(out.path() / name);
+    EXPECT_EQ(m.v, reference[f]) << name;  // shortest round-trip decimals: exact floats
+    EXPECT_EQ(m.f, tris) << name;
+  }
+  EXPECT_EQ(listDir(out.path()), expected);  // the staging directory is gone
+  EXPECT_EQ(r.files.size(), kFrames);
+}
+
+TEST(Export, PlySequenceWithFrameNumbersOfTheRange) {
+  const TempDir out;
+  auto o = options(out.path() / "f#.ply");
+  o.frames = "8:";
+  (void)tools::exportClip(o);
+  const auto reference = liveRigFrames(8, kFrames, 3);
+  EXPECT_EQ(listDir(out.path()), (std::vector<std::string>{"f10.ply", "f11.ply", "f8.ply", "f9.ply"}));
+  for (std::size_t k = 0; k < 4; ++k) {
+    const TextMesh m = readPly(out.path() / ("f" + std::to_string(8 + k) + ".ply"));
+    EXPECT_EQ(m.v, reference[k]);
+    EXPECT_EQ(m.f, rigTriangles());
+    ASSERT_FALSE(m.comments.empty());
+  }
+}
+
+void checkGltf(const std::filesystem::path& path, bool binary) {
+  tinygltf::Model model;
+  tinygltf::TinyGLTF loader;
+  std::string err, warn;
+  const bool ok = binary ? loader.LoadBinaryFromFile(&model, &err, &warn, path.string())
+                         : loader.LoadASCIIFromFile(&model, &err, &warn, path.string());
+  ASSERT_TRUE(ok) << err;
+  EXPECT_TRUE(err.empty()) << err;
+  EXPECT_TRUE(warn.empty()) << warn;
+  ASSERT_EQ(model.meshes.size(), 1u);
+  ASSERT_EQ(model.meshes[0].primitives.size(), 1u);
+  const tinygltf::Primitive& prim = model.meshes[0].primitives[0];
+  auto floats = [&](int accessor_index) {
+    const tinygltf::Accessor& a = model.accessors[static_cast<std::size_t>(accessor_index)];
+    const tinygltf::BufferView& v = model.bufferViews[static_cast<std::size_t>(a.bufferView)];
+    EXPECT_EQ(a.componentType, TINYGLTF_COMPONENT_TYPE_FLOAT);
+    const std::size_t n = a.count * static_cast<std::size_t>(tinygltf::GetNumComponentsInType(static_cast<std::uint32_t>(a.type)));
+    std::vector<float> out(n);
+    std::memcpy(out.data(), model.buffers[static_cast<std::size_t>(v.buffer)].data.data() + v.byteOffset + a.byteOffset, n * 4);
+    return out;
+  };
+  const std::vector<float> rest = floats(prim.attributes.at("POSITION"));
+  EXPECT_EQ(rest, rigRest());
+  const tinygltf::Accessor& ia = model.accessors[static_cast<std::size_t>(prim.indices)];
+  ASSERT_EQ(ia.componentType, TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT);
+  const tinygltf::BufferView& iv = model.bufferViews[static_cast<std::size_t>(ia.bufferView)];
+  std::vector<std::int32_t> indices(ia.count);
+  std::memcpy(indices.data(), model.buffers[0].data.data() + iv.byteOffset + ia.byteOffset, ia.count * 4);
+  EXPECT_EQ(indices, rigTriangles());
+  // One morph target per frame: rest + delta = the frame (float rounding of the sum: 1e-7 m).
+  const auto reference = liveRigFrames(0, kFrames, 3);
+  ASSERT_EQ(prim.targets.size(), kFrames);
+  for (std::size_t f = 0; f < kFrames; ++f) {
+    std::vector<float> pos = floats(prim.targets[f].at("POSITION"));
+    for (std::size_t i = 0; i < pos.size(); ++i) pos[i] += rest[i];
+    EXPECT_LT(maxDifference(pos, reference[f]), 1e-7) << "frame " << f;
+  }
+  // The animation: sample k at k / rate has weight 1 on target k only.
+  ASSERT_EQ(model.animations.size(), 1u);
+  ASSERT_EQ(model.animations[0].channels.size(), 1u);
+  EXPECT_EQ(model.animations[0].channels[0].target_path, "weights");
+  EXPECT_EQ(model.animations[0].channels[0].target_node, 0);
+  const tinygltf::AnimationSampler& s = model.animations[0].samplers[0];
+  EXPECT_EQ(s.interpolation, "LINEAR");
+  const std::vector<float> times = floats(s.input), weights = floats(s.output);
+  ASSERT_EQ(times.size(), kFrames);
+  ASSERT_EQ(weights.size(), kFrames * kFrames);
+  for (std::size_t k = 0; k < kFrames; ++k) {
+    EXPECT_FLOAT_EQ(times[k], static_cast<float>(k) / kRate);
+    for (std::size_t t = 0; t < kFrames; ++t) EXPECT_EQ(weights[k * kFrames + t], k == t ? 1.0f : 0.0f);
+  }
+  ASSERT_EQ(model.nodes.size(), 1u);
+  EXPECT_EQ(model.nodes[0].mesh, 0);
+  const tinygltf::Value& info = model.asset.extras.Get("tetrig_export");
+  ASSERT_TRUE(info.IsObject());
+  EXPECT_EQ(info.Get("rate_hz").GetNumberAsDouble(), kRate);
+  EXPECT_EQ(info.Get("first_frame").GetNumberAsInt(), 0);
+  EXPECT_EQ(info.Get("frames").GetNumberAsInt(), static_cast<int>(kFrames));
+}
+
+TEST(Export, GlbParsesBackWithTheSamePositions) {
+  const TempDir out;
+  (void)tools::exportClip(options(out.path() / "anim.glb"));
+  checkGltf(out.path() / "anim.glb", true);
+  const auto b = slurp(out.path() / "anim.glb");
+  ASSERT_GE(b.size(), 12u);
+  EXPECT_EQ(std::memcmp(b.data(), "glTF", 4), 0);
+  EXPECT_EQ(readAt<std::uint32_t>(b, 8), b.size());
+}
+
+TEST(Export, GltfIsOneSelfContainedFile) {
+  const TempDir out;
+  (void)tools::exportClip(options(out.path() / "anim.gltf"));
+  checkGltf(out.path() / "anim.gltf", false);
+  EXPECT_EQ(listDir(out.path()), std::vector<std::string>{"anim.gltf"});
+}
+
+TEST(Export, ClearErrorsAndNothingWritten) {
+  const TempDir out;
+  auto with = [&](const std::string& name, const std::string& frames = "") {
+    auto o = options(out.path() / name);
+    o.frames = frames;
+    return o;
+  };
+  EXPECT_THROW_CONTAINS(tools::exportClip(with("anim.fbx")), "unknown output format '.fbx'");
+  EXPECT_THROW_CONTAINS(tools::exportClip(with("anim")), "unknown output format '(no extension)'");
+  EXPECT_THROW_CONTAINS(tools::exportClip(with("anim.obj")), "needs a frame-number pattern such as");
+  EXPECT_THROW_CONTAINS(tools::exportClip(with("a#_#.obj")), "one run of '#' only");
+  EXPECT_THROW_CONTAINS(tools::exportClip(with("a##.pc2")), "for OBJ and PLY sequences only");
+  EXPECT_THROW_CONTAINS(tools::exportClip(with("missing/a.pc2")), "does not exist");
+  EXPECT_THROW_CONTAINS(tools::exportClip(with("a.pc2", "12:")), "first frame 12 is past the end; the clip has 12 frames (0..11)");
+  EXPECT_THROW_CONTAINS(tools::exportClip(with("a.pc2", "0:13")), "end 13 is past the end");
+  EXPECT_THROW_CONTAINS(tools::exportClip(with("a.pc2", "5:5")), "the range is empty");
+  EXPECT_THROW_CONTAINS(tools::exportClip(with("a.pc2", "x:3")), "'x' is not a frame number");
+  EXPECT_THROW_CONTAINS(tools::exportClip(with("a.pc2", "3")), "expected A:B");
+  {
+    auto o = with("a.pc2");
+    o.out = out.path();
+    EXPECT_THROW_CONTAINS(tools::exportClip(o), "is a directory");
+  }
+  // A clip of other markers.
+  test::TestC3DSpec other;
+  other.floating = true;
+  other.scale = 1.0f;
+  other.frames = 2;
+  other.labels = {"ELBOW", "KNEE"};
+  other.xyz = {{0, 0, 0}, {1, 1, 1}, {0, 0, 0}, {1, 1, 1}};
+  other.valid = {true, true, true, true};
+  const TempDir clips;
+  {
+    auto o = with("a.pc2");
+    o.clip_path = clips.writeBytes("other.c3d", test::writeTestC3D(other));
+    EXPECT_THROW_CONTAINS(tools::exportClip(o), "the clip's markers share no label with the rig (rig: TOP, LEFT, RIGHT, FRONT, BACK; clip other.c3d: ELBOW, KNEE)");
+  }
+  // Frames in which no marker is measured: nothing to export (all would be the rest pose).
+  {
+    auto o = with("a.pc2", "8:12");
+    o.clip_path = clips.writeBytes("lost.c3d", test::movingClip(kFrames, true));
+    EXPECT_THROW_CONTAINS(tools::exportClip(o), "no frame in 8..11 measures any rig marker");
+  }
+  // glTF beyond its frame limit is refused before any frame is solved.
+  {
+    auto o = with("a.glb");
+    o.clip_path = clips.writeBytes("long.c3d", test::movingClip(tools::kMaxGltfFrames + 1));
+    o.on_frame = [](std::size_t, std::size_t) { ADD_FAILURE() << "a frame was solved"; };
+    EXPECT_THROW_CONTAINS(tools::exportClip(o), "1001 frames is more than 1000; export a range with --frames A:B");
+    o.frames = "0:1000";
+    o.on_frame = {};
+    (void)tools::exportClip(o);  // the limit itself is fine
+    EXPECT_TRUE(std::filesystem::exists(out.path() / "a.glb"));
+    std::filesystem::remove(out.path() / "a.glb");
+  }
+  EXPECT_TRUE(listDir(out.path()).empty());
+}
+
+// A failure after some frames were written (here: the progress callback throws) leaves no file
+// and no temporary, and an existing output keeps its old content.
+TEST(Export, CancelledExportTouchesNothing) {
+  struct Case {
+    const char* out;
+    std::vector<std::string> existing;  // sorted
+  };
+  const Case cases[] = {{"anim.pc2", {"anim.obj", "anim.pc2"}}, {"anim_##.obj", {"anim_05.obj"}}, {"anim_##.ply", {"anim_05.ply"}},
+                        {"anim.glb", {"anim.glb"}}, {"anim.gltf", {"anim.gltf"}}};
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.out);
+    const TempDir out;
+    for (const std::string& e : c.existing) out.write(e, "old " + e + "\n");
+    auto o = options(out.path() / c.out);
+    o.on_frame = [](std::size_t done, std::size_t) {
+      if (done == 6) throw std::runtime_error("cancelled at frame 6");
+    };
+    EXPECT_THROW_CONTAINS(tools::exportClip(o), "cancelled at frame 6");
+    EXPECT_EQ(listDir(out.path()), c.existing);  // no new file, no temporary
+    for (const std::string& e : c.existing) {
+      const auto bytes = slurp(out.path() / e);
+      EXPECT_EQ(std::string(bytes.begin(), bytes.end()), "old " + e + "\n");
+    }
+  }
+}
+
+TEST(Export, FormatsFromBytes) {
+  // PC2 header layout, byte for byte.
+  const auto h = tools::pc2Header(7, 2.0f, 1.0f, 5);
+  ASSERT_EQ(h.size(), tools::kPc2HeaderBytes);
+  EXPECT_EQ(std::string(reinterpret_cast<const char*>(h.data()), 12), std::string("POINTCACHE2\0", 12));
+  EXPECT_EQ(readAt<std::int32_t>(h, 12), 1);
+  EXPECT_EQ(readAt<std::int32_t>(h, 16), 7);
+  EXPECT_EQ(readAt<float>(h, 20), 2.0f);
+  EXPECT_EQ(readAt<float>(h, 24), 1.0f);
+  EXPECT_EQ(readAt<std::int32_t>(h, 28), 5);
+  EXPECT_THROW((void)tools::pc2Header(0, 0, 1, 1), std::invalid_argument);
+  // OBJ: values that need all nine digits read back exactly; bad indices are refused.
+  const std::vector<float> v = {0.1f, 1.0f / 3.0f, -2.5e-7f, 1e8f, 0, -0.0f, 3, 4, 5};
+  const std::vector<std::int32_t> f = {0, 1, 2};
+  const TempDir dir;
+  const std::vector<std::string> comment = {"hello"};
+  dir.write("t.obj", tools::objText(v, f, comment));
+  const TextMesh m = readObj(dir.path() / "t.obj");
+  EXPECT_EQ(m.v, v);
+  EXPECT_EQ(m.f, f);
+  EXPECT_EQ(m.comments, comment);
+  const std::vector<std::int32_t> bad = {0, 1, 3};
+  EXPECT_THROW((void)tools::objText(v, bad, {}), std::invalid_argument);
+  EXPECT_THROW((void)tools::plyBytes(v, bad, {}), std::invalid_argument);
+}
+
+TEST(Export, GltfUpAxisIsY) {
+  std::vector<float> p = {1, 2, 3, 4, 5, 6};
+  tools::rotateUpToY("y", p);
+  EXPECT_EQ(p, (std::vector<float>{1, 2, 3, 4, 5, 6}));
+  const std::map<std::string, std::vector<float>> expected = {
+      {"z", {1, 3, -2}}, {"-z", {1, -3, 2}}, {"x", {-2, 1, 3}}, {"-x", {2, -1, 3}}, {"-y", {1, -2, -3}}};
+  for (const auto& [up, xyz] : expected) {
+    std::vector<float> q = {1, 2, 3};
+    tools::rotateUpToY(up, q);
+    EXPECT_EQ(q, xyz) << up;
+    // The up axis itself lands on +Y.
+    std::vector<float> u = {0, 0, 0};
+    u[static_cast<std::size_t>(up.back() - 'x')] = up[0] == '-' ? -1.0f : 1.0f;
+    tools::rotateUpToY(up, u);
+    EXPECT_EQ(u, (std::vector<float>{0, 1, 0})) << up;
+  }
+  EXPECT_THROW_CONTAINS(tools::rotateUpToY("w", p), "unknown up axis 'w'");
+}
+
+TEST(Export, TargetsAndRanges) {
+  const auto seq = tools::parseExportTarget("out/anim_####.ply");
+  EXPECT_EQ(seq.format, tools::ExportFormat::kPlySequence);
+  EXPECT_EQ(tools::sequenceFramePath(seq, 7), std::filesystem::path("out/anim_0007.ply"));
+  EXPECT_EQ(tools::sequenceFramePath(seq, 123456), std::filesystem::path("out/anim_123456.ply"));
+  const auto pc2 = tools::parseExportTarget("x/walk.PC2");
+  EXPECT_EQ(pc2.format, tools::ExportFormat::kPc2);
+  EXPECT_EQ(pc2.rest_obj, std::filesystem::path("x/walk.obj"));
+  EXPECT_EQ(tools::parseExportTarget("a.GLB").format, tools::ExportFormat::kGlb);
+  EXPECT_EQ(tools::parseExportTarget("a.gltf").format, tools::ExportFormat::kGltf);
+  EXPECT_THROW_CONTAINS((void)tools::parseExportTarget("d#/a_#.obj"), "not in a directory");
+  const auto all = tools::parseFrameRange("", 10);
+  EXPECT_EQ(all.first, 0u);
+  EXPECT_EQ(all.end, 10u);
+  const auto tail = tools::parseFrameRange("4:", 10);
+  EXPECT_EQ(tail.first, 4u);
+  EXPECT_EQ(tail.end, 10u);
+  const auto head = tools::parseFrameRange(":3", 10);
+  EXPECT_EQ(head.first, 0u);
+  EXPECT_EQ(head.end, 3u);
+  EXPECT_THROW_CONTAINS((void)tools::parseFrameRange("1:2:3", 10), "expected A:B");
+  EXPECT_THROW_CONTAINS((void)tools::parseFrameRange("-1:3", 10), "not a frame number");
+}
+
+// The command line: a successful export, and one-line errors with exit status 1.
+TEST(Export, CommandLine) {
+  const TempDir out;
+  auto run = [&](const std::string& args) {
+    const std::string err = (out.path() / "stderr.txt").string(), std_out = (out.path() / "stdout.txt").string();
+    const std::string cmd = std::string("'") + TETRIG_EXE + "' export " + args + " >'" + std_out + "' 2>'" + err + "'";
+    const int raw = std::system(cmd.c_str());
+    const auto text = [](const std::string& p) {
+      const auto b = slurp(p);
+      std::filesystem::remove(p);
+      return std::string(b.begin(), b.end());
+    };
+    const std::string o_text = text(std_out);
+    return std::make_tuple(WIFEXITED(raw) ? WEXITSTATUS(raw) : -1, text(err), o_text);
+  };
+  const std::string io = "--rig '" + scene().rig_path.string() + "' --c3d '" + scene().clip_path.string() + "' ";
+  const auto ok = run(io + "--out '" + (out.path() / "a.pc2").string() + "' --iterations 3 --frames 2:6 --simple-progress");
+  EXPECT_EQ(std::get<0>(ok), 0) << std::get<1>(ok);
+  EXPECT_NE(std::get<2>(ok).find("clip frames 2..5 (4 frames, 100 Hz)"), std::string::npos) << std::get<2>(ok);
+  EXPECT_NE(std::get<1>(ok).find("tetrig export: solving 4 frames (3 iterations each)"), std::string::npos) << std::get<1>(ok);
+  const Pc2 pc2 = readPc2(out.path() / "a.pc2");
+  EXPECT_EQ(pc2.samples, 4);
+  EXPECT_EQ(pc2.frames, liveRigFrames(2, 6, 3));
+  const auto bad = run(io + "--out '" + (out.path() / "a.fbx").string() + "'");
+  const std::string& bad_err = std::get<1>(bad);
+  EXPECT_EQ(std::get<0>(bad), 1);
+  EXPECT_EQ(bad_err.rfind("tetrig export: error: --out ", 0), 0u) << bad_err;
+  EXPECT_NE(bad_err.find("unknown output format '.fbx'"), std::string::npos) << bad_err;
+  EXPECT_EQ(std::count(bad_err.begin(), bad_err.end(), '\n'), 1) << bad_err;
+  const auto range = run(io + "--out '" + (out.path() / "b.pc2").string() + "' --frames 20:30");
+  EXPECT_EQ(std::get<0>(range), 1);
+  EXPECT_NE(std::get<1>(range).find("past the end; the clip has 12 frames"), std::string::npos) << std::get<1>(range);
+  EXPECT_FALSE(std::filesystem::exists(out.path() / "b.pc2"));
+  const auto help = run("--help");
+  EXPECT_EQ(std::get<0>(help), 0);
+  for (const char* flag : {"--rig", "--c3d", "--out", "--frames", "--iterations", "--tolerance", "--max-iterations", "--rate"})
+    EXPECT_NE(std::get<2>(help).find(flag), std::string::npos) << flag;
+}
+
+// Ctrl-C (SIGINT) during a long export: one line, exit 1, and no file or temporary left.
+TEST(Export, InterruptedCommandLeavesNothing) {
+  for (const char* name : {"long.pc2", "long_####.ply"}) {
+    SCOPED_TRACE(name);
+    const TempDir out, in;
+    const auto clip = in.writeBytes("long.c3d", test::movingClip(2000));
+    const auto err = in.path() / "stderr.txt";
+    const std::vector<std::string> args = {TETRIG_EXE, "export", "--rig", scene().rig_path.string(), "--c3d", clip.string(), "--out",
+                                           (out.path() / name).string(), "--iterations", "300", "--quiet"};
+    std::vector<char*> argv;
+    for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+    argv.push_back(nullptr);
+    posix_spawn_file_actions_t fa;
+    posix_spawn_file_actions_init(&fa);
+    posix_spawn_file_actions_addopen(&fa, STDERR_FILENO, err.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    pid_t pid = -1;
+    ASSERT_EQ(posix_spawn(&pid, argv[0], &fa, nullptr, argv.data(), environ), 0);
+    posix_spawn_file_actions_destroy(&fa);
+    // Wait until it is writing (the staged files exist), then interrupt.
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+    while (listDir(out.path()).empty() && std::chrono::steady_clock::now() < deadline)
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    EXPECT_FALSE(listDir(out.path()).empty()) << "the export never started writing";
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+    kill(pid, SIGINT);
+    int status = 0;
+    ASSERT_EQ(waitpid(pid, &status, 0), pid);
+    ASSERT_TRUE(WIFEXITED(status)) << "killed by the signal instead of ending cleanly";
+    EXPECT_EQ(WEXITSTATUS(status), 1);
+    const auto text = slurp(err);
+    const std::string message(text.begin(), text.end());
+    EXPECT_EQ(message.rfind("tetrig export: error: interrupted (SIGINT) after ", 0), 0u) << message;
+    EXPECT_NE(message.find("nothing was written"), std::string::npos) << message;
+    EXPECT_TRUE(listDir(out.path()).empty()) << ::testing::PrintToString(listDir(out.path()));
+  }
+}
+
+}  // namespace
+}  // namespace tetrig
