@@ -5,6 +5,7 @@
 #include "tetrig/drivers/source_factory.hpp"
 #include "tetrig/frame_loop.hpp"
 #include "tetrig/live_rig.hpp"
+#include "tetrig/printable_text.hpp"
 #include "tetrig/rigbuild/write_file_atomic.hpp"
 #include "tetrig/shm_publisher.hpp"
 
@@ -54,9 +55,10 @@ class SignalScope {
   struct sigaction old_int_ {}, old_term_ {};
 };
 
+// Labels come from files and devices: shown escaped (tetrig/printable_text.hpp) and cut short.
 std::string joinLabels(const std::vector<std::string>& labels, std::size_t max_shown = 12) {
   std::string out;
-  for (std::size_t i = 0; i < labels.size() && i < max_shown; ++i) out += (i ? ", " : "") + labels[i];
+  for (std::size_t i = 0; i < labels.size() && i < max_shown; ++i) out += (i ? ", " : "") + printableText(labels[i], 64);
   if (labels.size() > max_shown) out += ", ... (" + std::to_string(labels.size()) + " in all)";
   return out;
 }
@@ -112,6 +114,7 @@ int runLive(const RunOptions& options) {
   open.speed = options.speed;
   open.loop = options.loop;
   open.rate_hz = options.rate_hz;
+  open.c3d_keep_zero_points = options.keep_zero_markers;
   if (options.source.rfind("synthetic", 0) == 0) {
     // The synthetic source sways the rig's own markers about their rest positions (device mm).
     open.synthetic_rest_mm = markerRestPositionsMm(rig);
@@ -145,8 +148,8 @@ int runLive(const RunOptions& options) {
                              "): build the rig from a clip of the same marker set");
   }
   if (!options.quiet) {
-    std::printf("tetrig run: %s\n", source->describe().c_str());
-    std::printf("  rig: %s: %d tet vertices, %d tets, %d fine vertices, %zu markers; %d bound by label\n", rig.name.c_str(),
+    std::printf("tetrig run: %s\n", printableText(source->describe()).c_str());
+    std::printf("  rig: %s: %d tet vertices, %d tets, %d fine vertices, %zu markers; %d bound by label\n", printableText(rig.name, 256).c_str(),
                 rig.tet_mesh.vertexCount(), rig.tet_mesh.tetCount(), live.fineVertexCount(), rig.markers.size(), binding.matched);
     if (!binding.missing.empty())
       std::printf("  note: %zu rig markers the source never names are treated as occluded: %s\n", binding.missing.size(),
@@ -285,7 +288,7 @@ int runLive(const RunOptions& options) {
   if (!options.final_obj.empty()) {
     std::vector<float> last(static_cast<std::size_t>(live.fineVertexCount()) * 3);
     live.writeLastPose(last.data(), nullptr);
-    std::string text = "# tetrig: last published pose of " + rig.name + "\n";
+    std::string text = "# tetrig: last published pose of " + printableText(rig.name, 256) + "\n";  // one comment line, whatever the name holds
     char line[96];
     for (std::size_t i = 0; i < last.size(); i += 3) {
       std::snprintf(line, sizeof line, "v %.9g %.9g %.9g\n", last[i], last[i + 1], last[i + 2]);
@@ -327,7 +330,8 @@ int runLive(const RunOptions& options) {
                        {"receive_to_pose_done", phaseJson(l.receive_to_pose_done)},
                        {"receive_to_published", phaseJson(l.receive_to_published)},
                        {"overhead", phaseJson(l.overhead)}};
-    const std::string text = j.dump(2) + "\n";
+    // Text from the rig and the source may hold bytes that are not UTF-8: replaced, not a failed run.
+    const std::string text = j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
     rigbuild::writeFileAtomically(options.stats_json, std::span<const std::uint8_t>(reinterpret_cast<const std::uint8_t*>(text.data()), text.size()));
   }
   if (consumer > 0 && consumer_status != 0) {

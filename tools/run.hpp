@@ -25,6 +25,7 @@ struct RunOptions {
   double speed = 1.0;
   std::uint16_t rate_hz = 0;            // devices: SET_RATE; c3d: overrides the clip's rate; synthetic: its rate
   bool loop = false;
+  bool keep_zero_markers = false;       // c3d: samples at x = y = z = 0 with residual 0 stay valid (default: gaps)
   bool normals = false;
   int pose_threads = 1;                 // pose transfer threads: 1, or 2 (the solver + one worker; docs/live.md)
   double occlusion_blend_ms = 150;

@@ -11,7 +11,13 @@ packages=(
   # tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev umockdev libumockdev-dev
   # offline tools (tools/: rig builder)
-  libtet1.5-dev libassimp-dev libmeshoptimizer-dev libnanoflann-dev libcli11-dev nlohmann-json3-dev
+  libtet1.5-dev libassimp-dev libnanoflann-dev libcli11-dev nlohmann-json3-dev
+  # decimation with edge-length and aspect-ratio guards (tools/rigbuild/decimate_surface.cpp)
+  libopenmesh-dev
+  # tetrig export: glTF 2.0 (tools/export_formats.cpp)
+  libtinygltf-dev
+  # the Blender add-on's headless tests (tests/tools/test_blender.cpp; numpy for its fast path)
+  blender python3-numpy
   # fuzzing and sanitizers (clang, libFuzzer, LeakSanitizer runtime)
   clang libclang-rt-14-dev
   # the latency harness's table (bench/latency.sh)

@@ -1,7 +1,10 @@
-// The `tetrig` command: build-rig, inspect, run, demo. Every subcommand has --help; errors print one
+// The `tetrig` command: build-rig, inspect, run, demo, export, pose. Every subcommand has --help; errors print one
 // line "tetrig <cmd>: error: ..." on stderr and exit non-zero; no partial output file is left.
 #include "demo.hpp"
+#include "export.hpp"
+#include "pose.hpp"
 #include "run.hpp"
+#include "tetrig/printable_text.hpp"
 #include "tetrig/rig_file.hpp"
 #include "tetrig/rigbuild/build_rig.hpp"
 #include "tetrig/rigbuild/describe_rig.hpp"
@@ -25,10 +28,12 @@ using namespace tetrig::rigbuild;
 struct BuildArgs {
   std::string mesh, out, rig_json, markers;
   std::int32_t tet_vertices = 0;
-  std::int64_t frame = -1;
+  std::string frame;                 // "" (the description's, default 0), a 0-based frame, or "auto"
   double max_marker_distance = 0;
+  double min_fit_scale = 0, max_fit_scale = 0;
+  bool accept_implausible_alignment = false, accept_pose_mismatch = false;
   std::string mesh_unit, mesh_up, device_up, alignment;
-  bool quiet = false, simple = false, list_markers = false;
+  bool quiet = false, simple = false, list_markers = false, keep_zero_markers = false;
 };
 
 int buildRigCommand(const BuildArgs& a) {
@@ -41,12 +46,21 @@ int buildRigCommand(const BuildArgs& a) {
   if (!a.mesh_up.empty()) desc.mesh_up = a.mesh_up;
   if (!a.device_up.empty()) desc.markers.device_up = a.device_up;
   if (!a.alignment.empty()) desc.markers.alignment = a.alignment;
+  if (a.keep_zero_markers) desc.markers.keep_zero_points = true;
   BuildRigInputs in;
   in.mesh = a.mesh;
   in.description = desc;
   if (!a.markers.empty()) in.clip = a.markers;
   if (a.tet_vertices > 0) in.tet_vertices = a.tet_vertices;
-  if (a.frame >= 0) in.frame = a.frame;
+  if (a.frame == "auto") {
+    in.frame_auto = true;
+  } else if (!a.frame.empty()) {
+    in.frame = std::stoll(a.frame);  // checked by the option's validator
+  }
+  if (a.min_fit_scale > 0) in.min_fit_scale = a.min_fit_scale;
+  if (a.max_fit_scale > 0) in.max_fit_scale = a.max_fit_scale;
+  in.accept_implausible_alignment = a.accept_implausible_alignment;
+  in.accept_pose_mismatch = a.accept_pose_mismatch;
   if (a.max_marker_distance > 0) in.max_marker_distance = a.max_marker_distance;
   Progress progress("tetrig build-rig", a.quiet ? Progress::Mode::kQuiet : a.simple ? Progress::Mode::kSimple : Progress::Mode::kAuto);
   BuildRigReport report;
@@ -55,7 +69,7 @@ int buildRigCommand(const BuildArgs& a) {
   const std::vector<std::uint8_t> bytes = serializeRig(rig);
   writeFileAtomically(a.out, bytes);
   progress.end(std::to_string(bytes.size()) + " bytes");
-  for (const std::string& n : report.notes) progress.note("note: " + n);
+  for (const std::string& n : report.notes) progress.note("note: " + printableText(n));  // notes may quote labels from the clip
   if (!a.quiet) {
     std::printf("%s", describeRig(rig, static_cast<std::int64_t>(bytes.size()), a.list_markers).c_str());
   }
@@ -82,12 +96,34 @@ int main(int argc, char** argv) {
   build_cmd->add_option("--out", build.out, "Rig file to write (atomically replaced)")->required();
   build_cmd->add_option("--rig", build.rig_json, "Rig description JSON (handles, regions, rigid groups, stiffness, markers; docs/rig-format.md)");
   build_cmd->add_option("--markers", build.markers, "C3D clip whose rest frame gives the markers to bind (overrides markers.clip)");
-  build_cmd->add_option("--tet-vertices", build.tet_vertices, "Decimation target: tet-mesh surface vertices (default 2500)")
+  build_cmd->add_flag("--keep-zero-markers", build.keep_zero_markers,
+                      "C3D samples at x = y = z = 0 with residual 0 are valid points (default: gaps)");
+  build_cmd->add_option("--tet-vertices", build.tet_vertices, "Tet-vertex budget: surface vertices the decimation keeps plus TetGen's interior points (default 2500)")
       ->check(CLI::Range(4, 10000000));
-  build_cmd->add_option("--frame", build.frame, "Rest frame of the clip, 0-based (default 0: the first)")->check(CLI::Range(0, 100000000));
+  build_cmd->add_option("--frame", build.frame,
+                        "Rest frame of the clip, 0-based (default 0: the first), or auto: the frame that best fits the mesh's rest pose")
+      ->check([](const std::string& v) -> std::string {
+        if (v == "auto") return {};
+        std::size_t used = 0;
+        try {
+          const long long f = std::stoll(v, &used);
+          if (used == v.size() && f >= 0 && f <= 100000000) return {};
+        } catch (const std::exception&) {
+        }
+        return "expected a frame number in [0, 100000000] or auto";
+      });
   build_cmd->add_option("--max-marker-distance", build.max_marker_distance,
-                        "Stop when a marker is further than this from the surface after alignment, rig units (default 0.1)")
+                        "Stop when a marker is further than this from the surface after alignment, rig units "
+                        "(default: 6 % of the mesh's bounding-box diagonal)")
       ->check(CLI::Range(1e-6, 1e6));
+  build_cmd->add_option("--min-fit-scale", build.min_fit_scale, "Refuse an automatic alignment whose fit scale is below this (default 0.85)")
+      ->check(CLI::Range(1e-6, 1e6));
+  build_cmd->add_option("--max-fit-scale", build.max_fit_scale, "Refuse an automatic alignment whose fit scale is above this (default 1.18)")
+      ->check(CLI::Range(1e-6, 1e6));
+  build_cmd->add_flag("--accept-pose-mismatch", build.accept_pose_mismatch,
+                      "Build although the markers do not cover the mesh's extent in its rest pose (a partial marker set)");
+  build_cmd->add_flag("--accept-implausible-alignment", build.accept_implausible_alignment,
+                      "Build although the automatic alignment fails the scale or pose checks (docs/rig-builder.md)");
   build_cmd->add_option("--mesh-unit", build.mesh_unit, "Unit of the mesh: m, cm, mm or auto (default m)");
   build_cmd->add_option("--mesh-up", build.mesh_up, "Up axis of the mesh: x, y, z, -x, -y, -z (default y)");
   build_cmd->add_option("--device-up", build.device_up, "Up axis of the marker clip (default z, the C3D convention)");
@@ -110,7 +146,8 @@ int main(int argc, char** argv) {
   demo_cmd->add_option("--mesh", demo.mesh, "Real data: a surface mesh (with --c3d); the rig is built once and cached");
   demo_cmd->add_option("--c3d", demo.c3d, "Real data: the C3D clip that drives the mesh (with --mesh)");
   demo_cmd->add_option("--max-marker-distance", demo.max_marker_distance,
-                       "Real data: stop when a marker is further than this from the surface after alignment, rig units (default 0.1)")
+                       "Real data: stop when a marker is further than this from the surface after alignment, rig units "
+                       "(default: 6 % of the mesh's bounding-box diagonal)")
       ->check(CLI::Range(1e-6, 1e6));
   demo_cmd->add_option("--publish", demo.publish, "Shared-memory segment name (default: tetrig-demo-<pid>)");
   demo_cmd->add_option("--iterations", demo.iterations, "Iterations per frame (also bounded by the budget)")
@@ -140,6 +177,8 @@ int main(int argc, char** argv) {
   run_cmd->add_flag("--as-fast-as-possible", run.as_fast_as_possible, "Playback sources: no pacing (offline runs)");
   run_cmd->add_option("--speed", run.speed, "Playback speed factor (real-time pacing)")->capture_default_str()->check(CLI::Range(0.01, 100.0));
   run_cmd->add_flag("--loop", run.loop, "Playback sources: start again at the end");
+  run_cmd->add_flag("--keep-zero-markers", run.keep_zero_markers,
+                    "c3d: samples at x = y = z = 0 with residual 0 are valid points (default: gaps)");
   run_cmd->add_option("--rate", run.rate_hz, "Frame rate in Hz: asked of a device (SET_RATE), or overriding a clip's or the synthetic rate")
       ->check(CLI::Range(1, 65535));
   run_cmd->add_flag("--normals", run.normals, "Also publish per-vertex normals");
@@ -160,6 +199,49 @@ int main(int argc, char** argv) {
   run_cmd->add_option("--shm-mode", shm_mode, "Segment permissions in octal (default 600: owner only)");
   run_cmd->add_flag("-q,--quiet", run.quiet, "Only errors");
 
+  tetrig::tools::ExportOptions exp;
+  CLI::App* export_cmd = app.add_subcommand(
+      "export", "Run a clip offline through a rig at full quality and write the fine-mesh animation (PC2 + OBJ, OBJ/PLY sequence, glTF)");
+  export_cmd->add_option("--rig", exp.rig_path, "Rig file (tetrig build-rig)")->required();
+  export_cmd->add_option("--c3d", exp.clip_path, "C3D clip that drives the rig (bound by marker label, as tetrig run binds it)")->required();
+  export_cmd->add_option("--out", exp.out,
+                         "Output, format from the extension: FILE.pc2 (+ FILE.obj, the rest mesh), NAME_####.obj or NAME_####.ply "
+                         "(one file per frame; the #s become the clip frame number), FILE.gltf or FILE.glb (docs/export.md)")
+      ->required();
+  export_cmd->add_option("--frames", exp.frames, "Clip frames A:B (0-based, B exclusive; A: or :B), default the whole clip");
+  export_cmd->add_option("--iterations", exp.iterations, "Exactly this many solver iterations per frame (default: iterate to convergence)")
+      ->check(CLI::Range(1, 100000));
+  export_cmd->add_option("--tolerance", exp.tolerance,
+                         "Convergence: stop once no fine vertex moved more than this fraction of the mesh's bounding-box diagonal in 4 iterations")
+      ->capture_default_str()
+      ->check(CLI::Range(1e-12, 1.0));
+  export_cmd->add_option("--max-iterations", exp.max_iterations, "Convergence: at most this many iterations per frame")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 100000));
+  export_cmd->add_option("--occlusion-blend-ms", exp.occlusion_blend_ms, "Blend time when a marker drops out or returns (as tetrig run)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 10000.0));
+  export_cmd->add_flag("--keep-zero-markers", exp.keep_zero_markers,
+                       "Samples at x = y = z = 0 with residual 0 are valid points, not gaps (as tetrig run)");
+  export_cmd->add_option("--rate", exp.rate_hz, "Frame rate in Hz instead of the clip's (glTF sample times)")->check(CLI::Range(0.001, 100000.0));
+  export_cmd->add_flag("--simple-progress", exp.simple_progress, "Plain progress lines even on a terminal");
+  export_cmd->add_flag("-q,--quiet", exp.quiet, "No progress and no summary");
+
+  tetrig::tools::PoseOptions pose;
+  CLI::App* pose_cmd = app.add_subcommand("pose", "Pose a rig: rigid transforms (.def files) for its region handles -> the fine mesh as OBJ");
+  pose_cmd->add_option("RIG", pose.rig_path, "Rig file (tetrig build-rig)")->required();
+  pose_cmd->add_option("--region", pose.regions,
+                       "NAME=FILE.def: region handle NAME takes the 4x4 rigid transform in FILE.def (deformation-survey format; "
+                       "repeat for several regions; the others stay at rest)")
+      ->required();
+  pose_cmd->add_option("--out", pose.out, "OBJ file to write (atomically replaced), vertices in the rig's fine-mesh order")->required();
+  pose_cmd->add_option("--iterations", pose.iterations, "Exactly this many solver iterations (default: until the energy stops changing)")
+      ->check(CLI::Range(1, 10000000));
+  pose_cmd->add_option("--max-iterations", pose.max_iterations, "Convergence: fail after this many iterations")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 10000000));
+  pose_cmd->add_flag("-q,--quiet", pose.quiet, "No summary");
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -171,6 +253,8 @@ int main(int argc, char** argv) {
     if (cmd == "build-rig") return buildRigCommand(build);
     if (cmd == "inspect") return inspectCommand(inspect_path, inspect_markers);
     if (cmd == "demo") return tetrig::tools::runDemo(demo);
+    if (cmd == "pose") return tetrig::tools::runPose(pose);
+    if (cmd == "export") return tetrig::tools::runExport(exp);
     if (cmd == "run") {
       run.lock_memory = !no_mlock;
       if (!shm_mode.empty()) {
@@ -182,11 +266,12 @@ int main(int argc, char** argv) {
       return tetrig::tools::runLive(run);
     }
   } catch (const std::exception& e) {
+    // One line, and no control sequence from a file's text (a label, a JSON key) reaches the terminal.
     std::string what = e.what();
     for (char& c : what) {
       if (c == '\n') c = ' ';
     }
-    std::fprintf(stderr, "tetrig %s: error: %s\n", cmd.c_str(), what.c_str());
+    std::fprintf(stderr, "tetrig %s: error: %s\n", cmd.c_str(), printableText(what).c_str());
     return 1;
   }
   return 0;

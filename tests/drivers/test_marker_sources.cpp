@@ -34,6 +34,7 @@
 #include "tetrig/drivers/raw_recording.hpp"
 #include "tetrig/drivers/source_factory.hpp"
 #include "tetrig/frame_mailbox.hpp"
+#include "temp_dir.hpp"
 #include "test_data.hpp"
 
 namespace tetrig::drivers {
@@ -97,23 +98,7 @@ void expectSameFrame(const MarkerFrame& got, const MarkerFrame& want) {
   expectSameMarkers(got, want);
 }
 
-class TempDir {
- public:
-  TempDir() {
-    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    path_ = std::filesystem::temp_directory_path() /
-            ("tetrig_sources_" + std::to_string(monotonicNowNs()) + "_" + info->name());
-    std::filesystem::create_directories(path_);
-  }
-  ~TempDir() {
-    std::error_code ec;
-    std::filesystem::remove_all(path_, ec);
-  }
-  [[nodiscard]] const std::filesystem::path& path() const { return path_; }
-
- private:
-  std::filesystem::path path_;
-};
+using test::TempDir;  // a fresh private directory per test (tests/support/temp_dir.hpp)
 
 void writeFile(const std::filesystem::path& path, const std::vector<std::uint8_t>& bytes) {
   std::ofstream out(path, std::ios::binary);
@@ -790,15 +775,11 @@ std::string invalidArgumentOf(std::string_view spec, const SourceOpenOptions& op
 class FactoryTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    dir_ = std::filesystem::temp_directory_path() /
-           ("tetrig_factory_" + std::to_string(monotonicNowNs()) + "_" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    std::filesystem::create_directories(dir_);
+    tmp_ = std::make_unique<test::TempDir>("tetrig-factory");
+    dir_ = tmp_->path();
   }
-  void TearDown() override {
-    std::error_code ec;
-    std::filesystem::remove_all(dir_, ec);
-  }
+  void TearDown() override { tmp_.reset(); }
+  std::unique_ptr<test::TempDir> tmp_;
   std::filesystem::path dir_;
 };
 
@@ -832,6 +813,32 @@ TEST_F(FactoryTest, C3DSpecLoadsTheFileWithTheOptions) {
   SourceOpenOptions rate;
   rate.rate_hz = 25;
   EXPECT_EQ(openMarkerSource("c3d:" + path.string(), rate)->nominalRateHz(), 25.0);
+}
+
+TEST_F(FactoryTest, C3DKeepZeroPointsReachesTheReader) {
+  // Marker B sits at the origin with residual word 0: a gap by default, a point with the option.
+  test::TestC3DSpec s;
+  s.frames = 1;
+  s.labels = {"A", "B"};
+  s.xyz = {{10.0f, 20.0f, 30.0f}, {0.0f, 0.0f, 0.0f}};
+  s.fourth_words = {515.0, 0.0};
+  const auto path = dir_ / "zeros.c3d";
+  writeFile(path, test::writeTestC3D(s));
+  for (const bool keep : {false, true}) {
+    SourceOpenOptions options;
+    options.pacing = Pacing::kAsFastAsPossible;
+    options.c3d_keep_zero_points = keep;
+    auto source = openMarkerSource("c3d:" + path.string(), options);
+    auto mailbox = std::make_unique<FrameMailbox>();
+    ASSERT_TRUE(source->start(*mailbox));
+    ASSERT_TRUE(waitForFinish(*source));
+    MarkerFrame frame{};
+    ASSERT_TRUE(mailbox->tryTakeLatest(frame));
+    ASSERT_EQ(frame.marker_count, 2);
+    EXPECT_EQ(frame.markers[0].valid, 1);
+    EXPECT_EQ(frame.markers[1].valid, keep ? 1 : 0) << "keep_zero_points " << keep;
+    EXPECT_EQ(frame.rejected_count, 0);  // a zero gap is an ordinary gap, not a rejected value
+  }
 }
 
 TEST_F(FactoryTest, ReplaySpecOpensTheRecording) {

@@ -4,6 +4,7 @@
 #pragma once
 
 #include "../drivers/c3d_test_writer.hpp"
+#include "temp_dir.hpp"
 #include "tetrig/rig_file.hpp"
 #include "tetrig/rigbuild/build_rig.hpp"
 
@@ -13,34 +14,6 @@
 #include <vector>
 
 namespace tetrig::test {
-
-// A temporary directory removed at destruction.
-class TempDir {
- public:
-  TempDir() {
-    std::string tmpl = (std::filesystem::temp_directory_path() / "tetrig-rig-XXXXXX").string();
-    std::vector<char> buf(tmpl.begin(), tmpl.end());
-    buf.push_back('\0');
-    path_ = mkdtemp(buf.data());
-  }
-  ~TempDir() {
-    std::error_code ec;
-    std::filesystem::remove_all(path_, ec);
-  }
-  const std::filesystem::path& path() const { return path_; }
-  std::filesystem::path write(const std::string& name, const std::string& text) const {
-    std::ofstream(path_ / name) << text;
-    return path_ / name;
-  }
-  std::filesystem::path writeBytes(const std::string& name, const std::vector<std::uint8_t>& bytes) const {
-    std::ofstream out(path_ / name, std::ios::binary);
-    out.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
-    return path_ / name;
-  }
-
- private:
-  std::filesystem::path path_;
-};
 
 // Block [0, 0.3] x [0, 0.2] x [0, 0.2] (metres, y up) on an n_x x n_y x n_z grid of cells, six
 // tets per cell (Kuhn subdivision). Writes NAME.node and NAME.ele, returns the .node path.

@@ -1,6 +1,7 @@
 // The `tetrig` command as scripts use it: --help for every subcommand, the flags scripts rely on,
 // one-line errors with a non-zero exit and no partial output file, build-rig then inspect.
 #include "small_rig.hpp"
+#include "t_shape_rig.hpp"
 #include "test_data.hpp"
 
 #include <gtest/gtest.h>
@@ -16,6 +17,7 @@
 
 #include <cstdio>
 #include <fstream>
+#include <regex>
 #include <sstream>
 
 namespace tetrig {
@@ -232,6 +234,47 @@ TEST(TetrigCli, DemoRunsTheLivePathOnDefaultAndOnRealData) {
   ASSERT_EQ(second.first, 0) << second.second;
   EXPECT_CONTAINS(second.second, "reusing the rig");
   EXPECT_CONTAINS(second.second, "30 frames solved");
+}
+
+// build-rig's marker checks from the command line (generated T-shaped body, t_shape_rig.hpp): no
+// handles stops at once; an arms-down frame is refused in one line and writes nothing, unless
+// accepted; --frame auto finds the T-pose frames; inspect shows no alignment for a rig without markers.
+TEST(TetrigCli, BuildRigChecksTheMarkerAlignment) {
+  const TempDir dir;
+  const std::string out = (dir.path() / "t.rig").string();
+  auto one_line_refusal = [&](const CliRun& r, const std::string& text) {
+    EXPECT_NE(r.status, 0);
+    EXPECT_EQ(r.err.rfind("tetrig build-rig: error: ", 0), 0u) << r.err;
+    EXPECT_CONTAINS(r.err, text);
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+    EXPECT_FALSE(std::filesystem::exists(out));
+  };
+  const std::filesystem::path junk = dir.write("junk.obj", "not a mesh\n");
+  one_line_refusal(run("build-rig --mesh '" + junk.string() + "' --out '" + out + "' --quiet", dir), "the rig would have no handles");
+  const std::string mesh = test::writeTTetMesh(dir, "t").string();
+  std::vector<test::LabelledPoints> frames(12, test::armsDownMarkers());
+  for (int i = 0; i < 6; ++i) frames.push_back(test::tPoseMarkers());
+  const std::string clip = test::writeTClip(dir, "mixed.c3d", frames).string();
+  const std::string build = "build-rig --mesh '" + mesh + "' --markers '" + clip + "' --out '" + out + "' ";
+  one_line_refusal(run(build + "--quiet", dir), "frame 0: the marker alignment is implausible");
+  EXPECT_NE(run(build + "--frame first --quiet", dir).status, 0);
+  const CliRun found = run(build + "--frame auto --simple-progress", dir);
+  ASSERT_EQ(found.status, 0) << found.err;
+  EXPECT_TRUE(std::regex_search(found.err, std::regex("note: --frame auto chose frame 1[2-7] "))) << found.err;  // the T-pose frames
+  EXPECT_CONTAINS(found.err, "note: alignment checks: fit scale");
+  EXPECT_CONTAINS(found.out, "alignment:     device mm (up z) -> rig m");
+  std::filesystem::remove(out);
+  const CliRun accepted = run(build + "--frame 3 --accept-pose-mismatch --simple-progress", dir);
+  ASSERT_EQ(accepted.status, 0) << accepted.err;
+  EXPECT_CONTAINS(accepted.err, "note: implausible alignment accepted as asked");
+  // A rig without markers: inspect prints no device alignment.
+  const std::filesystem::path json = dir.write("pin.json", R"({"vertex_handles": [{"name": "pin", "select": {"vertices": [0]}}]})");
+  const std::string bare = (dir.path() / "bare.rig").string();
+  ASSERT_EQ(run("build-rig --mesh '" + mesh + "' --rig '" + json.string() + "' --out '" + bare + "' --quiet", dir).status, 0);
+  const CliRun inspect = run("inspect '" + bare + "'", dir);
+  ASSERT_EQ(inspect.status, 0) << inspect.err;
+  EXPECT_CONTAINS(inspect.out, "alignment:     none (no markers or pose sensors)");
+  EXPECT_EQ(inspect.out.find("device mm"), std::string::npos) << inspect.out;
 }
 
 }  // namespace
