@@ -134,52 +134,6 @@ class Measurer {
   double fine_rest_volume_ = 0.0;
 };
 
-// Marker clusters from a clip: markers i and j are rigid partners when the standard deviation of
-// their distance over the clip (frames where both are valid) is at most `rigid_mm`. Cluster of
-// marker m: m and its partners, when that makes >= 3 markers.
-std::vector<std::vector<std::int32_t>> clustersFromClip(const Rig& rig, const tetrig::drivers::C3DClip& clip,
-                                                        double rigid_mm, bool print) {
-  const std::size_t n = rig.markers.size();
-  std::vector<int> point(n, -1);
-  for (std::size_t m = 0; m < n; ++m) point[m] = clip.findPoint(rig.markers[m].label);
-  const double to_mm = clip.unitsToMm();
-  std::vector<double> sum(n * n, 0.0), sum2(n * n, 0.0), count(n * n, 0.0);
-  for (std::size_t f = 0; f < clip.frameCount(); f += 2) {
-    const float* p = clip.positions(f);
-    for (std::size_t i = 0; i < n; ++i) {
-      if (point[i] < 0 || !clip.isValid(f, point[i])) continue;
-      const Eigen::Vector3d a(p[3 * point[i]], p[3 * point[i] + 1], p[3 * point[i] + 2]);
-      for (std::size_t j = i + 1; j < n; ++j) {
-        if (point[j] < 0 || !clip.isValid(f, point[j])) continue;
-        const Eigen::Vector3d b(p[3 * point[j]], p[3 * point[j] + 1], p[3 * point[j] + 2]);
-        const double d = to_mm * (a - b).norm();
-        sum[i * n + j] += d;
-        sum2[i * n + j] += d * d;
-        count[i * n + j] += 1.0;
-      }
-    }
-  }
-  std::vector<std::vector<std::int32_t>> clusters;
-  for (std::size_t m = 0; m < n; ++m) {
-    std::vector<std::int32_t> c{static_cast<std::int32_t>(m)};
-    for (std::size_t j = 0; j < n; ++j) {
-      if (j == m) continue;
-      const std::size_t e = std::min(m, j) * n + std::max(m, j);
-      if (count[e] < 10) continue;
-      const double mean = sum[e] / count[e];
-      const double sd = std::sqrt(std::max(0.0, sum2[e] / count[e] - mean * mean));
-      if (sd <= rigid_mm) c.push_back(static_cast<std::int32_t>(j));
-    }
-    if (print) {
-      std::fprintf(stderr, "cluster %-6s:", rig.markers[m].label.c_str());
-      for (const auto j : c) std::fprintf(stderr, " %s", rig.markers[static_cast<std::size_t>(j)].label.c_str());
-      std::fprintf(stderr, "\n");
-    }
-    if (c.size() >= 3) clusters.push_back(std::move(c));
-  }
-  return clusters;
-}
-
 struct Config {
   std::vector<std::string> clips;
   std::string rig_path;
@@ -190,8 +144,6 @@ struct Config {
   int first_frame = 0;
   int frame_count = 0;  // 0: to the end
   bool quiet = false;
-  double rigid_mm = 0.0;  // > 0: marker clusters from the clip (clustersFromClip)
-  bool print_clusters = false;
   tetrig::LiveRigOptions live;
 };
 
@@ -206,9 +158,7 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
   const tetrig::drivers::C3DPlayback playback(clip, options);
   std::vector<std::string> labels(static_cast<std::size_t>(clip.pointCount()));
   for (const int p : playback.selectedPoints()) labels[static_cast<std::size_t>(p)] = clip.labels()[static_cast<std::size_t>(p)];
-  tetrig::LiveRigOptions live_options = cfg.live;
-  if (cfg.rigid_mm > 0.0) live_options.marker_clusters = clustersFromClip(rig, clip, cfg.rigid_mm, cfg.print_clusters);
-  tetrig::LiveRig live(rig, live_options);
+  tetrig::LiveRig live(rig, cfg.live);
   const tetrig::MarkerBindingReport binding = live.bindLabels(labels);
   if (binding.matched == 0) throw std::runtime_error("no rig marker is named in " + clip_name);
 
@@ -392,14 +342,11 @@ int main(int argc, char** argv) {
   app.add_option("--json", json_path, "Write the results here (JSON)");
   app.add_flag("-q,--quiet", cfg.quiet, "No progress line");
   app.add_option("--extrapolate", cfg.live.rotation_extrapolation,
-                 "Temporal prediction: alpha of the rotation extrapolation (0 off, 1 constant velocity)")
+                 "Temporal prediction: alpha of the rotation extrapolation (0: off, the live rig's default; 1: constant velocity)")
       ->check(CLI::Range(0.0, 1.0));
-  app.add_option("--rigid-mm", cfg.rigid_mm,
-                 "Marker clusters from the clip: pairs whose distance varies by at most this (std, mm); 0 off")
-      ->check(CLI::Range(0.0, 1000.0));
-  app.add_flag("--print-clusters", cfg.print_clusters, "Print the marker clusters");
-  app.add_flag("--guide-acceleration", cfg.live.guide_acceleration,
-               "Marker clusters correct the temporal prediction by their change of rotation per frame");
+  app.add_option("--extrapolate-max-deg", cfg.live.rotation_extrapolation_max_deg,
+                 "Temporal prediction: cap of a tet's predicted rotation per frame, degrees (default 5)")
+      ->check(CLI::Range(0.001, 180.0));
   CLI11_PARSE(app, argc, argv);
   try {
     const std::vector<int> ks = parseIterations(iterations);

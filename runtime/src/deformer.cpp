@@ -10,7 +10,6 @@
 #include <functional>
 #include <cmath>
 #include <cstdio>
-#include <cstdlib>
 #include <limits>
 #include <numeric>
 #include <stdexcept>
@@ -44,6 +43,10 @@ Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(s
   if (!(options_.rotation_extrapolation >= 0.0 && options_.rotation_extrapolation <= 1.0)) {
     fail("rotation_extrapolation must be in [0, 1]");
   }
+  if (!(options_.rotation_extrapolation_max_deg > 0.0 && options_.rotation_extrapolation_max_deg <= 180.0)) {
+    fail("rotation_extrapolation_max_deg must be in (0, 180]");
+  }
+  extrapolation_max_sin_half_ = static_cast<float>(std::sin(0.5 * options_.rotation_extrapolation_max_deg * M_PI / 180.0));
   const TetMeshReport report = checkTetMesh(mesh);
   if (report.out_of_range_indices > 0 || report.repeated_corner_tets > 0 || report.degenerate_tets > 0 ||
       report.non_finite_vertices > 0) {
@@ -281,48 +284,6 @@ Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(s
     group_start_.push_back(static_cast<std::int32_t>(group_slot_.size()));
   }
 
-  if (!setup.rotation_guides.empty()) {
-    if (options_.guides_per_tet < 1 || options_.guides_per_tet > 8) fail("guides_per_tet must be in [1, 8]");
-    std::vector<std::vector<std::int32_t>> guide_tets;
-    for (size_t g = 0; g < setup.rotation_guides.size(); ++g) {
-      if (setup.rotation_guides[g].tets.empty()) fail("rotation guide " + std::to_string(g) + " has no tets");
-      for (auto t : setup.rotation_guides[g].tets) checkTetIndex(t, tet_count_, "rotation guide " + std::to_string(g));
-      guide_tets.push_back(setup.rotation_guides[g].tets);
-    }
-    const auto guides = guide_tets.size();
-    const std::vector<double> w = harmonicTetWeights(mesh, guide_tets, {});
-    const auto k = static_cast<size_t>(std::min<size_t>(static_cast<size_t>(options_.guides_per_tet), guides));
-    guides_per_slot_ = static_cast<std::int32_t>(k);
-    const auto slots = blocks_.size() * kTetBlockWidth;
-    guide_index_.assign(slots * k, 0);
-    guide_weight_.assign(slots * k, 0.0f);
-    std::vector<std::pair<double, std::int32_t>> ranked(guides);
-    for (std::int32_t t = 0; t < tet_count_; ++t) {
-      double total = 0.0;
-      for (size_t g = 0; g < guides; ++g) {
-        ranked[g] = {w[g * static_cast<size_t>(tet_count_) + static_cast<size_t>(t)], static_cast<std::int32_t>(g)};
-        total += ranked[g].first;
-      }
-      std::partial_sort(ranked.begin(), ranked.begin() + static_cast<std::ptrdiff_t>(k), ranked.end(), std::greater<>());
-      double kept = 0.0;
-      for (size_t j = 0; j < k; ++j) kept += ranked[j].first;
-      // The kept weights carry the whole sum (a tet near one guide keeps ~1; the remainder of a
-      // partition of unity that reaches few guides goes to the temporal prediction).
-      const double scale = kept > 0.0 ? std::min(1.0, total) / kept : 0.0;
-      const size_t slot = static_cast<size_t>(slotOfTet(t));
-      for (size_t j = 0; j < k; ++j) {
-        guide_index_[slot * k + j] = ranked[j].second;
-        guide_weight_[slot * k + j] = static_cast<float>(ranked[j].first * scale);
-      }
-    }
-    guide_last_.assign(guides, Eigen::Quaterniond::Identity());
-    guide_last_valid_.assign(guides, 0);
-    guide_increment_.assign(guides * 4, 0.0f);
-    guide_active_.assign(guides, 0);
-    guide_last_increment_.assign(guides, Eigen::Quaterniond::Identity());
-    guide_valid_run_.assign(guides, 0);
-  }
-
   vertex_targets_.resize(static_cast<size_t>(vertex_handle_count_));
   region_targets_.resize(setup.region_handles.size());
   point_targets_.resize(setup.point_handles.size());
@@ -345,62 +306,11 @@ void Deformer::reset() {
   std::copy(point_rest_.begin(), point_rest_.end(), point_targets_.begin());
   for (auto& q : interpolated_rotation_) q = Eigen::Quaterniond::Identity();
   rememberRotations();
-  std::fill(guide_last_valid_.begin(), guide_last_valid_.end(), std::uint8_t{0});
-  std::fill(guide_valid_run_.begin(), guide_valid_run_.end(), std::uint8_t{0});
   rebuildDelta();
   updateConstantRhs();
   writePositions();
 }
 
-void Deformer::predictRotations(std::span<const GuideRotation> guides) {
-  RotationPredictionInput in;
-  if (!previous_rotation_.empty()) {
-    in.previous = previous_rotation_.data();
-    in.alpha = static_cast<float>(options_.rotation_extrapolation);
-    if (const char* cap = std::getenv("TETRIG_EXTRAP_CAP_DEG"); cap != nullptr) {
-      in.max_sin_half = static_cast<float>(std::sin(0.5 * std::atof(cap) * 3.14159265358979 / 180.0));
-    }
-  }
-  if (guides_per_slot_ > 0) {
-    const bool given = guides.size() == guide_last_.size();
-    for (size_t g = 0; g < guide_last_.size(); ++g) {
-      const bool valid = given && guides[g].valid && guides[g].rotation.coeffs().allFinite() &&
-                         guides[g].rotation.norm() > 0.5;
-      guide_active_[g] = 0;
-      guide_valid_run_[g] = valid ? static_cast<std::uint8_t>(std::min(3, guide_valid_run_[g] + 1)) : std::uint8_t{0};
-      if (valid) {
-        const Eigen::Quaterniond now = guides[g].rotation.normalized();
-        if (guide_last_valid_[g] != 0) {
-          Eigen::Quaterniond inc = now * guide_last_[g].conjugate();
-          if (inc.w() < 0.0) inc.coeffs() = -inc.coeffs();
-          const Eigen::Quaterniond last_inc = guide_last_increment_[g];
-          guide_last_increment_[g] = inc;
-          if (options_.guide_acceleration) {
-            // The change of the per-frame rotation: known from the third consecutive estimate on.
-            inc = inc * last_inc.conjugate();
-            if (inc.w() < 0.0) inc.coeffs() = -inc.coeffs();
-            if (guide_valid_run_[g] < 3) inc = Eigen::Quaterniond::Identity();
-          }
-          guide_increment_[4 * g] = static_cast<float>(inc.w());
-          guide_increment_[4 * g + 1] = static_cast<float>(inc.x());
-          guide_increment_[4 * g + 2] = static_cast<float>(inc.y());
-          guide_increment_[4 * g + 3] = static_cast<float>(inc.z());
-          guide_active_[g] = 1;
-        }
-        guide_last_[g] = now;
-      }
-      guide_last_valid_[g] = valid ? 1 : 0;
-    }
-    in.guides_per_slot = guides_per_slot_;
-    in.guide_index = guide_index_.data();
-    in.guide_weight = guide_weight_.data();
-    in.guide_increment = guide_increment_.data();
-    in.guide_active = guide_active_.data();
-    in.compose_with_temporal = options_.guide_acceleration;
-  }
-  predictFrameRotations(blocks_.data(), static_cast<std::int32_t>(blocks_.size()), in);
-  rebuildDelta();
-}
 
 void Deformer::rememberRotations() {
   if (previous_rotation_.empty()) return;
@@ -553,8 +463,11 @@ StepStats Deformer::step(const HandleTargets& targets, const StepBudget& budget)
   updateConstantRhs();
   if (options_.update_rotations) {
     const auto t0 = Clock::now();
-    if ((!previous_rotation_.empty() || guides_per_slot_ > 0) && !budget.continues_frame) {
-      predictRotations(targets.guide_rotations);
+    if (!previous_rotation_.empty() && !budget.continues_frame) {
+      // Temporal prediction: each tet carried on by its last frame's rotation (rotation_prediction.hpp).
+      predictFrameRotations(blocks_.data(), static_cast<std::int32_t>(blocks_.size()), previous_rotation_.data(),
+                            static_cast<float>(options_.rotation_extrapolation), extrapolation_max_sin_half_);
+      rebuildDelta();
     }
     interpolateRotations();
     stats.interpolation_ns += nanosecondsBetween(t0, Clock::now());

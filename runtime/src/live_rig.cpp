@@ -4,10 +4,7 @@
 #include "tetrig/live_rig.hpp"
 
 #include "tetrig/clock.hpp"
-#include "tetrig/polar.hpp"
 #include "tetrig/pose_transfer.hpp"
-
-#include <Eigen/Eigenvalues>
 
 #include <algorithm>
 #include <chrono>
@@ -30,38 +27,7 @@ DeformerSetup liveSetup(const Rig& rig, const LiveRigOptions& options) {
   DeformerSetup setup = rig.setup;
   setup.options.padded_positions = true;  // the input of applyPoseTransferPadded
   setup.options.rotation_extrapolation = options.rotation_extrapolation;
-  setup.options.guide_acceleration = options.guide_acceleration;
-  if (!options.marker_clusters.empty()) {
-    // Seed tets of a cluster: the tets around its seed marker: those holding the marker's vertex
-    // (its invisible tets) and the body tets touching their body corners.
-    const TetMesh& mesh = rig.tet_mesh;
-    std::vector<std::vector<std::int32_t>> tets_of_vertex(static_cast<std::size_t>(mesh.vertexCount()));
-    for (std::int32_t t = 0; t < mesh.tetCount(); ++t)
-      for (int c = 0; c < 4; ++c) tets_of_vertex[static_cast<std::size_t>(mesh.tets(t, c))].push_back(t);
-    for (const auto& cluster : options.marker_clusters) {
-      if (cluster.empty()) throw std::invalid_argument("live rig: an empty marker cluster");
-      for (const std::int32_t m : cluster) {
-        if (m < 0 || static_cast<std::size_t>(m) >= rig.markers.size()) {
-          throw std::invalid_argument("live rig: marker cluster names marker " + std::to_string(m) + " of " +
-                                      std::to_string(rig.markers.size()));
-        }
-      }
-      const std::int32_t v = rig.markers[static_cast<std::size_t>(cluster.front())].tet_vertex;
-      std::vector<std::int32_t> seeds;
-      for (const std::int32_t t : tets_of_vertex[static_cast<std::size_t>(v)]) {
-        seeds.push_back(t);
-        for (int c = 0; c < 4; ++c) {
-          const std::int32_t corner = mesh.tets(t, c);
-          if (corner >= rig.body_vertex_count) continue;
-          for (const std::int32_t b : tets_of_vertex[static_cast<std::size_t>(corner)])
-            if (b < rig.body_tet_count) seeds.push_back(b);
-        }
-      }
-      std::sort(seeds.begin(), seeds.end());
-      seeds.erase(std::unique(seeds.begin(), seeds.end()), seeds.end());
-      setup.rotation_guides.push_back(RotationGuide{std::move(seeds)});
-    }
-  }
+  setup.options.rotation_extrapolation_max_deg = options.rotation_extrapolation_max_deg;
   return setup;
 }
 
@@ -145,13 +111,6 @@ LiveRig::LiveRig(const Rig& rig, const LiveRigOptions& options)
     for (int c = 0; c < 4; ++c) rest += p.barycentric[c] * rig.tet_mesh.vertices.row(rig.tet_mesh.tets(p.tet, c)).transpose();
     point_targets_.push_back(rest);
   }
-
-  cluster_start_.push_back(0);
-  for (const auto& cluster : options.marker_clusters) {
-    cluster_marker_.insert(cluster_marker_.end(), cluster.begin(), cluster.end());
-    cluster_start_.push_back(static_cast<std::int32_t>(cluster_marker_.size()));
-  }
-  guide_rotations_.assign(options.marker_clusters.size(), GuideRotation{});
 
   const std::size_t markers = rig.markers.size();
   tracks_.assign(markers, Track{});
@@ -383,12 +342,10 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
   }
 
   // 6. The step.
-  updateGuideRotations();
   HandleTargets targets;
   targets.vertex_positions = vertex_targets_;
   targets.region_transforms = region_targets_;
   targets.point_positions = point_targets_;
-  targets.guide_rotations = guide_rotations_;
   // Refresh only when some marker is fully measured: that is what moves the body in the first
   // iteration. With every marker predicted or blending (e.g. all returning after a held pose) the
   // predictions would only chase the body they drive.
@@ -506,42 +463,6 @@ std::uint32_t LiveRig::updateTargets() noexcept {
 void LiveRig::writeLastPose(float* positions, float* normals) const noexcept {
   if (positions != nullptr) std::memcpy(positions, last_positions_.data(), last_positions_.size() * sizeof(float));
   if (normals != nullptr && options_.normals) std::memcpy(normals, last_normals_.data(), last_normals_.size() * sizeof(float));
-}
-
-void LiveRig::updateGuideRotations() noexcept {
-  // Each cluster's best-fit rotation from its rest shape to its measured markers (Kabsch, the
-  // markers measured in this frame and not blending; >= 3 of them, not collinear).
-  const std::size_t clusters = guide_rotations_.size();
-  for (std::size_t c = 0; c < clusters; ++c) {
-    GuideRotation& guide = guide_rotations_[c];
-    guide.valid = false;
-    Eigen::Vector3d rest_sum = Eigen::Vector3d::Zero(), now_sum = Eigen::Vector3d::Zero();
-    int n = 0;
-    const auto begin = static_cast<std::size_t>(cluster_start_[c]), end = static_cast<std::size_t>(cluster_start_[c + 1]);
-    for (std::size_t i = begin; i < end; ++i) {
-      const auto k = static_cast<std::size_t>(cluster_marker_[i]);
-      if (measured_[k] == 0 || tracks_[k].state != MarkerTrackState::kMeasured) continue;
-      rest_sum += rig_->markers[k].rest_position;
-      now_sum += measurement_[k];
-      ++n;
-    }
-    if (n < 3) continue;
-    const Eigen::Vector3d rest_c = rest_sum / n, now_c = now_sum / n;
-    Eigen::Matrix3d a = Eigen::Matrix3d::Zero(), rest_cov = Eigen::Matrix3d::Zero();
-    for (std::size_t i = begin; i < end; ++i) {
-      const auto k = static_cast<std::size_t>(cluster_marker_[i]);
-      if (measured_[k] == 0 || tracks_[k].state != MarkerTrackState::kMeasured) continue;
-      const Eigen::Vector3d r = rig_->markers[k].rest_position - rest_c;
-      a += (measurement_[k] - now_c) * r.transpose();
-      rest_cov += r * r.transpose();
-    }
-    // Collinear markers leave the rotation about their line undetermined: the second largest
-    // eigenvalue of the rest scatter must not vanish against the largest.
-    const Eigen::Vector3d ev = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(rest_cov, Eigen::EigenvaluesOnly).eigenvalues();
-    if (!(ev[1] > 1e-3 * ev[2])) continue;
-    guide.rotation = closestRotation(a);
-    guide.valid = guide.rotation.coeffs().allFinite();
-  }
 }
 
 }  // namespace tetrig

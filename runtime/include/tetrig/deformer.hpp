@@ -67,14 +67,6 @@ struct RigidGroup {
   std::vector<std::int32_t> tets;  // may be disconnected ("pseudo-skeleton"); groups are disjoint
 };
 
-// A rotation guide (issue #12): a set of seed tets whose rotation some outside estimate follows
-// (the live rig: a marker cluster's best-fit rotation). Not a constraint: at the start of each frame
-// its rotation increment is spread over the mesh with harmonic weights and composed onto the tets'
-// rotations (rotation_prediction.hpp), so the iterations start near the frame's pose.
-struct RotationGuide {
-  std::vector<std::int32_t> tets;  // seed tets (weight 1)
-};
-
 struct DeformerOptions {
   bool update_rotations = true;       // false: linear Laplacian editing (R_j = I), for comparison
   bool interpolate_rotations = true;  // needs oriented region handles; ignored otherwise
@@ -86,9 +78,7 @@ struct DeformerOptions {
   double rotation_extrapolation = 0.0;  // alpha in [0, 1]: a frame starts from every tet's rotation carried
                                         // on by alpha times its last frame's rotation (rotation_extrapolation.hpp);
                                         // 0: the plain warm start
-  int guides_per_tet = 4;               // rotation guides kept per tet (largest harmonic weights), 1..8
-  bool guide_acceleration = false;      // guides correct the temporal prediction by their change of per-frame
-                                        // rotation (rotation_prediction.hpp, compose_with_temporal)
+  double rotation_extrapolation_max_deg = 5.0;  // a tet's predicted rotation per frame is capped at this angle
 };
 
 struct DeformerSetup {
@@ -97,7 +87,6 @@ struct DeformerSetup {
   std::vector<PointHandle> point_handles;
   std::vector<RigidGroup> rigid_groups;
   std::vector<double> stiffness;  // empty, or one positive weight per tet (1 = default)
-  std::vector<RotationGuide> rotation_guides;  // optional
   DeformerOptions options;
 };
 
@@ -106,18 +95,11 @@ struct RigidTransform {
   Eigen::Vector3d translation = Eigen::Vector3d::Zero();
 };
 
-// A guide's estimated rotation in one frame (valid = false: no estimate this frame).
-struct GuideRotation {
-  Eigen::Quaterniond rotation = Eigen::Quaterniond::Identity();
-  bool valid = false;
-};
-
 // Targets for one frame. Sizes must match the setup; spans are read during step() only.
 struct HandleTargets {
   std::span<const Eigen::Vector3d> vertex_positions;  // one per vertex handle
   std::span<const RigidTransform> region_transforms;  // one per region handle
   std::span<const Eigen::Vector3d> point_positions;   // one per point handle
-  std::span<const GuideRotation> guide_rotations;     // one per rotation guide, or empty (no estimate)
 };
 
 struct StepBudget {
@@ -237,18 +219,7 @@ class Deformer {
   // Temporal extrapolation (options_.rotation_extrapolation): each slot's rotation at the end of
   // the previous frame, laid out like the blocks' rotations ([block][component][lane]).
   AlignedVector<float> previous_rotation_;
-  // Rotation guides: per slot guides_per_tet (guide, weight) pairs; per guide the last estimate,
-  // and this frame's increment and whether it is known.
-  std::int32_t guides_per_slot_ = 0;
-  std::vector<std::int32_t> guide_index_;
-  std::vector<float> guide_weight_;
-  std::vector<Eigen::Quaterniond> guide_last_;
-  std::vector<std::uint8_t> guide_last_valid_;
-  std::vector<float> guide_increment_;
-  std::vector<Eigen::Quaterniond> guide_last_increment_;
-  std::vector<std::uint8_t> guide_valid_run_;  // consecutive frames with an estimate (capped at 3)
-  std::vector<std::uint8_t> guide_active_;
-  void predictRotations(std::span<const GuideRotation> guides);
+  float extrapolation_max_sin_half_ = 1.0f;  // sin(cap / 2)
 
   // Rigid groups: CSR over tet slots.
   std::vector<std::int32_t> group_start_, group_slot_;

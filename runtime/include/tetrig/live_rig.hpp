@@ -74,12 +74,12 @@ struct LiveRigOptions {
                                      // blending); true: every marker every frame (markerPredictions()
                                      // then holds a current prediction for measured markers too; tools, tests)
   bool refresh_predictions = true;   // with predicted markers and >= 2 iterations: re-predict after the first
-  double rotation_extrapolation = 0.0;  // DeformerOptions::rotation_extrapolation of the live deformer
-  // Marker clusters (rig marker indices; the first is the cluster's seed marker): each one's best-fit
-  // rotation (Kabsch, from the markers measured in a frame, >= 3) guides the rotations of the tets
-  // around its seed marker at the start of each frame (DeformerSetup::rotation_guides).
-  std::vector<std::vector<std::int32_t>> marker_clusters;
-  bool guide_acceleration = false;  // DeformerOptions::guide_acceleration
+  // Temporal prediction of the warm start (tetrig/rotation_prediction.hpp, docs/fidelity.md): 1 brings
+  // the median body error to the converged pose at 3 iterations per frame on HDM05 from 41 to 5.5 mm,
+  // but raises the error tails at fast reversals and the pops at occlusion edges (docs/fidelity.md):
+  // off by default until those are solved.
+  double rotation_extrapolation = 0.0;          // DeformerOptions::rotation_extrapolation
+  double rotation_extrapolation_max_deg = 5.0;  // DeformerOptions::rotation_extrapolation_max_deg
 };
 
 enum LiveFrameFlags : std::uint32_t {
@@ -216,10 +216,6 @@ class LiveRig {
   std::int64_t last_source_ns_ = 0;
   std::int64_t now_ns_ = 0;
   bool stepped_ = false;
-  // Marker clusters (options_.marker_clusters) as CSR, and this frame's guide rotations.
-  std::vector<std::int32_t> cluster_start_, cluster_marker_;
-  std::vector<GuideRotation> guide_rotations_;
-  void updateGuideRotations() noexcept;
   bool regions_changed_ = false;  // setRegionTarget since the last processFrame
 
   // Output: rest and last pose (floats, #fine*3), normals accumulator.
