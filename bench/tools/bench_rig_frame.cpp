@@ -7,6 +7,7 @@
 //   pose-transfer matrix as loaded (double weights), from the deformer's padded positions
 //   (applyPoseTransferPadded). Counters split the frame into the step and the pose transfer.
 //   The yardstick of the deformation core's frame cost (kept as it was for comparisons).
+//   BM_RigFrame/smpl_hdm05_predicted: the same with the temporal prediction of the warm start.
 //   BM_LiveRigFrame/smpl_hdm05: the same frames through the live path's own per-frame call,
 //   LiveRig::processFrame (clip frame as the C3D playback source fills it -> labels bound once ->
 //   targets incl. occlusion prediction -> step(3) -> pose transfer into a float buffer, what
@@ -61,7 +62,7 @@ const RigScene* rigScene(std::string& error) {
       error);
 }
 
-void BM_RigFrame(benchmark::State& state) {
+void rigFrame(benchmark::State& state, double extrapolation) {
   std::string error;
   const RigScene* scene = rigScene(error);
   if (scene == nullptr) {
@@ -71,6 +72,7 @@ void BM_RigFrame(benchmark::State& state) {
   const tetrig::Rig& rig = scene->rig;
   tetrig::DeformerSetup setup = rig.setup;
   setup.options.padded_positions = true;  // the input of applyPoseTransferPadded
+  setup.options.rotation_extrapolation = extrapolation;
   tetrig::Deformer deformer(rig.tet_mesh, setup);
   std::vector<Eigen::Vector3d> targets;
   for (const std::int32_t v : rig.setup.vertex_handles) targets.push_back(rig.tet_mesh.vertices.row(v).transpose());
@@ -112,7 +114,12 @@ void BM_RigFrame(benchmark::State& state) {
   state.counters["fine_vertices"] = rig.pose_transfer.rows;
   state.counters["B_nnz_per_row"] = static_cast<double>(rig.pose_transfer.weights.size()) / rig.pose_transfer.rows;
 }
+void BM_RigFrame(benchmark::State& state) { rigFrame(state, 0.0); }
 BENCHMARK(BM_RigFrame)->Name("BM_RigFrame/smpl_hdm05")->Unit(benchmark::kMicrosecond);
+// The same with the temporal prediction of the warm start (DeformerOptions::rotation_extrapolation = 1,
+// issue #12): what it adds to a frame.
+void BM_RigFramePredicted(benchmark::State& state) { rigFrame(state, 1.0); }
+BENCHMARK(BM_RigFramePredicted)->Name("BM_RigFrame/smpl_hdm05_predicted")->Unit(benchmark::kMicrosecond);
 
 void BM_LiveRigFrame(benchmark::State& state) {
   std::string error;

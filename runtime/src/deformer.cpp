@@ -1,11 +1,13 @@
 // The deformation core's load step and frame step: Stoll et al. 2007, sections 2.3.1-2.3.2.
 #include "tetrig/deformer.hpp"
+#include "tetrig/rotation_prediction.hpp"
 
 #include "tetrig/laplacian.hpp"
 #include "tetrig/rigid_groups.hpp"
 #include "tetrig/rotation_interpolation.hpp"
 
 #include <algorithm>
+#include <functional>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -38,6 +40,13 @@ Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(s
   tet_count_ = mesh.tetCount();
   if (tet_count_ == 0) fail("the mesh has no tets");
   if (options_.rotation_steps < 0 || options_.rotation_steps > 64) fail("rotation_steps must be in [0, 64]");
+  if (!(options_.rotation_extrapolation >= 0.0 && options_.rotation_extrapolation <= 1.0)) {
+    fail("rotation_extrapolation must be in [0, 1]");
+  }
+  if (!(options_.rotation_extrapolation_max_deg > 0.0 && options_.rotation_extrapolation_max_deg <= 180.0)) {
+    fail("rotation_extrapolation_max_deg must be in (0, 180]");
+  }
+  extrapolation_max_sin_half_ = static_cast<float>(std::sin(0.5 * options_.rotation_extrapolation_max_deg * M_PI / 180.0));
   const TetMeshReport report = checkTetMesh(mesh);
   if (report.out_of_range_indices > 0 || report.repeated_corner_tets > 0 || report.degenerate_tets > 0 ||
       report.non_finite_vertices > 0) {
@@ -193,6 +202,9 @@ Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(s
   const std::int32_t block_count = (tet_count_ + kTetBlockWidth - 1) / kTetBlockWidth;
   blocks_.assign(static_cast<size_t>(block_count), TetBlock{});
   exact_lanes_.assign(static_cast<size_t>(block_count), 0);
+  if (options_.rotation_extrapolation > 0.0) {
+    previous_rotation_.assign(static_cast<size_t>(block_count) * 4 * kTetBlockWidth, 0.0f);
+  }
   tet_slot_.assign(static_cast<size_t>(tet_count_), -1);
   for (std::int32_t b = 0; b < block_count; ++b) {
     TetBlock& block = blocks_[static_cast<size_t>(b)];
@@ -293,9 +305,20 @@ void Deformer::reset() {
   for (auto& region : region_targets_) region = RigidTransform{};
   std::copy(point_rest_.begin(), point_rest_.end(), point_targets_.begin());
   for (auto& q : interpolated_rotation_) q = Eigen::Quaterniond::Identity();
+  rememberRotations();
   rebuildDelta();
   updateConstantRhs();
   writePositions();
+}
+
+
+void Deformer::rememberRotations() {
+  if (previous_rotation_.empty()) return;
+  for (size_t b = 0; b < blocks_.size(); ++b) {
+    for (int c = 0; c < 4; ++c) {
+      std::copy_n(blocks_[b].rotation[c], kTetBlockWidth, &previous_rotation_[(4 * b + static_cast<size_t>(c)) * kTetBlockWidth]);
+    }
+  }
 }
 
 bool Deformer::acceptTargets(const HandleTargets& targets, std::uint32_t& flags) {
@@ -440,6 +463,12 @@ StepStats Deformer::step(const HandleTargets& targets, const StepBudget& budget)
   updateConstantRhs();
   if (options_.update_rotations) {
     const auto t0 = Clock::now();
+    if (!previous_rotation_.empty() && !budget.continues_frame) {
+      // Temporal prediction: each tet carried on by its last frame's rotation (rotation_prediction.hpp).
+      predictFrameRotations(blocks_.data(), static_cast<std::int32_t>(blocks_.size()), previous_rotation_.data(),
+                            static_cast<float>(options_.rotation_extrapolation), extrapolation_max_sin_half_);
+      rebuildDelta();
+    }
     interpolateRotations();
     stats.interpolation_ns += nanosecondsBetween(t0, Clock::now());
   }
@@ -507,6 +536,7 @@ void Deformer::setRotations(std::span<const Eigen::Quaterniond> rotations) {
     block.rotation[2][l] = static_cast<float>(q.y());
     block.rotation[3][l] = static_cast<float>(q.z());
   }
+  rememberRotations();
   rebuildDelta();
 }
 

@@ -23,9 +23,11 @@ const Rig& validated(const Rig& rig) {
   return rig;
 }
 
-DeformerSetup paddedSetup(const Rig& rig) {
+DeformerSetup liveSetup(const Rig& rig, const LiveRigOptions& options) {
   DeformerSetup setup = rig.setup;
   setup.options.padded_positions = true;  // the input of applyPoseTransferPadded
+  setup.options.rotation_extrapolation = options.rotation_extrapolation;
+  setup.options.rotation_extrapolation_max_deg = options.rotation_extrapolation_max_deg;
   return setup;
 }
 
@@ -84,7 +86,7 @@ void vertexNormals(const float* x, std::span<const std::int32_t> triangles, std:
 LiveRig::LiveRig(const Rig& rig, const LiveRigOptions& options)
     : rig_(&validated(rig)),
       options_(options),
-      deformer_(rig.tet_mesh, paddedSetup(rig)),
+      deformer_(rig.tet_mesh, liveSetup(rig, options)),
       predictor_(rig.tet_mesh, rig.body_vertex_count, rig.body_tet_count, markerVertices(rig), predictionOptions(options)) {
   if (!(options.occlusion_blend_s >= 0.0) || !std::isfinite(options.occlusion_blend_s)) {
     throw std::invalid_argument("live rig: occlusion_blend_s must be finite and >= 0");
@@ -364,6 +366,7 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
       updateTargets();
       StepBudget rest = budget;
       rest.max_iterations = budget.max_iterations - 1;
+      rest.continues_frame = true;
       const StepStats more = deformer_.step(targets, rest);
       stats.step.iterations += more.iterations;
       stats.step.flags |= more.flags;

@@ -54,6 +54,18 @@ TEST(StepAllocations, NoneOnABarWithVertexHandles) {
   EXPECT_TRUE(flags & kStepExactRotations) << "the fallback path was meant to run";
 }
 
+TEST(StepAllocations, NoneWithTheTemporalPrediction) {
+  const auto bar = scenes::makeBarScene(4, 4, 33);
+  DeformerSetup setup = test::endVertexHandles(bar);
+  setup.options.rotation_extrapolation = 1.0;
+  Deformer deformer(bar.mesh, setup);
+  std::vector<std::vector<Eigen::Vector3d>> positions;
+  for (int f = 0; f < 6; ++f) positions.push_back(test::endTargets(bar, scenes::barBendTransform(bar, 0.1 * f)));
+  std::vector<HandleTargets> frames(positions.size());
+  for (size_t f = 0; f < positions.size(); ++f) frames[f].vertex_positions = positions[f];
+  EXPECT_EQ(allocationsDuringSteps(deformer, frames, 3, nullptr), 0u);
+}
+
 TEST(StepAllocations, NoneWithRegionsInterpolationRigidGroupsAndPointHandles) {
   const auto bar = scenes::makeBarScene(4, 4, 20);
   DeformerSetup setup;

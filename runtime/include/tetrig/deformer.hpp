@@ -75,6 +75,10 @@ struct DeformerOptions {
   double max_abs_coordinate = 1e6;    // a target coordinate beyond this is rejected as absurd
   bool padded_positions = false;      // also write paddedPositions() every step (~30 % more output
                                       // traffic; for applyPoseTransferPadded)
+  double rotation_extrapolation = 0.0;  // alpha in [0, 1]: a frame starts from every tet's rotation carried
+                                        // on by alpha times its last frame's rotation (rotation_extrapolation.hpp);
+                                        // 0: the plain warm start
+  double rotation_extrapolation_max_deg = 5.0;  // a tet's predicted rotation per frame is capped at this angle
 };
 
 struct DeformerSetup {
@@ -101,6 +105,9 @@ struct HandleTargets {
 struct StepBudget {
   int max_iterations = 3;
   std::chrono::steady_clock::time_point deadline = std::chrono::steady_clock::time_point::max();
+  // true: this call continues the previous call's frame (the live rig's re-prediction splits a
+  // frame's iterations over two calls): the per-frame start (temporal extrapolation) is skipped.
+  bool continues_frame = false;
 };
 
 enum StepFlags : std::uint32_t {
@@ -159,6 +166,7 @@ class Deformer {
   void updateConstantRhs();
   void interpolateRotations();
   void rebuildDelta();
+  void rememberRotations();  // previous_rotation_ <- the current rotations (no velocity)
   void writePositions();
   std::int32_t slotOfTet(std::int32_t t) const { return tet_slot_[static_cast<size_t>(t)]; }
 
@@ -207,6 +215,11 @@ class Deformer {
   std::vector<double> harmonic_weights_;                // oriented-handle-major, #T each, slot order
   std::vector<Eigen::Quaterniond> interpolated_rotation_;
   std::vector<Eigen::Quaterniond> rotation_increment_;  // scratch
+
+  // Temporal extrapolation (options_.rotation_extrapolation): each slot's rotation at the end of
+  // the previous frame, laid out like the blocks' rotations ([block][component][lane]).
+  AlignedVector<float> previous_rotation_;
+  float extrapolation_max_sin_half_ = 1.0f;  // sin(cap / 2)
 
   // Rigid groups: CSR over tet slots.
   std::vector<std::int32_t> group_start_, group_slot_;

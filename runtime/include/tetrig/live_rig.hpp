@@ -74,6 +74,12 @@ struct LiveRigOptions {
                                      // blending); true: every marker every frame (markerPredictions()
                                      // then holds a current prediction for measured markers too; tools, tests)
   bool refresh_predictions = true;   // with predicted markers and >= 2 iterations: re-predict after the first
+  // Temporal prediction of the warm start (tetrig/rotation_prediction.hpp, docs/fidelity.md): 1 brings
+  // the median body error to the converged pose at 3 iterations per frame on HDM05 from 41 to 5.5 mm,
+  // but raises the error tails at fast reversals and the pops at occlusion edges (docs/fidelity.md):
+  // off by default until those are solved.
+  double rotation_extrapolation = 0.0;          // DeformerOptions::rotation_extrapolation
+  double rotation_extrapolation_max_deg = 5.0;  // DeformerOptions::rotation_extrapolation_max_deg
 };
 
 enum LiveFrameFlags : std::uint32_t {

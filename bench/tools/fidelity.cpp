@@ -1,0 +1,387 @@
+// tetrig_fidelity: how far the budgeted live result lands from the converged pose, frame by frame,
+// on real motion capture (issue #12, docs/fidelity.md).
+//
+//   tetrig_fidelity --rig RIG --c3d CLIP [--c3d CLIP2 ...] --iterations 1,2,3,5 --reference-every 10 --json FILE
+//
+// For each clip and each iteration count k, a fresh LiveRig plays every frame of the clip through
+// LiveRig::processFrame with StepBudget{k} (no deadline: the result does not depend on the machine),
+// exactly as `tetrig run` does (labels bound once, occlusion prediction, warm start from frame to
+// frame). On every frame: inverted body tets and the fine mesh's volume against rest. On every
+// `reference_every`-th frame, the reference: a second, plain Deformer of the same rig starts from the
+// live deformer's rotations after the frame's step (the state the frame ends in) and iterates on the
+// same frame's handle targets until the energy stops falling (relative change per 25 iterations below
+// --tolerance, at most --max-reference-iterations). Then:
+//   error        distance of every body tet vertex, budgeted to converged, in mm: RMS and worst;
+//   energy       E(x) = sum_j a_j ||F_j(x) - R_j||_F^2 with R_j = closestRotation(F_j) (exact, in
+//                double: Horn's method, det R = +1) and a_j = stiffness_j |vol_j|, over all tets
+//                (body and invisible); excess = (E(x_budget) - E(x_conv)) / E(x_conv), left out
+//                (and counted) for frames whose converged energy is below 1e-6 of the clip's median;
+//   inverted     body tets with det F_j <= 0, budgeted (every frame) and converged;
+//   volume       the fine mesh's enclosed volume (B x) against its rest volume, budgeted (every frame)
+//                and converged.
+// The JSON holds "runs": one object per clip and k with the keys docs/fidelity.md lists.
+// Mechanism switches (--no-...) turn off the live rig's frame-step aids one by one, for measuring
+// what each buys.
+#include "tetrig/drivers/c3d_playback.hpp"
+#include "tetrig/laplacian.hpp"
+#include "tetrig/live_rig.hpp"
+#include "tetrig/polar.hpp"
+#include "tetrig/pose_transfer.hpp"
+#include "tetrig/rig_file.hpp"
+#include "tetrig/rigbuild/write_file_atomic.hpp"
+
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <exception>
+#include <memory>
+#include <sstream>
+#include <string>
+#include <vector>
+
+namespace {
+
+using tetrig::Rig;
+
+struct Percentiles {
+  double median = 0, p90 = 0, p99 = 0, max = 0;
+  std::size_t count = 0;
+};
+
+Percentiles percentiles(std::vector<double> v) {
+  Percentiles p;
+  p.count = v.size();
+  if (v.empty()) return p;
+  std::sort(v.begin(), v.end());
+  const auto at = [&v](double q) {
+    // Nearest rank: the smallest value with at least q of the samples at or below it.
+    const auto rank = static_cast<std::size_t>(std::ceil(q * static_cast<double>(v.size())));
+    return v[std::min(v.size() - 1, rank == 0 ? 0 : rank - 1)];
+  };
+  p.median = at(0.5);
+  p.p90 = at(0.9);
+  p.p99 = at(0.99);
+  p.max = v.back();
+  return p;
+}
+
+nlohmann::json toJson(const Percentiles& p) {
+  return {{"median", p.median}, {"p90", p.p90}, {"p99", p.p99}, {"max", p.max}, {"count", p.count}};
+}
+
+// The exact energy and the inverted body tets of a tet-mesh pose (#V*3 doubles).
+struct PoseMeasure {
+  double energy = 0.0;
+  int inverted_body_tets = 0;
+};
+
+class Measurer {
+ public:
+  explicit Measurer(const Rig& rig)
+      : rig_(rig), frames_(tetrig::computeRestFrames(rig.tet_mesh)),
+        weights_(tetrig::tetWeights(frames_, rig.setup.stiffness)) {
+    fine_rest_volume_ = fineVolume(rig.fine_vertices.data(), true);
+  }
+
+  PoseMeasure measure(std::span<const double> x, bool energy) const {
+    PoseMeasure m;
+    const auto& tets = rig_.tet_mesh.tets;
+    for (std::int32_t t = 0; t < rig_.tet_mesh.tetCount(); ++t) {
+      const auto c = tets.row(t);
+      const auto p = [&x](std::int32_t v) {
+        return Eigen::Vector3d(x[3 * static_cast<std::size_t>(v)], x[3 * static_cast<std::size_t>(v) + 1],
+                               x[3 * static_cast<std::size_t>(v) + 2]);
+      };
+      const Eigen::Vector3d p4 = p(c[3]);
+      Eigen::Matrix3d e;
+      e.col(0) = p(c[0]) - p4;
+      e.col(1) = p(c[1]) - p4;
+      e.col(2) = p(c[2]) - p4;
+      const Eigen::Matrix3d f = e * frames_.edge_inverse[static_cast<std::size_t>(t)];
+      if (t < rig_.body_tet_count && f.determinant() <= 0.0) ++m.inverted_body_tets;
+      if (energy) {
+        const Eigen::Matrix3d r = tetrig::closestRotation(f).toRotationMatrix();
+        m.energy += weights_[static_cast<std::size_t>(t)] * (f - r).squaredNorm();
+      }
+    }
+    return m;
+  }
+
+  // Enclosed volume of the fine mesh at positions p (#fine*3, float or the rest doubles).
+  template <class T>
+  double fineVolume(const T* p, bool /*rest*/) const {
+    double six = 0.0;
+    const auto& tri = rig_.fine_triangles;
+    for (Eigen::Index f = 0; f < tri.rows(); ++f) {
+      const auto v = [&](int k) {
+        const auto i = static_cast<std::size_t>(tri(f, k));
+        return Eigen::Vector3d(p[3 * i], p[3 * i + 1], p[3 * i + 2]);
+      };
+      six += v(0).dot(v(1).cross(v(2)));
+    }
+    return six / 6.0;
+  }
+  double fineRestVolume() const { return fine_rest_volume_; }
+
+ private:
+  const Rig& rig_;
+  tetrig::TetRestFrames frames_;
+  std::vector<double> weights_;
+  double fine_rest_volume_ = 0.0;
+};
+
+struct Config {
+  std::vector<std::string> clips;
+  std::string rig_path;
+  std::vector<int> iterations{1, 2, 3, 5};
+  int reference_every = 10;
+  int max_reference_iterations = 3000;
+  double tolerance = 1e-8;
+  int first_frame = 0;
+  int frame_count = 0;  // 0: to the end
+  bool quiet = false;
+  tetrig::LiveRigOptions live;
+};
+
+struct RunResult {
+  nlohmann::json json;
+};
+
+nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::drivers::C3DClip& clip,
+                      const std::string& clip_name, int k, const Config& cfg) {
+  tetrig::drivers::C3DPlaybackOptions options;
+  options.pacing = tetrig::drivers::Pacing::kAsFastAsPossible;
+  const tetrig::drivers::C3DPlayback playback(clip, options);
+  std::vector<std::string> labels(static_cast<std::size_t>(clip.pointCount()));
+  for (const int p : playback.selectedPoints()) labels[static_cast<std::size_t>(p)] = clip.labels()[static_cast<std::size_t>(p)];
+  tetrig::LiveRig live(rig, cfg.live);
+  const tetrig::MarkerBindingReport binding = live.bindLabels(labels);
+  if (binding.matched == 0) throw std::runtime_error("no rig marker is named in " + clip_name);
+
+  // The reference solver: the rig's own setup, plain (the converged pose does not depend on how
+  // a frame step gets there).
+  tetrig::Deformer reference(rig.tet_mesh, rig.setup);
+  std::vector<Eigen::Vector3d> vertex_targets(rig.setup.vertex_handles.size());
+  for (std::size_t h = 0; h < vertex_targets.size(); ++h) {
+    vertex_targets[h] = rig.tet_mesh.vertices.row(rig.setup.vertex_handles[h]).transpose();
+  }
+  std::vector<Eigen::Vector3d> point_targets;
+  for (const tetrig::PointHandle& ph : rig.setup.point_handles) {
+    Eigen::Vector3d p = Eigen::Vector3d::Zero();
+    for (int c = 0; c < 4; ++c) p += ph.barycentric[c] * rig.tet_mesh.vertices.row(rig.tet_mesh.tets(ph.tet, c)).transpose();
+    point_targets.push_back(p);
+  }
+  std::vector<Eigen::Quaterniond> rotations(static_cast<std::size_t>(rig.tet_mesh.tetCount()));
+
+  const double to_mm = 1.0 / rig.alignment.rig_units_per_mm;
+  const std::size_t fine_n = static_cast<std::size_t>(live.fineVertexCount()) * 3;
+  std::vector<float> fine(fine_n);
+  std::vector<double> fine_conv(fine_n);
+  const auto b = rig.pose_transfer.view();
+  auto frame = std::make_unique<tetrig::MarkerFrame>();
+
+  const std::size_t first = static_cast<std::size_t>(cfg.first_frame);
+  const std::size_t end = cfg.frame_count > 0 ? std::min(clip.frameCount(), first + static_cast<std::size_t>(cfg.frame_count))
+                                              : clip.frameCount();
+  if (first >= end) throw std::runtime_error("--first-frame is past the end of " + clip_name);
+
+  std::vector<double> rms, worst, e_budget, e_conv, volume_budget, volume_conv, ref_iterations;
+  std::vector<std::size_t> ref_frame;
+  int inverted_budget_max = 0, inverted_conv_max = 0;
+  std::size_t held = 0, predicted = 0;
+  double step_us = 0.0;
+  const double rest_volume = measurer.fineRestVolume();
+  const auto wall0 = std::chrono::steady_clock::now();
+  for (std::size_t f = first; f < end; ++f) {
+    playback.fillFrame(f, f, *frame);
+    const tetrig::LiveFrameStats s = live.processFrame(*frame, tetrig::StepBudget{k}, fine.data(), nullptr);
+    step_us += static_cast<double>(s.step.total_ns) * 1e-3;
+    if ((s.flags & tetrig::kLivePoseHeld) != 0) ++held;
+    if ((s.flags & tetrig::kLiveMarkersPredicted) != 0) ++predicted;
+    const std::span<const double> x = live.deformer().positions();
+    const bool is_reference = (f - first) % static_cast<std::size_t>(cfg.reference_every) == 0;
+    const PoseMeasure mb = measurer.measure(x, is_reference);
+    inverted_budget_max = std::max(inverted_budget_max, mb.inverted_body_tets);
+    volume_budget.push_back(measurer.fineVolume(fine.data(), false) / rest_volume - 1.0);
+    if (!is_reference) continue;
+
+    // Converged solve of this frame's targets, from the state the budgeted step ended in.
+    for (const tetrig::RigMarker& m : rig.markers) {
+      vertex_targets[static_cast<std::size_t>(m.vertex_handle)] =
+          live.markerTargets()[static_cast<std::size_t>(&m - rig.markers.data())];
+    }
+    for (std::int32_t t = 0; t < rig.tet_mesh.tetCount(); ++t) rotations[static_cast<std::size_t>(t)] = live.deformer().rotation(t);
+    reference.setRotations(rotations);
+    tetrig::HandleTargets targets;
+    targets.vertex_positions = vertex_targets;
+    targets.region_transforms = live.regionTargets();
+    targets.point_positions = point_targets;
+    double last = std::numeric_limits<double>::infinity();
+    int done = 0;
+    while (done < cfg.max_reference_iterations) {
+      const tetrig::StepStats rs = reference.step(targets, tetrig::StepBudget{25});
+      done += rs.iterations;
+      if (std::abs(last - rs.energy) <= cfg.tolerance * std::max(rs.energy, 1e-300)) break;
+      last = rs.energy;
+    }
+    ref_iterations.push_back(done);
+    const std::span<const double> xc = reference.positions();
+    const PoseMeasure mc = measurer.measure(xc, true);
+    inverted_conv_max = std::max(inverted_conv_max, mc.inverted_body_tets);
+    double sum2 = 0.0, w = 0.0;
+    for (std::int32_t v = 0; v < rig.body_vertex_count; ++v) {
+      const std::size_t i = 3 * static_cast<std::size_t>(v);
+      const double d2 = (Eigen::Vector3d(x[i], x[i + 1], x[i + 2]) - Eigen::Vector3d(xc[i], xc[i + 1], xc[i + 2])).squaredNorm();
+      sum2 += d2;
+      w = std::max(w, d2);
+    }
+    rms.push_back(to_mm * std::sqrt(sum2 / rig.body_vertex_count));
+    worst.push_back(to_mm * std::sqrt(w));
+    e_budget.push_back(mb.energy);
+    e_conv.push_back(mc.energy);
+    tetrig::applyPoseTransfer(b, xc.data(), fine_conv.data());
+    volume_conv.push_back(measurer.fineVolume(fine_conv.data(), false) / rest_volume - 1.0);
+    ref_frame.push_back(f);
+    if (!cfg.quiet) {
+      const double s_elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
+      std::fprintf(stderr, "\r%s k=%d: frame %zu/%zu  rms %.1f mm  worst %.1f mm  (%.0f s)   ", clip_name.c_str(), k, f - first + 1,
+                   end - first, rms.back(), worst.back(), s_elapsed);
+    }
+  }
+  if (!cfg.quiet) std::fprintf(stderr, "\n");
+
+  // Energy excess, leaving out frames whose converged energy is negligible.
+  std::vector<double> sorted_conv = e_conv;
+  std::sort(sorted_conv.begin(), sorted_conv.end());
+  const double median_conv = sorted_conv.empty() ? 0.0 : sorted_conv[sorted_conv.size() / 2];
+  std::vector<double> excess;
+  std::size_t left_out = 0;
+  for (std::size_t i = 0; i < e_conv.size(); ++i) {
+    if (e_conv[i] < 1e-6 * median_conv) {
+      ++left_out;
+      continue;
+    }
+    excess.push_back((e_budget[i] - e_conv[i]) / e_conv[i]);
+  }
+  const auto absmax = [](const std::vector<double>& v) {
+    double m = 0.0;
+    for (const double d : v) m = std::max(m, std::abs(d));
+    return m;
+  };
+  nlohmann::json run = {
+      {"clip", clip_name},
+      {"iterations", k},
+      {"frames", end - first},
+      {"reference_frames", rms.size()},
+      {"rms_error_mm", toJson(percentiles(rms))},
+      {"max_error_mm", toJson(percentiles(worst))},
+      {"energy_excess", toJson(percentiles(excess))},
+      {"energy_excess_left_out", left_out},
+      {"inverted_body_tets_max", inverted_budget_max},
+      {"inverted_body_tets_converged_max", inverted_conv_max},
+      {"volume_change_max", absmax(volume_budget)},
+      {"volume_change_converged_max", absmax(volume_conv)},
+      {"reference_iterations", toJson(percentiles(ref_iterations))},
+      {"frames_held", held},
+      {"frames_with_predicted_markers", predicted},
+      {"step_us_mean", step_us / static_cast<double>(end - first)},
+      {"markers_matched", binding.matched},
+      {"markers_missing", binding.missing},
+  };
+  nlohmann::json per_frame = nlohmann::json::array();
+  for (std::size_t i = 0; i < rms.size(); ++i) {
+    per_frame.push_back({{"frame", ref_frame[i]}, {"rms_mm", rms[i]}, {"max_mm", worst[i]}, {"energy", e_budget[i]},
+                         {"energy_converged", e_conv[i]}});
+  }
+  run["reference"] = std::move(per_frame);
+  return run;
+}
+
+std::vector<int> parseIterations(const std::string& s) {
+  std::vector<int> out;
+  std::stringstream ss(s);
+  std::string item;
+  while (std::getline(ss, item, ',')) {
+    std::size_t used = 0;
+    int k = 0;
+    try {
+      k = std::stoi(item, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (used != item.size() || k < 1 || k > 1000) {
+      throw std::runtime_error("--iterations: '" + item + "' is not an iteration count in 1..1000 (give e.g. 1,2,3,5)");
+    }
+    out.push_back(k);
+  }
+  if (out.empty()) throw std::runtime_error("--iterations is empty (give e.g. 1,2,3,5)");
+  return out;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"Budgeted live result against the converged pose, on a rig and C3D clips (docs/fidelity.md)"};
+  Config cfg;
+  std::string iterations = "1,2,3,5", json_path;
+  app.add_option("--rig", cfg.rig_path, "Rig file (tetrig build-rig)")->required()->check(CLI::ExistingFile);
+  app.add_option("--c3d", cfg.clips, "C3D clip(s) of the rig's marker set")->required()->check(CLI::ExistingFile);
+  app.add_option("--iterations", iterations, "Iterations per frame, comma-separated (default 1,2,3,5)");
+  app.add_option("--reference-every", cfg.reference_every, "Converged reference every Nth frame (default 10)")
+      ->check(CLI::Range(1, 1000000));
+  app.add_option("--max-reference-iterations", cfg.max_reference_iterations,
+                 "Iteration cap of a converged solve (default 3000)")->check(CLI::Range(25, 1000000));
+  app.add_option("--tolerance", cfg.tolerance, "Converged: relative energy change per 25 iterations below this (default 1e-8)")
+      ->check(CLI::Range(0.0, 1.0));
+  app.add_option("--first-frame", cfg.first_frame, "First clip frame (default 0)")->check(CLI::NonNegativeNumber);
+  app.add_option("--frames", cfg.frame_count, "Frames to play (default: to the end)")->check(CLI::NonNegativeNumber);
+  app.add_option("--json", json_path, "Write the results here (JSON)");
+  app.add_flag("-q,--quiet", cfg.quiet, "No progress line");
+  app.add_option("--extrapolate", cfg.live.rotation_extrapolation,
+                 "Temporal prediction: alpha of the rotation extrapolation (0: off, the live rig's default; 1: constant velocity)")
+      ->check(CLI::Range(0.0, 1.0));
+  app.add_option("--extrapolate-max-deg", cfg.live.rotation_extrapolation_max_deg,
+                 "Temporal prediction: cap of a tet's predicted rotation per frame, degrees (default 5)")
+      ->check(CLI::Range(0.001, 180.0));
+  CLI11_PARSE(app, argc, argv);
+  try {
+    const std::vector<int> ks = parseIterations(iterations);
+    const Rig rig = tetrig::loadRigFile(cfg.rig_path);
+    const Measurer measurer(rig);
+    nlohmann::json out = {{"rig", cfg.rig_path},
+                          {"tet_vertices", rig.tet_mesh.vertexCount()},
+                          {"tets", rig.tet_mesh.tetCount()},
+                          {"body_tets", rig.body_tet_count},
+                          {"reference_every", cfg.reference_every},
+                          {"runs", nlohmann::json::array()}};
+    for (const std::string& clip_path : cfg.clips) {
+      const auto clip = tetrig::drivers::C3DClip::load(clip_path);
+      const std::string name = std::filesystem::path(clip_path).filename().string();
+      for (const int k : ks) {
+        nlohmann::json run = runOne(rig, measurer, clip, name, k, cfg);
+        const auto& r = run;
+        std::printf("%-32s k=%d  rms mm median %.2f p99 %.2f | worst mm median %.2f p99 %.2f max %.2f | excess median %.4f p99 %.4f | inverted %d (conv %d) | volume %.4f (conv %.4f)\n",
+                    name.c_str(), k, r["rms_error_mm"]["median"].get<double>(), r["rms_error_mm"]["p99"].get<double>(),
+                    r["max_error_mm"]["median"].get<double>(), r["max_error_mm"]["p99"].get<double>(),
+                    r["max_error_mm"]["max"].get<double>(), r["energy_excess"]["median"].get<double>(),
+                    r["energy_excess"]["p99"].get<double>(), r["inverted_body_tets_max"].get<int>(),
+                    r["inverted_body_tets_converged_max"].get<int>(), r["volume_change_max"].get<double>(),
+                    r["volume_change_converged_max"].get<double>());
+        std::fflush(stdout);
+        out["runs"].push_back(std::move(run));
+      }
+    }
+    if (!json_path.empty()) {
+      const std::string text = out.dump(1) + "\n";
+      tetrig::rigbuild::writeFileAtomically(json_path, std::span(reinterpret_cast<const std::uint8_t*>(text.data()), text.size()));
+    }
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "tetrig_fidelity: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}
