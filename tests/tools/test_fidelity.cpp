@@ -4,6 +4,7 @@
 // pose; the converged reference is never above the budgeted result's energy; the temporal prediction
 // of the warm start (--extrapolate 1) lands nearer than the plain warm start (the default); bad
 // arguments exit non-zero with one line naming the problem.
+#include "run_command.hpp"
 #include "small_rig.hpp"
 #include "test_data.hpp"
 
@@ -26,27 +27,9 @@ namespace {
 
 using test::TempDir;
 
-struct ToolRun {
-  int status = -1;
-  std::string out, err;
-};
+using ToolRun = test::CommandRun;
 
-ToolRun fidelity(const std::string& args, const TempDir& dir) {
-  const auto out = dir.path() / "out.txt", err = dir.path() / "err.txt";
-  const std::string cmd = std::string("'") + TETRIG_FIDELITY_EXE + "' " + args + " >'" + out.string() + "' 2>'" + err.string() + "'";
-  const int raw = std::system(cmd.c_str());
-  ToolRun r;
-  r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
-  const auto slurp = [](const std::filesystem::path& p) {
-    std::ifstream in(p);
-    std::stringstream s;
-    s << in.rdbuf();
-    return s.str();
-  };
-  r.out = slurp(out);
-  r.err = slurp(err);
-  return r;
-}
+ToolRun fidelity(const std::string& args, const TempDir& dir) { return test::runCommand(TETRIG_FIDELITY_EXE, args, dir.path()); }
 
 class FidelityTool : public ::testing::Test {
  protected:

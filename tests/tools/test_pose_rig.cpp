@@ -4,6 +4,7 @@
 // deformation-survey edits reproduced from the command line (rig built by `tetrig build-rig` from
 // the .sel through a rig JSON, posed with the .def) match the in-process pipeline of
 // test_rig_deformation_survey, and bad input is one line, a non-zero exit and no file.
+#include "run_command.hpp"
 #include "small_rig.hpp"
 #include "test_data.hpp"
 #include "tetrig/rig_file.hpp"
@@ -258,29 +259,9 @@ TEST(PoseRig, ObjTextHasTheFineMeshInItsOrder) {
 
 // ---- tetrig pose through the binary ----
 
-struct CliRun {
-  int status = -1;
-  std::string out, err;
-};
+using CliRun = test::CommandRun;
 
-CliRun runTetrig(const std::string& args, const TempDir& dir) {
-  const std::string out = (dir.path() / "stdout.txt").string(), err = (dir.path() / "stderr.txt").string();
-  const std::string cmd = std::string("'") + TETRIG_EXE + "' " + args + " >'" + out + "' 2>'" + err + "'";
-  CliRun r;
-  const int raw = std::system(cmd.c_str());
-  r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
-  auto slurp = [](const std::string& p) {
-    std::ifstream in(p);
-    std::stringstream s;
-    s << in.rdbuf();
-    return s.str();
-  };
-  r.out = slurp(out);
-  r.err = slurp(err);
-  std::filesystem::remove(out);
-  std::filesystem::remove(err);
-  return r;
-}
+CliRun runTetrig(const std::string& args, const TempDir& dir) { return test::runCommand(TETRIG_EXE, args, dir.path()); }
 
 std::vector<double> readObjVertices(const std::filesystem::path& path) {
   std::ifstream in(path);

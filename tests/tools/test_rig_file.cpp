@@ -7,6 +7,7 @@
 // a pose sensor, so every sweep covers the optional PSNS section too; rigs without one still
 // write and read the thirteen required sections alone. The example puppet rig
 // (assets/puppet_hydra.json) is built here with the rig builder.
+#include "run_command.hpp"
 #include "small_rig.hpp"
 #include "tetrig/deformer.hpp"
 #include "tetrig/printable_text.hpp"
@@ -825,27 +826,9 @@ TEST_F(SmallRig, MarkerVerticesAndInvisibleTetsFollowTheLayout) {
 
 // ---- terminal safety: text from a file never reaches the terminal raw ----
 
-struct CliRun {
-  int status = -1;
-  std::string out, err;
-};
+using CliRun = test::CommandRun;
 
-CliRun runTetrig(const std::string& args, const TempDir& dir) {
-  const std::string out = (dir.path() / "stdout.txt").string(), err = (dir.path() / "stderr.txt").string();
-  const std::string cmd = std::string("'") + TETRIG_EXE + "' " + args + " >'" + out + "' 2>'" + err + "'";
-  CliRun r;
-  const int raw = std::system(cmd.c_str());
-  r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
-  auto slurp = [](const std::string& p) {
-    std::ifstream in(p, std::ios::binary);
-    std::stringstream s;
-    s << in.rdbuf();
-    return s.str();
-  };
-  r.out = slurp(out);
-  r.err = slurp(err);
-  return r;
-}
+CliRun runTetrig(const std::string& args, const TempDir& dir) { return test::runCommand(TETRIG_EXE, args, dir.path()); }
 
 // Bytes a terminal acts on: C0 controls other than the line ends, DEL, C1 (raw or in UTF-8), and
 // anything that is not UTF-8.

@@ -1,5 +1,6 @@
 // The `tetrig` command as scripts use it: --help for every subcommand, the flags scripts rely on,
 // one-line errors with a non-zero exit and no partial output file, build-rig then inspect.
+#include "run_command.hpp"
 #include "small_rig.hpp"
 #include "t_shape_rig.hpp"
 #include "test_data.hpp"
@@ -25,29 +26,9 @@ namespace {
 
 using test::TempDir;
 
-struct CliRun {
-  int status = -1;
-  std::string out, err;
-};
+using CliRun = test::CommandRun;
 
-CliRun run(const std::string& args, const TempDir& dir) {
-  const std::string out = (dir.path() / "stdout.txt").string(), err = (dir.path() / "stderr.txt").string();
-  const std::string cmd = std::string("'") + TETRIG_EXE + "' " + args + " >'" + out + "' 2>'" + err + "'";
-  CliRun r;
-  const int raw = std::system(cmd.c_str());
-  r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
-  auto slurp = [](const std::string& p) {
-    std::ifstream in(p);
-    std::stringstream s;
-    s << in.rdbuf();
-    return s.str();
-  };
-  r.out = slurp(out);
-  r.err = slurp(err);
-  std::filesystem::remove(out);
-  std::filesystem::remove(err);
-  return r;
-}
+CliRun run(const std::string& args, const TempDir& dir) { return test::runCommand(TETRIG_EXE, args, dir.path()); }
 
 #define EXPECT_CONTAINS(haystack, needle) \
   EXPECT_NE(std::string(haystack).find(needle), std::string::npos) << "text: " << (haystack)
