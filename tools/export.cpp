@@ -20,6 +20,7 @@
 #include "export.hpp"
 
 #include "export_formats.hpp"
+#include "signal_scope.hpp"
 #include "tetrig/atomic_file.hpp"
 #include "tetrig/drivers/c3d_playback.hpp"
 #include "tetrig/drivers/c3d_reader.hpp"
@@ -509,42 +510,12 @@ ExportReport exportClip(const ExportOptions& o) {
   return report;
 }
 
-namespace {
-
-volatile std::sig_atomic_t g_signal = 0;
-extern "C" void onExportSignal(int signal_number) { g_signal = signal_number; }
-
-// SIGINT/SIGTERM end the export between two frames (through on_frame), so that the temporaries
-// are removed on the way out; the previous handlers come back afterwards.
-class SignalScope {
- public:
-  SignalScope() {
-    g_signal = 0;
-    struct sigaction action {};
-    action.sa_handler = onExportSignal;
-    sigemptyset(&action.sa_mask);
-    sigaction(SIGINT, &action, &old_int_);
-    sigaction(SIGTERM, &action, &old_term_);
-  }
-  ~SignalScope() {
-    sigaction(SIGINT, &old_int_, nullptr);
-    sigaction(SIGTERM, &old_term_, nullptr);
-  }
-  SignalScope(const SignalScope&) = delete;
-  SignalScope& operator=(const SignalScope&) = delete;
-
- private:
-  struct sigaction old_int_ {}, old_term_ {};
-};
-
-}  // namespace
-
 int runExport(const ExportOptions& options) {
-  const SignalScope signals;
+  const StopSignalScope signals;
   ExportOptions o = options;
   o.on_frame = [inner = options.on_frame](std::size_t done, std::size_t total) {
-    if (g_signal != 0)
-      throw std::runtime_error(std::string(g_signal == SIGINT ? "interrupted (SIGINT)" : "terminated (SIGTERM)") + " after " +
+    if (const int stop = StopSignalScope::pending(); stop != 0)
+      throw std::runtime_error(std::string(StopSignalScope::describe(stop)) + " after " +
                                std::to_string(done) + " of " + std::to_string(total) + " frames; nothing was written");
     if (inner) inner(done, total);
   };

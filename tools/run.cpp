@@ -1,5 +1,6 @@
 // `tetrig run` (tools/run.hpp): source -> mailbox -> solver thread -> shared memory.
 #include "run.hpp"
+#include "signal_scope.hpp"
 
 #include "tetrig/clock.hpp"
 #include "tetrig/drivers/source_factory.hpp"
@@ -31,29 +32,6 @@ extern char** environ;
 namespace tetrig::tools {
 
 namespace {
-
-volatile std::sig_atomic_t g_signal = 0;
-extern "C" void onSignal(int signal_number) { g_signal = signal_number; }
-
-// Installs SIGINT/SIGTERM handlers for the run's lifetime and restores the previous ones after.
-class SignalScope {
- public:
-  SignalScope() {
-    g_signal = 0;
-    struct sigaction action {};
-    action.sa_handler = onSignal;
-    sigemptyset(&action.sa_mask);
-    sigaction(SIGINT, &action, &old_int_);
-    sigaction(SIGTERM, &action, &old_term_);
-  }
-  ~SignalScope() {
-    sigaction(SIGINT, &old_int_, nullptr);
-    sigaction(SIGTERM, &old_term_, nullptr);
-  }
-
- private:
-  struct sigaction old_int_ {}, old_term_ {};
-};
 
 // Labels come from files and devices: shown escaped (tetrig/printable_text.hpp) and cut short.
 std::string joinLabels(const std::vector<std::string>& labels, std::size_t max_shown = 12) {
@@ -194,7 +172,7 @@ int runLive(const RunOptions& options) {
   loop_options.cpu = options.cpu;
   loop_options.realtime_fifo = options.fifo;
   loop_options.lock_memory = options.lock_memory;
-  SignalScope signals;
+  const StopSignalScope signals;
   FrameLoop loop(*mailbox, live, *publisher, loop_options);
   loop.start();
   if (start_late && !source->start(*mailbox)) {
@@ -221,8 +199,8 @@ int runLive(const RunOptions& options) {
   while (true) {
     std::this_thread::sleep_for(std::chrono::milliseconds(50));
     const FrameLoopSnapshot s = loop.snapshot();
-    if (g_signal != 0) {
-      end_reason = g_signal == SIGINT ? "interrupted (SIGINT)" : "terminated (SIGTERM)";
+    if (const int stop = StopSignalScope::pending(); stop != 0) {
+      end_reason = StopSignalScope::describe(stop);
       break;
     }
     if (loop.finished()) {
