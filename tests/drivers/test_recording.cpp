@@ -19,6 +19,7 @@
 #include <string>
 #include <vector>
 
+#include "file_checks.hpp"
 #include "fake_clock.hpp"
 #include "temp_dir.hpp"
 #include "tetrig/drivers/raw_recording.hpp"
@@ -27,6 +28,8 @@ namespace tetrig::drivers {
 namespace {
 
 using test::FakeClock;
+using ::tetrig::test::modeOf;
+using ::tetrig::test::temporaries;
 
 struct Rec {
   std::int64_t ns;
@@ -259,22 +262,6 @@ TEST_F(RecordingTest, RecorderRejectsBadInput) {
   const std::uint8_t b[1] = {0};
   EXPECT_THROW(rec.write(0, 0, b), RawRecordingError);
   EXPECT_THROW(RawReplay(RawRecording::load(dir_ / "ok.trr"), {Pacing::kRealTime, 0.0, false}), std::invalid_argument);
-}
-
-// Names in `dir` that look like temporaries of the writer (".NAME.tmp-XXXXXX").
-std::vector<std::string> temporaries(const std::filesystem::path& dir) {
-  std::vector<std::string> out;
-  for (const auto& e : std::filesystem::directory_iterator(dir)) {
-    const std::string n = e.path().filename().string();
-    if (n.find(".tmp-") != std::string::npos) out.push_back(n);
-  }
-  return out;
-}
-
-mode_t modeOf(const std::filesystem::path& p) {
-  struct stat st {};
-  EXPECT_EQ(::lstat(p.c_str(), &st), 0) << p;
-  return st.st_mode & 07777;
 }
 
 TEST_F(RecordingTest, AnExistingRecordingStaysWholeUntilClose) {

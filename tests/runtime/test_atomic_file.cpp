@@ -1,6 +1,7 @@
 // Tests of the project's file writer (tetrig/atomic_file.hpp): the mode a new file gets (the
 // umask) and an existing one keeps, the temporary (fresh, beside the target, never through a
 // planted link), the target replaced only by commit(), and no temporary left after any failure.
+#include "file_checks.hpp"
 #include "tetrig/atomic_file.hpp"
 
 #include "temp_dir.hpp"
@@ -22,27 +23,9 @@ namespace tetrig {
 namespace {
 
 using test::TempDir;
-
-std::string readText(const std::filesystem::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
-
-mode_t modeOf(const std::filesystem::path& p) {
-  struct stat st {};
-  EXPECT_EQ(::lstat(p.c_str(), &st), 0) << p;
-  return st.st_mode & 07777;
-}
-
-// Names in `dir` that look like temporaries of the writer (".NAME.tmp-XXXXXX").
-std::vector<std::string> temporaries(const std::filesystem::path& dir) {
-  std::vector<std::string> out;
-  for (const auto& e : std::filesystem::directory_iterator(dir)) {
-    const std::string n = e.path().filename().string();
-    if (n.find(".tmp-") != std::string::npos) out.push_back(n);
-  }
-  return out;
-}
+using ::tetrig::test::readText;
+using ::tetrig::test::modeOf;
+using ::tetrig::test::temporaries;
 
 void write(const std::filesystem::path& target, const std::string& text) {
   AtomicFile f(target);

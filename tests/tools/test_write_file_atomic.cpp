@@ -2,6 +2,7 @@
 // and `tetrig demo --out` through them: the umask and an existing file's mode are honoured, a
 // link planted at the old predictable "<out>.tmp" is not followed, and a failure leaves neither a
 // temporary nor a partial file. (tetrig::AtomicFile itself: tests/runtime/test_atomic_file.cpp.)
+#include "file_checks.hpp"
 #include "tetrig/rigbuild/surface_mesh.hpp"
 #include "tetrig/rigbuild/write_file_atomic.hpp"
 
@@ -24,29 +25,12 @@ namespace tetrig {
 namespace {
 
 using test::TempDir;
+using ::tetrig::test::readText;
+using ::tetrig::test::modeOf;
+using ::tetrig::test::temporaries;
 
 #define EXPECT_CONTAINS(haystack, needle) \
   EXPECT_NE(std::string(haystack).find(needle), std::string::npos) << "text: " << (haystack)
-
-std::string readText(const std::filesystem::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
-
-mode_t modeOf(const std::filesystem::path& p) {
-  struct stat st {};
-  EXPECT_EQ(::lstat(p.c_str(), &st), 0) << p;
-  return st.st_mode & 07777;
-}
-
-std::vector<std::string> temporaries(const std::filesystem::path& dir) {
-  std::vector<std::string> out;
-  for (const auto& e : std::filesystem::directory_iterator(dir)) {
-    const std::string n = e.path().filename().string();
-    if (n.find(".tmp-") != std::string::npos) out.push_back(n);
-  }
-  return out;
-}
 
 void writeText(const std::filesystem::path& p, const std::string& text) {
   rigbuild::writeFileAtomically(p, std::span<const std::uint8_t>(reinterpret_cast<const std::uint8_t*>(text.data()), text.size()));
