@@ -5,11 +5,11 @@
 // "Piecewise polynomial, positive definite and compactly supported radial functions of minimal
 // degree", 1995) and normalised. Neighbour queries use a nanoflann k-d tree.
 #include "tetrig/rigbuild/pose_transfer_weights.hpp"
+#include "xyz_kd_tree.hpp"
 
 #include "tetrig/rigbuild/surface_mesh.hpp"
 
 #include <Eigen/Dense>
-#include <nanoflann.hpp>
 
 #include <algorithm>
 #include <array>
@@ -20,18 +20,6 @@
 
 namespace tetrig::rigbuild {
 namespace {
-
-// nanoflann dataset adaptor over a flat xyz array.
-struct PointCloud {
-  const std::vector<double>* xyz = nullptr;
-  size_t kdtree_get_point_count() const { return xyz->size() / 3; }
-  double kdtree_get_pt(size_t idx, size_t dim) const { return (*xyz)[idx * 3 + dim]; }
-  template <class Box>
-  bool kdtree_get_bbox(Box& /*box*/) const {
-    return false;
-  }
-};
-using KdTree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, PointCloud>, PointCloud, 3, std::uint32_t>;
 
 struct BoundaryFace {
   std::array<std::int32_t, 3> corners;
@@ -121,11 +109,11 @@ Eigen::SparseMatrix<double, Eigen::RowMajor> poseTransferWeights(const Vertices&
     c /= 3.0;
     for (int k = 0; k < 3; ++k) centres[f * 3 + static_cast<size_t>(k)] = c[k];
   }
-  PointCloud face_cloud{&centres};
-  KdTree face_tree(3, face_cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+  XyzPointCloud face_cloud{&centres};
+  XyzKdTree face_tree(3, face_cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
   face_tree.buildIndex();
-  PointCloud centroid_cloud{&centroids};
-  KdTree centroid_tree(3, centroid_cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+  XyzPointCloud centroid_cloud{&centroids};
+  XyzKdTree centroid_tree(3, centroid_cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
   centroid_tree.buildIndex();
 
   const auto n_fine = static_cast<std::int32_t>(fine_vertices.rows());

@@ -1,8 +1,8 @@
 // `--frame auto`: the clip frame that best matches the mesh's rest pose (see rest_frame_search.hpp).
 #include "tetrig/rigbuild/rest_frame_search.hpp"
+#include "xyz_kd_tree.hpp"
 
 #include <Eigen/Geometry>
-#include <nanoflann.hpp>
 
 #include <algorithm>
 #include <cmath>
@@ -12,18 +12,6 @@
 
 namespace tetrig::rigbuild {
 namespace {
-
-// nanoflann dataset adaptor over a flat xyz array.
-struct PointCloud {
-  const std::vector<double>* xyz = nullptr;
-  size_t kdtree_get_point_count() const { return xyz->size() / 3; }
-  double kdtree_get_pt(size_t idx, size_t dim) const { return (*xyz)[idx * 3 + dim]; }
-  template <class Box>
-  bool kdtree_get_bbox(Box& /*box*/) const {
-    return false;
-  }
-};
-using KdTree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, PointCloud>, PointCloud, 3, std::uint32_t>;
 
 std::string fmt(const char* f, double v) {
   char buf[64];
@@ -37,8 +25,8 @@ constexpr std::size_t kMaxSamples = 4'000'000;  // about 130 MB with the tree
 }  // namespace
 
 struct SurfaceSamples::Tree {
-  PointCloud cloud;
-  KdTree tree;
+  XyzPointCloud cloud;
+  XyzKdTree tree;
   explicit Tree(const std::vector<double>* xyz) : cloud{xyz}, tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10)) {}
 };
 
