@@ -6,6 +6,7 @@
 // where assimp would guess, drop data or read out of bounds, the file is refused. See
 // check_surface_file.hpp for the list.
 #include "tetrig/rigbuild/check_surface_file.hpp"
+#include "ply_scalar_type.hpp"
 
 #include "tetrig/printable_text.hpp"
 #include "tetrig/rigbuild/surface_mesh.hpp"
@@ -258,27 +259,6 @@ struct PlyElement {
   std::vector<PlyProperty> properties;
   std::int64_t header_line = 0;
 };
-
-bool plyType(std::string_view t, int& size, bool& is_float, bool& is_signed) {
-  struct T {
-    std::string_view a, b;
-    int size;
-    bool f, s;
-  };
-  static constexpr T kTypes[] = {{"char", "int8", 1, false, true},     {"uchar", "uint8", 1, false, false},
-                                 {"short", "int16", 2, false, true},   {"ushort", "uint16", 2, false, false},
-                                 {"int", "int32", 4, false, true},     {"uint", "uint32", 4, false, false},
-                                 {"float", "float32", 4, true, true},  {"double", "float64", 8, true, true}};
-  for (const T& k : kTypes) {
-    if (t == k.a || t == k.b) {
-      size = k.size;
-      is_float = k.f;
-      is_signed = k.s;
-      return true;
-    }
-  }
-  return false;
-}
 
 bool isVertexIndexList(const PlyElement& e, const PlyProperty& p) {
   return p.list && e.name == "face" && (p.name == "vertex_indices" || p.name == "vertex_index");
@@ -555,7 +535,7 @@ SurfaceFileSummary checkPly(std::string_view text, const std::string& name, cons
       std::string_view type;
       if (tokens.size() == 5 && tokens[1] == "list") {
         p.list = true;
-        if (!plyType(tokens[2], p.count_size, count_float, p.count_signed) || count_float) {
+        if (!plyScalarType(tokens[2], p.count_size, count_float, p.count_signed) || count_float) {
           refuse(name, where + ": list length type " + shown(tokens[2]) + " is not an integer type");
         }
         type = tokens[3];
@@ -566,7 +546,7 @@ SurfaceFileSummary checkPly(std::string_view text, const std::string& name, cons
       } else {
         refuse(name, where + ": expected 'property TYPE NAME' or 'property list COUNT_TYPE TYPE NAME'");
       }
-      if (!plyType(type, p.size, p.is_float, p.is_signed)) {
+      if (!plyScalarType(type, p.size, p.is_float, p.is_signed)) {
         refuse(name, where + ": unknown property type " + shown(type) + " (char, uchar, short, ushort, int, uint, float, double)");
       }
       PlyElement& e = elements.back();

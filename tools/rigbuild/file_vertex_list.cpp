@@ -4,6 +4,7 @@
 // Stanford PLY (header, elements in order; ascii or binary little/big endian; list properties of
 // elements before "vertex" skipped). Only positions are read; faces stay with assimp.
 #include "tetrig/rigbuild/file_vertex_list.hpp"
+#include "ply_scalar_type.hpp"
 #include "tetrig/rigbuild/surface_mesh.hpp"
 
 #include <array>
@@ -129,28 +130,6 @@ struct PlyElement {
   std::vector<PlyProperty> properties;
 };
 
-bool plyType(const std::string& t, int& size, bool& is_float, bool& is_signed) {
-  struct T {
-    const char* a;
-    const char* b;
-    int size;
-    bool f, s;
-  };
-  static constexpr T kTypes[] = {{"char", "int8", 1, false, true},     {"uchar", "uint8", 1, false, false},
-                                 {"short", "int16", 2, false, true},   {"ushort", "uint16", 2, false, false},
-                                 {"int", "int32", 4, false, true},     {"uint", "uint32", 4, false, false},
-                                 {"float", "float32", 4, true, true},  {"double", "float64", 8, true, true}};
-  for (const T& k : kTypes) {
-    if (t == k.a || t == k.b) {
-      size = k.size;
-      is_float = k.f;
-      is_signed = k.s;
-      return true;
-    }
-  }
-  return false;
-}
-
 // One binary scalar as a double; false at the end of the file.
 bool readBinary(std::istream& in, int size, bool is_float, bool is_signed, bool big, double& out) {
   std::array<unsigned char, 8> b{};
@@ -210,9 +189,9 @@ std::optional<Vertices> readPly(std::istream& in, std::uintmax_t file_bytes) {
         std::string count_type;
         bool count_float = false;
         p.list = true;
-        if (!(s >> count_type >> type) || !plyType(count_type, p.count_size, count_float, p.count_signed) || count_float) return std::nullopt;
+        if (!(s >> count_type >> type) || !plyScalarType(count_type, p.count_size, count_float, p.count_signed) || count_float) return std::nullopt;
       }
-      if (!plyType(type, p.size, p.is_float, p.is_signed) || !(s >> p.name)) return std::nullopt;
+      if (!plyScalarType(type, p.size, p.is_float, p.is_signed) || !(s >> p.name)) return std::nullopt;
       elements.back().properties.push_back(p);
     }  // comment, obj_info and unknown header lines are skipped
   }
