@@ -84,7 +84,7 @@ class Measurer {
   explicit Measurer(const Rig& rig)
       : rig_(rig), frames_(tetrig::computeRestFrames(rig.tet_mesh)),
         weights_(tetrig::tetWeights(frames_, rig.setup.stiffness)) {
-    fine_rest_volume_ = fineVolume(rig.fine_vertices.data(), true);
+    fine_rest_volume_ = fineVolume(rig.fine_vertices.data());
   }
 
   PoseMeasure measure(std::span<const double> x, bool energy) const {
@@ -111,9 +111,9 @@ class Measurer {
     return m;
   }
 
-  // Enclosed volume of the fine mesh at positions p (#fine*3, float or the rest doubles).
+  // Enclosed volume of the fine mesh at positions p (#fine*3 floats or doubles, rig units).
   template <class T>
-  double fineVolume(const T* p, bool /*rest*/) const {
+  double fineVolume(const T* p) const {
     double six = 0.0;
     const auto& tri = rig_.fine_triangles;
     for (Eigen::Index f = 0; f < tri.rows(); ++f) {
@@ -147,10 +147,6 @@ struct Config {
   tetrig::LiveRigOptions live;
 };
 
-struct RunResult {
-  nlohmann::json json;
-};
-
 nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::drivers::C3DClip& clip,
                       const std::string& clip_name, int k, const Config& cfg) {
   tetrig::drivers::C3DPlaybackOptions options;
@@ -165,16 +161,6 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
   // The reference solver: the rig's own setup, plain (the converged pose does not depend on how
   // a frame step gets there).
   tetrig::Deformer reference(rig.tet_mesh, rig.setup);
-  std::vector<Eigen::Vector3d> vertex_targets(rig.setup.vertex_handles.size());
-  for (std::size_t h = 0; h < vertex_targets.size(); ++h) {
-    vertex_targets[h] = rig.tet_mesh.vertices.row(rig.setup.vertex_handles[h]).transpose();
-  }
-  std::vector<Eigen::Vector3d> point_targets;
-  for (const tetrig::PointHandle& ph : rig.setup.point_handles) {
-    Eigen::Vector3d p = Eigen::Vector3d::Zero();
-    for (int c = 0; c < 4; ++c) p += ph.barycentric[c] * rig.tet_mesh.vertices.row(rig.tet_mesh.tets(ph.tet, c)).transpose();
-    point_targets.push_back(p);
-  }
   std::vector<Eigen::Quaterniond> rotations(static_cast<std::size_t>(rig.tet_mesh.tetCount()));
 
   const double to_mm = 1.0 / rig.alignment.rig_units_per_mm;
@@ -206,20 +192,16 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
     const bool is_reference = (f - first) % static_cast<std::size_t>(cfg.reference_every) == 0;
     const PoseMeasure mb = measurer.measure(x, is_reference);
     inverted_budget_max = std::max(inverted_budget_max, mb.inverted_body_tets);
-    volume_budget.push_back(measurer.fineVolume(fine.data(), false) / rest_volume - 1.0);
+    volume_budget.push_back(measurer.fineVolume(fine.data()) / rest_volume - 1.0);
     if (!is_reference) continue;
 
     // Converged solve of this frame's targets, from the state the budgeted step ended in.
-    for (const tetrig::RigMarker& m : rig.markers) {
-      vertex_targets[static_cast<std::size_t>(m.vertex_handle)] =
-          live.markerTargets()[static_cast<std::size_t>(&m - rig.markers.data())];
-    }
     for (std::int32_t t = 0; t < rig.tet_mesh.tetCount(); ++t) rotations[static_cast<std::size_t>(t)] = live.deformer().rotation(t);
     reference.setRotations(rotations);
     tetrig::HandleTargets targets;
-    targets.vertex_positions = vertex_targets;
+    targets.vertex_positions = live.vertexTargets();
     targets.region_transforms = live.regionTargets();
-    targets.point_positions = point_targets;
+    targets.point_positions = live.pointTargets();
     double last = std::numeric_limits<double>::infinity();
     int done = 0;
     while (done < cfg.max_reference_iterations) {
@@ -244,7 +226,7 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
     e_budget.push_back(mb.energy);
     e_conv.push_back(mc.energy);
     tetrig::applyPoseTransfer(b, xc.data(), fine_conv.data());
-    volume_conv.push_back(measurer.fineVolume(fine_conv.data(), false) / rest_volume - 1.0);
+    volume_conv.push_back(measurer.fineVolume(fine_conv.data()) / rest_volume - 1.0);
     ref_frame.push_back(f);
     if (!cfg.quiet) {
       const double s_elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();

@@ -157,6 +157,11 @@ class LiveRig {
   // would ignore the region); an index out of range is ignored. No allocation.
   void setRegionTarget(std::int32_t region, const RigidTransform& target) noexcept;
   std::span<const RigidTransform> regionTargets() const noexcept { return region_targets_; }  // one per rig.setup.region_handles
+  // The vertex- and point-handle targets the last processFrame stepped with (rig units; markers'
+  // handles carry their targets, the other handles their rest positions): with regionTargets(), what
+  // a second Deformer of the rig needs to solve the same frame (tetrig_fidelity's converged reference).
+  std::span<const Eigen::Vector3d> vertexTargets() const noexcept { return vertex_targets_; }
+  std::span<const Eigen::Vector3d> pointTargets() const noexcept { return point_targets_; }
 
   // For tests and tools, per rig marker (rig.markers order), as of the last processFrame:
   std::span<const Eigen::Vector3d> markerTargets() const noexcept { return marker_target_; }      // the target it was driven with, rig units
