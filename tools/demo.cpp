@@ -1,13 +1,17 @@
 // `tetrig demo` (tools/demo.hpp): the live path on the project's own data or on real data.
 #include "demo.hpp"
 
+#include "character/default_character.hpp"
+#include "demo_report.hpp"
 #include "run.hpp"
+#include "tetrig/drivers/c3d_reader.hpp"
 #include "tetrig/rigbuild/demo_bar_rig.hpp"
 #include "tetrig/rigbuild/build_rig.hpp"
 #include "tetrig/rigbuild/progress.hpp"
 #include "tetrig/rigbuild/write_file_atomic.hpp"
 #include "tetrig/tet_mesh_io.hpp"
 
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -57,6 +61,8 @@ std::string cacheKey(const std::filesystem::path& mesh, const std::filesystem::p
 
 int runDemo(const DemoOptions& options) {
   if (options.mesh.empty() != options.c3d.empty()) throw std::invalid_argument("--mesh and --c3d go together (a mesh and the clip that drives it)");
+  // The report's folder and gnuplot are checked before any work.
+  if (!options.no_report) checkDemoReportTarget(options.report);
   RunOptions run;
   run.iterations = options.iterations;
   run.budget_ms = options.frame_budget_ms;
@@ -66,9 +72,16 @@ int runDemo(const DemoOptions& options) {
   const std::filesystem::path consumer = exeDir() / "tetrig-shm-cat";
   if (std::filesystem::exists(consumer)) run.consumer_command = consumer.string() + " --quiet --timeout-ms 10000";
   if (options.mesh.empty()) {
-    run.rig = rigbuild::makeDemoBarRig(readTetGen(assetsDir() / "bar_4x4x33.node"));
-    run.source = "synthetic";
-    run.frames = options.frames != 0 ? options.frames : 600;
+    // The default character (assets/character, docs/character.md), its rig built once and cached,
+    // playing its performance from the synthetic source.
+    rigbuild::Progress progress("tetrig demo", options.quiet ? rigbuild::Progress::Mode::kQuiet : rigbuild::Progress::Mode::kAuto);
+    const character::DefaultCharacter character = character::prepareDefaultCharacter(assetsDir() / "character", cacheDir(), &progress);
+    if (!options.quiet) {
+      std::printf("tetrig demo: %s the default character's rig %s\n", character.reused ? "reusing" : "cached", character.rig_path.string().c_str());
+    }
+    run.rig = loadRigFile(character.rig_path);
+    run.source = character.source_spec;
+    run.frames = options.frames != 0 ? options.frames : character.performance_frames;
   } else {
     // "-checked": rigs cached by builders before the alignment checks (and the relative distance
     // limit that 0 now means) are not reused.
@@ -91,7 +104,52 @@ int runDemo(const DemoOptions& options) {
     run.source = "c3d:" + options.c3d;
     run.frames = options.frames;
   }
-  return runLive(run);
+  if (options.no_report) return runLive(run);
+
+  // The report: the solver's frame log (sized now, before the loop starts) and a reader of the
+  // segment in this process.
+  std::size_t log_frames = run.frames;
+  int log_markers = run.rig ? static_cast<int>(run.rig->markers.size()) : 64;
+  if (run.source.rfind("c3d:", 0) == 0) {
+    const drivers::C3DClip clip = drivers::C3DClip::load(run.source.substr(4));
+    log_frames = log_frames != 0 ? std::min<std::size_t>(log_frames, clip.frameCount()) : clip.frameCount();
+    log_markers = clip.pointCount();
+  }
+  run.frame_log_capacity = log_frames != 0 ? log_frames : 120 * 120;  // unknown length: the first 2 minutes at 120 Hz
+  run.frame_log_markers = std::clamp(log_markers, 0, kMaxMarkers);
+  SegmentFrameCapture capture(run.publish, options.sheet_frames);
+  capture.start();
+  RunOutcome outcome;
+  int code = 0;
+  try {
+    code = runLive(run, &outcome);
+  } catch (...) {
+    capture.stop();
+    throw;
+  }
+  capture.stop();
+  std::fflush(stdout);  // the run's summary before any report error on stderr
+  if (code != 0) {
+    std::fprintf(stderr, "tetrig demo: error: the run failed (status %d): no report written\n", code);
+    return code;
+  }
+  DemoReportOptions report;
+  report.dir = options.report;
+  report.demo = {{"data", options.mesh.empty() ? "default" : "mesh and clip"}, {"source", run.source}};
+  if (!options.mesh.empty()) {
+    report.demo["mesh"] = options.mesh;
+    report.demo["c3d"] = options.c3d;
+  }
+  const std::vector<CapturedFrame> frames = capture.pick();
+  if (frames.empty()) throw std::runtime_error("no report written: no frame was read from the segment (" + capture.error() + ")");
+  try {
+    (void)writeDemoReport(report, outcome, frames, capture.triangles());
+  } catch (const std::exception& e) {
+    throw std::runtime_error(std::string("no report written in ") + options.report + ": " + e.what());
+  }
+  std::printf("tetrig demo: report in %s: summary.json, sheet.png (%zu frames), latency.png\n",
+              std::filesystem::absolute(options.report).string().c_str(), frames.size());
+  return 0;
 }
 
 }  // namespace tetrig::tools

@@ -21,6 +21,7 @@
 #include <stdexcept>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include <spawn.h>
@@ -73,7 +74,7 @@ int reapConsumer(pid_t pid, std::chrono::milliseconds timeout) {
 
 }  // namespace
 
-int runLive(const RunOptions& options) {
+int runLive(const RunOptions& options, RunOutcome* outcome) {
   if (options.iterations < 1) throw std::invalid_argument("--iterations must be at least 1");
   // 1. The rig and the live rig (load time: allocation, factorization).
   std::optional<Rig> loaded;
@@ -172,6 +173,8 @@ int runLive(const RunOptions& options) {
   loop_options.cpu = options.cpu;
   loop_options.realtime_fifo = options.fifo;
   loop_options.lock_memory = options.lock_memory;
+  loop_options.frame_log_capacity = options.frame_log_capacity;
+  loop_options.frame_log_markers = options.frame_log_markers;
   const StopSignalScope signals;
   FrameLoop loop(*mailbox, live, *publisher, loop_options);
   loop.start();
@@ -280,7 +283,7 @@ int runLive(const RunOptions& options) {
     rigbuild::writeFileAtomically(options.final_obj, std::span<const std::uint8_t>(reinterpret_cast<const std::uint8_t*>(text.data()), text.size()));
     if (!options.quiet) std::printf("  wrote %s\n", options.final_obj.c_str());
   }
-  if (!options.stats_json.empty()) {
+  if (!options.stats_json.empty() || outcome != nullptr) {
     nlohmann::json j;
     j["frames"] = c.frames;
     j["budget_misses"] = c.budget_misses;
@@ -308,9 +311,25 @@ int runLive(const RunOptions& options) {
                        {"receive_to_pose_done", phaseJson(l.receive_to_pose_done)},
                        {"receive_to_published", phaseJson(l.receive_to_published)},
                        {"overhead", phaseJson(l.overhead)}};
-    // Text from the rig and the source may hold bytes that are not UTF-8: replaced, not a failed run.
-    const std::string text = j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
-    rigbuild::writeFileAtomically(options.stats_json, std::span<const std::uint8_t>(reinterpret_cast<const std::uint8_t*>(text.data()), text.size()));
+    if (!options.stats_json.empty()) {
+      // Text from the rig and the source may hold bytes that are not UTF-8: replaced, not a failed run.
+      const std::string text = j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
+      rigbuild::writeFileAtomically(options.stats_json, std::span<const std::uint8_t>(reinterpret_cast<const std::uint8_t*>(text.data()), text.size()));
+    }
+    if (outcome != nullptr) {
+      outcome->stats = std::move(j);
+      const auto log = loop.frameLog();
+      outcome->frame_log.assign(log.begin(), log.end());
+      outcome->frame_log_markers.resize(log.size());
+      for (std::size_t i = 0; i < log.size(); ++i) {
+        const auto markers = loop.frameLogMarkers(i);
+        outcome->frame_log_markers[i].assign(markers.begin(), markers.end());
+      }
+      outcome->frame_log_dropped = loop.frameLogDropped();
+      outcome->alignment = rig.alignment;
+      outcome->rig_name = rig.name;
+      outcome->budget_ms = budget_ms;
+    }
   }
   if (consumer > 0 && consumer_status != 0) {
     std::fprintf(stderr, "tetrig run: error: the consumer exited with status %d\n", consumer_status);

@@ -4,11 +4,16 @@
 // Keys of --stats-json: docs/live.md.
 #pragma once
 
+#include "tetrig/frame_loop.hpp"
 #include "tetrig/rig_file.hpp"
 
+#include <nlohmann/json.hpp>
+
+#include <cstddef>
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <vector>
 
 namespace tetrig::tools {
 
@@ -39,12 +44,28 @@ struct RunOptions {
   bool status_line = true;              // a live status line on a terminal (stderr)
   std::string final_obj;                // write the last published fine surface here as OBJ (atomically)
   std::string consumer_command;         // demo: started after the segment exists, with the segment name appended; waited for at the end
+  std::size_t frame_log_capacity = 0;   // demo report: the solver's per-frame log (FrameLoopOptions::frame_log_capacity)
+  int frame_log_markers = 0;            // demo report: markers kept per logged frame
+};
+
+// What a run leaves for the caller (tetrig demo's report): the --stats-json object, the frame log
+// (tetrig/frame_loop.hpp) with the markers kept per frame, and the rig's alignment (device mm ->
+// rig units, its up axis).
+struct RunOutcome {
+  nlohmann::json stats;
+  std::vector<tetrig::FrameLogEntry> frame_log;
+  std::vector<std::vector<tetrig::FrameLogMarker>> frame_log_markers;  // one list per frame_log entry
+  std::uint64_t frame_log_dropped = 0;
+  tetrig::RigAlignment alignment;
+  std::string rig_name;
+  double budget_ms = 0;
 };
 
 // Runs until the source ends, `frames` frames were solved, or SIGINT/SIGTERM. Prints a summary
 // on stdout. Returns the process exit code; throws (one clear line) on bad input: a rig that does
 // not load, a source that cannot open, a segment name in use by a live producer, a source whose
 // markers share no label with the rig.
-int runLive(const RunOptions& options);
+// With `outcome`, also fills it (after the run, whatever its exit code).
+int runLive(const RunOptions& options, RunOutcome* outcome = nullptr);
 
 }  // namespace tetrig::tools

@@ -18,6 +18,15 @@ packages=(
   libtinygltf-dev
   # the Blender add-on's headless tests (tests/tools/test_blender.cpp; numpy for its fast path)
   blender python3-numpy
+  # the default character's skin (tools/character: OpenVDB level set -> mesh; its CMake module needs Boost.Iostreams)
+  libopenvdb-dev libboost-iostreams-dev
+  # headless pictures and tetrig view (tools/render, tools/view): GL loader, EGL surfaceless + Mesa, GLFW, PNG, captions
+  libepoxy-dev libegl-dev libegl1 libegl-mesa0 libgl1-mesa-dri libglfw3-dev libpng-dev libfreetype-dev libfontconfig-dev
+  fonts-dejavu-core
+  # tetrig view's tests under a virtual display
+  xvfb xauth
+  # the demo report's latency plot (tools/demo_report.cpp)
+  gnuplot-nox
   # fuzzing and sanitizers (clang, libFuzzer, LeakSanitizer runtime)
   clang libclang-rt-14-dev
   # the latency harness's table (bench/latency.sh)

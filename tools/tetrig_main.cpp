@@ -1,9 +1,12 @@
-// The `tetrig` command: build-rig, inspect, run, demo, export, pose. Every subcommand has --help; errors print one
+// The `tetrig` command: build-rig, inspect, run, demo, export, pose, make-character, view. Every subcommand has --help; errors print one
 // line "tetrig <cmd>: error: ..." on stderr and exit non-zero; no partial output file is left.
+#include "character/make_character.hpp"
 #include "demo.hpp"
 #include "export.hpp"
 #include "pose.hpp"
 #include "run.hpp"
+#include "view.hpp"
+#include "tetrig/drivers/character_performance.hpp"
 #include "tetrig/printable_text.hpp"
 #include "tetrig/rig_file.hpp"
 #include "tetrig/rigbuild/build_rig.hpp"
@@ -141,7 +144,7 @@ int main(int argc, char** argv) {
 
   tetrig::tools::DemoOptions demo;
   CLI::App* demo_cmd = app.add_subcommand("demo", "Run the live path (source -> solver -> shared memory -> a consumer) on the project's own default data, or on --mesh/--c3d");
-  demo_cmd->add_option("--frames", demo.frames, "Frames to solve (default: 600 on the default data, the whole clip with --c3d)")
+  demo_cmd->add_option("--frames", demo.frames, "Frames to solve (default: one pass of the default character's performance, 1152 frames; the whole clip with --c3d)")
       ->check(CLI::Range(1, 100000000));
   demo_cmd->add_option("--mesh", demo.mesh, "Real data: a surface mesh (with --c3d); the rig is built once and cached");
   demo_cmd->add_option("--c3d", demo.c3d, "Real data: the C3D clip that drives the mesh (with --mesh)");
@@ -156,13 +159,19 @@ int main(int argc, char** argv) {
   demo_cmd->add_option("--budget-ms", demo.frame_budget_ms, "Receive -> published deadline per frame (default: 0.9 of the source's period)")
       ->check(CLI::Range(0.001, 60000.0));
   demo_cmd->add_option("--out", demo.out_obj, "Write the last published surface to this OBJ file");
+  demo_cmd->add_option("--report", demo.report, "The report folder: summary.json, sheet.png, latency.png (docs/demo.md)")
+      ->capture_default_str();
+  demo_cmd->add_flag("--no-report", demo.no_report, "Write no report");
+  demo_cmd->add_option("--sheet-frames", demo.sheet_frames, "Frames on the report's picture sheet")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 48));
   demo_cmd->add_flag("-q,--quiet", demo.quiet, "Less output");
 
   tetrig::tools::RunOptions run;
   CLI::App* run_cmd = app.add_subcommand("run", "Run the live path: a marker source -> the rig, frame after frame -> shared memory");
   run_cmd->add_option("--rig", run.rig_path, "Rig file (tetrig build-rig)")->required();
   run_cmd->add_option("--source", run.source,
-                      "Marker source: c3d:PATH, replay:PATH, synthetic[:N], hid:VID:PID, usb:VID:PID (hex ids), hydra[:SERIAL]")
+                      "Marker source: c3d:PATH, replay:PATH, synthetic[:N], synthetic:character, hid:VID:PID, usb:VID:PID (hex ids), hydra[:SERIAL]")
       ->required();
   run_cmd->add_option("--publish", run.publish, "Shared-memory segment name (docs/shm.md)")->capture_default_str();
   run_cmd->add_option("--frames", run.frames, "Stop after this many solved frames (default: until the source ends or Ctrl-C)");
@@ -227,6 +236,27 @@ int main(int argc, char** argv) {
   export_cmd->add_flag("--simple-progress", exp.simple_progress, "Plain progress lines even on a terminal");
   export_cmd->add_flag("-q,--quiet", exp.quiet, "No progress and no summary");
 
+  tetrig::tools::ViewOptions view;
+  CLI::App* view_cmd = app.add_subcommand(
+      "view", "A window showing a shared-memory segment live: shaded mesh, orbit/zoom, frame id, rate, latency (docs/view.md)");
+  view_cmd->add_option("NAME", view.name, "Segment name (the --publish name of tetrig run / tetrig demo)")->required();
+  view_cmd->add_flag("--markers", view.markers, "Show the segment's marker information (labels, occluded this frame)");
+  view_cmd->add_flag("--follow", view.follow, "Keep the camera on the figure as it moves (F toggles it)");
+  view_cmd->add_option("--screenshot", view.screenshot, "Write the window's picture to this PNG after --after-frames new frames, then exit 0");
+  view_cmd->add_option("--after-frames", view.after_frames, "New frames before the screenshot")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 100000000));
+  view_cmd->add_option("--timeout", view.timeout_s, "--screenshot: fail when the frames did not come within this many seconds")
+      ->capture_default_str()
+      ->check(CLI::Range(0.1, 86400.0));
+  view_cmd->add_option("--width", view.width, "Window width, pixels")->capture_default_str()->check(CLI::Range(64, 8192));
+  view_cmd->add_option("--height", view.height, "Window height, pixels")->capture_default_str()->check(CLI::Range(64, 8192));
+  view_cmd->add_option("--up", view.up, "The rig's up axis: x, y or z")->capture_default_str()->check(CLI::IsMember({"x", "y", "z"}));
+  view_cmd->add_option("--stale-ms", view.stale_ms, "Heartbeat age that counts as a producer not responding")
+      ->capture_default_str()
+      ->check(CLI::Range(1.0, 600000.0));
+  view_cmd->add_flag("-q,--quiet", view.quiet, "No status lines on stderr");
+
   tetrig::tools::PoseOptions pose;
   CLI::App* pose_cmd = app.add_subcommand("pose", "Pose a rig: rigid transforms (.def files) for its region handles -> the fine mesh as OBJ");
   pose_cmd->add_option("RIG", pose.rig_path, "Rig file (tetrig build-rig)")->required();
@@ -242,6 +272,12 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1, 10000000));
   pose_cmd->add_flag("-q,--quiet", pose.quiet, "No summary");
 
+  std::string character_out;
+  CLI::App* character_cmd = app.add_subcommand(
+      "make-character", "Generate the default character's assets (skin OBJ + T-pose markers CSV; docs/character.md) into a folder");
+  character_cmd->add_option("--out", character_out, "Folder to write character.obj and markers.csv into (each replaced atomically)")
+      ->required();
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -254,6 +290,15 @@ int main(int argc, char** argv) {
     if (cmd == "inspect") return inspectCommand(inspect_path, inspect_markers);
     if (cmd == "demo") return tetrig::tools::runDemo(demo);
     if (cmd == "pose") return tetrig::tools::runPose(pose);
+    if (cmd == "view") return tetrig::tools::runView(view);
+    if (cmd == "make-character") {
+      const tetrig::character::CharacterSkinStats made = tetrig::character::writeCharacterAssets(character_out);
+      std::printf("tetrig make-character: %s/%s: %d vertices, %d triangles, genus %d, %.3f m tall, %.4f m^3 (%.2f s); %s/%s: %d markers\n",
+                  character_out.c_str(), tetrig::character::kCharacterObjName, made.vertices, made.triangles, made.genus, made.height_m,
+                  made.volume_m3, made.seconds, character_out.c_str(), tetrig::character::kCharacterMarkersName,
+                  tetrig::drivers::kCharacterMarkerCount);
+      return 0;
+    }
     if (cmd == "export") return tetrig::tools::runExport(exp);
     if (cmd == "run") {
       run.lock_memory = !no_mlock;

@@ -1,4 +1,4 @@
-// Marker source factory: parses a source spec ("c3d:PATH", "replay:PATH", "synthetic[:N]",
+// Marker source factory: parses a source spec ("c3d:PATH", "replay:PATH", "synthetic[:N]", "synthetic:character",
 // "hid:VID:PID", "usb:VID:PID", "hydra[:SERIAL]"; docs/drivers.md, "One source shape") and builds
 // the matching MarkerSource.
 #include "tetrig/drivers/source_factory.hpp"
@@ -19,7 +19,7 @@ namespace tetrig::devices {
 namespace {
 
 constexpr std::string_view kSpecForms =
-    "c3d:PATH, replay:PATH, synthetic[:N], hid:VID:PID, usb:VID:PID, hydra[:SERIAL] (VID, PID in hex, e.g. hid:1209:0001)";
+    "c3d:PATH, replay:PATH, synthetic[:N], synthetic:character, hid:VID:PID, usb:VID:PID, hydra[:SERIAL] (VID, PID in hex, e.g. hid:1209:0001)";
 
 [[noreturn]] void badSpec(std::string_view spec, const std::string& what) {
   throw std::invalid_argument("bad marker source \"" + std::string(spec) + "\": " + what + "; accepted: " +
@@ -97,6 +97,16 @@ std::unique_ptr<drivers::MarkerSource> openReplay(std::string_view spec, std::st
 std::unique_ptr<drivers::MarkerSource> openSynthetic(std::string_view spec, std::string_view rest, bool has_rest,
                                                      const SourceOpenOptions& options) {
   checkSpeed(spec, options.speed);
+  if (has_rest && rest == "character") {
+    // The default character's own 41 markers and labels: synthetic_rest_mm and synthetic_labels
+    // (a rig's) are not used; the rig binds the labels it shares with the character.
+    drivers::SyntheticOptions character = drivers::characterSyntheticOptions();
+    character.pacing = options.pacing;
+    character.speed = options.speed;
+    character.max_frames = options.max_frames;
+    if (options.rate_hz > 0) character.rate_hz = options.rate_hz;
+    return drivers::makeSyntheticSource(std::move(character), drivers::SyntheticSource::characterMarkerLabels());
+  }
   drivers::SyntheticOptions synthetic;
   synthetic.rest_positions_mm = options.synthetic_rest_mm;
   if (!synthetic.rest_positions_mm.empty()) {
@@ -110,7 +120,7 @@ std::unique_ptr<drivers::MarkerSource> openSynthetic(std::string_view spec, std:
     const auto [ptr, ec] = std::from_chars(rest.data(), end, n);
     if (rest.empty() || ec != std::errc() || ptr != end || n < 1 || n > kMaxMarkers) {
       badSpec(spec, "the marker count \"" + std::string(rest) + "\" is not a whole number in 1.." +
-                        std::to_string(kMaxMarkers));
+                        std::to_string(kMaxMarkers) + " (nor \"character\")");
     }
     if (!synthetic.rest_positions_mm.empty() && static_cast<std::size_t>(n) != synthetic.rest_positions_mm.size()) {
       throw std::invalid_argument("marker source \"" + std::string(spec) + "\": " + std::to_string(n) +

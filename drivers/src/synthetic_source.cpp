@@ -1,6 +1,9 @@
-// Synthetic marker source: scripted sinusoid + rotation motion (Rodrigues' rotation formula),
-// dropouts and Gaussian noise (Box-Muller) from a counter-based SplitMix64 generator.
+// Synthetic marker source: scripted sinusoid + rotation motion (Rodrigues' rotation formula) or the
+// default character's performance (character_performance.cpp), dropouts and Gaussian noise
+// (Box-Muller) from a counter-based SplitMix64 generator.
 #include "tetrig/drivers/synthetic_source.hpp"
+
+#include "tetrig/drivers/character_performance.hpp"
 
 #include <numbers>
 #include <stdexcept>
@@ -28,7 +31,17 @@ double uniform(std::uint64_t seed, std::uint64_t frame, std::uint64_t marker, st
 }  // namespace
 
 SyntheticSource::SyntheticSource(SyntheticOptions options) : options_(std::move(options)) {
-  rest_ = options_.rest_positions_mm.empty() ? defaultRestPositions(options_.marker_count) : options_.rest_positions_mm;
+  if (options_.motion == SyntheticMotion::kCharacter) {
+    if (!options_.rest_positions_mm.empty()) {
+      throw std::invalid_argument("synthetic source: the character motion has its own markers; rest positions cannot be given");
+    }
+    for (const CharacterMarker& m : characterMarkers()) {
+      rest_.push_back({static_cast<float>(m.tpose[0]), static_cast<float>(m.tpose[1]), static_cast<float>(m.tpose[2])});
+    }
+    options_.marker_count = static_cast<int>(rest_.size());
+  } else {
+    rest_ = options_.rest_positions_mm.empty() ? defaultRestPositions(options_.marker_count) : options_.rest_positions_mm;
+  }
   if (rest_.empty() || rest_.size() > static_cast<std::size_t>(kMaxMarkers)) {
     throw std::invalid_argument("synthetic source: marker count must be 1.." + std::to_string(kMaxMarkers));
   }
@@ -40,6 +53,12 @@ SyntheticSource::SyntheticSource(SyntheticOptions options) : options_(std::move(
   }
   if (options_.dropout_max_frames < 1 || options_.dropout_max_frames > 64) {
     throw std::invalid_argument("synthetic source: dropout_max_frames must be 1..64");
+  }
+  if (!(options_.noise_sigma_mm >= 0.0f) || !std::isfinite(options_.noise_sigma_mm)) {
+    throw std::invalid_argument("synthetic source: noise_sigma_mm must be a finite number >= 0");
+  }
+  if (!(options_.dropout_probability >= 0.0f && options_.dropout_probability <= 1.0f)) {
+    throw std::invalid_argument("synthetic source: dropout_probability must be within 0..1");
   }
   const auto& a = options_.rotation_axis;
   const float len = std::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
@@ -61,6 +80,22 @@ std::vector<std::array<float, 3>> SyntheticSource::defaultRestPositions(int n) {
   return out;
 }
 
+SyntheticOptions characterSyntheticOptions() {
+  SyntheticOptions o;
+  o.motion = SyntheticMotion::kCharacter;
+  o.rate_hz = 120.0;
+  o.noise_sigma_mm = 0.5f;
+  o.dropout_probability = 1.0f / 2000.0f;
+  o.dropout_max_frames = 12;
+  return o;
+}
+
+std::vector<std::string> SyntheticSource::characterMarkerLabels() {
+  std::vector<std::string> labels;
+  for (const CharacterMarker& m : characterMarkers()) labels.emplace_back(m.label);
+  return labels;
+}
+
 void SyntheticSource::fillFrame(std::uint64_t counter, MarkerFrame& out) const noexcept {
   const SyntheticOptions& o = options_;
   const double t = static_cast<double>(counter) / o.rate_hz;
@@ -75,6 +110,9 @@ void SyntheticSource::fillFrame(std::uint64_t counter, MarkerFrame& out) const n
                        (1 - c) * ky * kx + s * kz, c + (1 - c) * ky * ky,      (1 - c) * ky * kz - s * kx,
                        (1 - c) * kz * kx - s * ky, (1 - c) * kz * ky + s * kx, c + (1 - c) * kz * kz};
   const std::size_t n = rest_.size();
+  const bool character = o.motion == SyntheticMotion::kCharacter;
+  std::array<CharacterVec3, kCharacterMarkerCount> body;
+  if (character) characterMarkersAt(std::fmod(t, characterPerformanceSeconds()), body);
   out.frame_counter = counter;
   out.device_timestamp_ns = static_cast<std::int64_t>(counter) * period_ns_;
   out.receive_timestamp_ns = 0;
@@ -103,14 +141,18 @@ void SyntheticSource::fillFrame(std::uint64_t counter, MarkerFrame& out) const n
       m.position_mm[0] = m.position_mm[1] = m.position_mm[2] = 0.0f;
       continue;
     }
-    double p[3] = {rest_[i][0], rest_[i][1], rest_[i][2]};
-    const double sway = o.sway_amplitude_mm * std::sin(two_pi * o.sway_frequency_hz * t +
-                                                        two_pi * static_cast<double>(i) / static_cast<double>(n));
-    p[i % 3] += sway;
-    for (int k = 0; k < 3; ++k) p[k] -= o.rotation_center_mm[static_cast<std::size_t>(k)];
     double q[3];
-    for (int row = 0; row < 3; ++row) q[row] = r[3 * row] * p[0] + r[3 * row + 1] * p[1] + r[3 * row + 2] * p[2];
-    for (int k = 0; k < 3; ++k) q[k] += o.rotation_center_mm[static_cast<std::size_t>(k)];
+    if (character) {
+      for (int k = 0; k < 3; ++k) q[k] = body[i][static_cast<std::size_t>(k)];
+    } else {
+      double p[3] = {rest_[i][0], rest_[i][1], rest_[i][2]};
+      const double sway = o.sway_amplitude_mm * std::sin(two_pi * o.sway_frequency_hz * t +
+                                                          two_pi * static_cast<double>(i) / static_cast<double>(n));
+      p[i % 3] += sway;
+      for (int k = 0; k < 3; ++k) p[k] -= o.rotation_center_mm[static_cast<std::size_t>(k)];
+      for (int row = 0; row < 3; ++row) q[row] = r[3 * row] * p[0] + r[3 * row + 1] * p[1] + r[3 * row + 2] * p[2];
+      for (int k = 0; k < 3; ++k) q[k] += o.rotation_center_mm[static_cast<std::size_t>(k)];
+    }
     if (o.noise_sigma_mm > 0.0f) {
       // Box-Muller: two Gaussians per pair of uniforms; three axes use two pairs.
       for (int k = 0; k < 3; k += 2) {

@@ -52,7 +52,18 @@ std::chrono::steady_clock::time_point steadyAt(std::int64_t ns) {
 }  // namespace
 
 FrameLoop::FrameLoop(FrameMailbox& mailbox, LiveRig& live_rig, ShmPublisher& publisher, const FrameLoopOptions& options)
-    : mailbox_(mailbox), live_(live_rig), publisher_(publisher), options_(options) {}
+    : mailbox_(mailbox), live_(live_rig), publisher_(publisher), options_(options) {
+  options_.frame_log_markers = std::clamp(options_.frame_log_markers, 0, kMaxMarkers);
+  // value-initialised: every page is touched here, not on the solver thread
+  frame_log_.resize(options_.frame_log_capacity);
+  frame_log_markers_.resize(options_.frame_log_capacity * static_cast<std::size_t>(options_.frame_log_markers));
+}
+
+std::span<const FrameLogMarker> FrameLoop::frameLogMarkers(std::size_t index) const noexcept {
+  if (index >= frame_log_count_) return {};
+  const std::size_t stride = static_cast<std::size_t>(options_.frame_log_markers);
+  return {frame_log_markers_.data() + index * stride, frame_log_[index].marker_count};
+}
 
 FrameLoop::~FrameLoop() {
   requestStop();
@@ -218,6 +229,39 @@ void FrameLoop::run() noexcept {
         recent_p50_ns_.store(sorted[static_cast<std::size_t>((n - 1) / 2)], std::memory_order_relaxed);
         recent_p99_ns_.store(sorted[static_cast<std::size_t>(((n - 1) * 99) / 100)], std::memory_order_relaxed);
       }
+    }
+    // The frame log: plain stores into storage sized at construction.
+    if (frame_log_count_ < frame_log_.size()) {
+      FrameLogEntry& e = frame_log_[frame_log_count_];
+      e.frame_id = done;
+      e.source_frame = frame->frame_counter;
+      e.device_ns = frame->device_timestamp_ns;
+      e.receive_ns = receive_ns;
+      e.taken_ns = taken_ns;
+      e.step_done_ns = step_done_ns;
+      e.pose_done_ns = pose_done_ns;
+      e.published_ns = published_ns;
+      e.step_ns = stats.flags & kLivePoseHeld ? 0 : stats.step.total_ns;
+      e.pose_transfer_ns = stats.pose_transfer_ns;
+      e.iterations = stats.step.iterations;
+      e.occluded_markers = stats.occluded_markers;
+      e.flags = static_cast<std::uint16_t>((receive_ns < start_ns_ ? kFrameLogBeforeStart : 0) |
+                                           (frame_deadline != 0 && published_ns > frame_deadline ? kFrameLogBudgetMiss : 0) |
+                                           (stats.flags & kLivePoseHeld ? kFrameLogPoseHeld : 0));
+      const int kept = std::min(static_cast<int>(frame->marker_count), options_.frame_log_markers);
+      FrameLogMarker* out = frame_log_markers_.data() + frame_log_count_ * static_cast<std::size_t>(options_.frame_log_markers);
+      for (int m = 0; m < kept; ++m) {
+        const Marker& in = frame->markers[static_cast<std::size_t>(m)];
+        out[m].position_mm[0] = in.position_mm[0];
+        out[m].position_mm[1] = in.position_mm[1];
+        out[m].position_mm[2] = in.position_mm[2];
+        out[m].id = in.id;
+        out[m].valid = in.valid;
+      }
+      e.marker_count = static_cast<std::uint32_t>(kept);
+      ++frame_log_count_;
+    } else {
+      ++frame_log_dropped_;
     }
     if (options_.max_frames != 0 && done >= options_.max_frames) break;
   }

@@ -976,7 +976,7 @@ TEST_F(FactoryTest, BadSpecsSayWhatIsWrongAndListTheForms) {
   for (const Case& c : cases) {
     const std::string message = invalidArgumentOf(c.spec);
     EXPECT_NE(message.find(c.says), std::string::npos) << "spec \"" << c.spec << "\": " << message;
-    EXPECT_NE(message.find("accepted: c3d:PATH, replay:PATH, synthetic[:N], hid:VID:PID, usb:VID:PID, hydra[:SERIAL]"),
+    EXPECT_NE(message.find("accepted: c3d:PATH, replay:PATH, synthetic[:N], synthetic:character, hid:VID:PID, usb:VID:PID, hydra[:SERIAL]"),
               std::string::npos)
         << message;
     EXPECT_EQ(message.find('\n'), std::string::npos) << message;  // one line

@@ -2,7 +2,8 @@
 // (tools/rigbuild/demo_bar_rig.cpp: 16 markers, driven here by the synthetic source's frames):
 // every published frame equals an offline LiveRig run of the same frames with the same iteration
 // counts, bit for bit; stale sources are reported and cleared; --frames stops the loop; budget
-// misses are counted and flagged; nothing is allocated on the solver thread per frame.
+// misses are counted and flagged; nothing is allocated on the solver thread per frame; the frame
+// log holds exactly the solved frames, with the segment's own timestamps and the frames' markers.
 #include "counting_allocator.hpp"
 #include "tetrig/clock.hpp"
 #include "tetrig/drivers/synthetic_source.hpp"
@@ -15,6 +16,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstring>
 #include <memory>
@@ -219,9 +221,111 @@ TEST(FrameLoop, AFrameReceivedBeforeStartIsPublishedButKeptOutOfTheLatencies) {
   EXPECT_LT(h.loop->latency().receive_to_published.maxNs(), 30'000'000) << "the early frame's 30 ms wait is not in it";
 }
 
+TEST(FrameLoop, TheFrameLogHoldsExactlyTheSolvedFramesWithTheirTimesAndMarkers) {
+  FrameLoopOptions options;
+  options.budget_ns = 0;
+  options.lock_memory = false;
+  options.frame_log_capacity = 100;
+  options.frame_log_markers = 16;  // the bar rig's 16 markers, all kept
+  Harness h("log", options);
+  const auto source = makeSource(demoRig());
+  std::vector<MarkerFrame> sent;
+  auto frame = std::make_unique<MarkerFrame>();
+  // One frame waits in the mailbox before start(): logged, flagged, kept out of the histograms.
+  source->fillFrame(0, *frame);
+  frame->receive_timestamp_ns = monotonicNowNs();
+  h.mailbox->publish(*frame);
+  sent.push_back(*frame);
+  std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  h.loop->start();
+  const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+  while (tetrig_shm_latest_frame_id(&h.reader) < 1 && std::chrono::steady_clock::now() < end) std::this_thread::yield();
+  std::vector<TetrigShmFrameInfo> infos(1);
+  ASSERT_EQ(tetrig_shm_read_latest(&h.reader, nullptr, 0, nullptr, 0, &infos[0]), TETRIG_SHM_OK);
+  ASSERT_EQ(infos[0].frame_id, 1u);
+  for (std::uint64_t k = 1; k < 60; ++k) {
+    source->fillFrame(k, *frame);
+    ASSERT_TRUE(h.publishAndWait(*frame));
+    sent.push_back(*frame);
+    infos.emplace_back();
+    ASSERT_EQ(tetrig_shm_read_latest(&h.reader, nullptr, 0, nullptr, 0, &infos.back()), TETRIG_SHM_OK);
+  }
+  h.loop->requestStop();
+  h.loop->join();
+  const auto log = h.loop->frameLog();
+  ASSERT_EQ(log.size(), 60u);
+  ASSERT_EQ(h.loop->counters().frames, 60u);
+  EXPECT_EQ(h.loop->frameLogDropped(), 0u);
+  std::int64_t max_latency = 0;
+  int occluded_frames = 0;
+  for (std::size_t i = 0; i < log.size(); ++i) {
+    const FrameLogEntry& e = log[i];
+    const TetrigShmFrameInfo& info = infos[i];
+    SCOPED_TRACE("log entry " + std::to_string(i));
+    EXPECT_EQ(e.frame_id, info.frame_id);
+    EXPECT_EQ(e.source_frame, info.source_frame);
+    EXPECT_EQ(e.device_ns, info.device_ns);
+    EXPECT_EQ(e.receive_ns, info.receive_ns);
+    EXPECT_EQ(e.taken_ns, info.taken_ns);
+    EXPECT_EQ(e.step_done_ns, info.step_done_ns);
+    EXPECT_EQ(e.pose_done_ns, info.pose_done_ns);
+    EXPECT_GE(e.published_ns, info.publish_ns) << "stamped after the commit that stamped the segment";
+    EXPECT_EQ(e.iterations, info.iterations);
+    EXPECT_EQ(e.occluded_markers, info.occluded_markers);
+    EXPECT_GE(e.step_done_ns - e.taken_ns, e.step_ns) << "the step ran between taken and step done";
+    EXPECT_EQ(e.pose_done_ns - e.step_done_ns, e.pose_transfer_ns);
+    EXPECT_EQ((e.flags & kFrameLogBeforeStart) != 0, i == 0);
+    EXPECT_EQ(e.flags & kFrameLogBudgetMiss, 0u) << "no budget";
+    if (e.occluded_markers != 0) ++occluded_frames;
+    const auto markers = h.loop->frameLogMarkers(i);
+    ASSERT_EQ(markers.size(), sent[i].marker_count);
+    for (std::size_t m = 0; m < markers.size(); ++m) {
+      EXPECT_EQ(markers[m].id, sent[i].markers[m].id);
+      EXPECT_EQ(markers[m].valid, sent[i].markers[m].valid);
+      if (sent[i].markers[m].valid) {
+        EXPECT_EQ(std::memcmp(markers[m].position_mm, sent[i].markers[m].position_mm, sizeof markers[m].position_mm), 0) << "marker " << m;
+      }
+    }
+    if (i > 0) max_latency = std::max(max_latency, e.published_ns - e.receive_ns);
+  }
+  EXPECT_GT(occluded_frames, 0) << "the dropouts were meant to show in the log";
+  // The histograms were filled from the same stamps: the same count and the same (exact) maximum.
+  EXPECT_EQ(h.loop->latency().receive_to_published.count(), 59u);
+  EXPECT_EQ(h.loop->latency().receive_to_published.maxNs(), max_latency);
+}
+
+TEST(FrameLoop, TheFrameLogKeepsItsCapacityAndCountsTheRest) {
+  FrameLoopOptions options;
+  options.lock_memory = false;
+  options.frame_log_capacity = 5;  // no markers kept
+  options.budget_ns = 1000;         // 1 us: every frame misses its budget, and the log says so
+  Harness h("logfull", options);
+  h.loop->start();
+  const auto source = makeSource(demoRig(), 0.0f);
+  auto frame = std::make_unique<MarkerFrame>();
+  for (std::uint64_t k = 0; k < 8; ++k) {
+    source->fillFrame(k, *frame);
+    ASSERT_TRUE(h.publishAndWait(*frame));
+  }
+  h.loop->requestStop();
+  h.loop->join();
+  const auto log = h.loop->frameLog();
+  ASSERT_EQ(log.size(), 5u);
+  EXPECT_EQ(h.loop->frameLogDropped(), 3u);
+  for (std::size_t i = 0; i < log.size(); ++i) {
+    EXPECT_EQ(log[i].frame_id, i + 1);
+    EXPECT_EQ(log[i].source_frame, i);
+    EXPECT_EQ(log[i].marker_count, 0u);
+    EXPECT_NE(log[i].flags & kFrameLogBudgetMiss, 0u);
+    EXPECT_TRUE(h.loop->frameLogMarkers(i).empty());
+  }
+}
+
 TEST(FrameLoop, NoHeapAllocationPerFrameAfterWarmUp) {
   FrameLoopOptions options;
   options.lock_memory = false;
+  options.frame_log_capacity = 1000;  // the frame log (with markers) is filled on the solver thread too
+  options.frame_log_markers = 16;
   LiveRigOptions live_options;
   live_options.normals = true;
   Harness h("alloc", options, live_options);
@@ -246,6 +350,9 @@ TEST(FrameLoop, NoHeapAllocationPerFrameAfterWarmUp) {
   EXPECT_TRUE(all_published);
   EXPECT_EQ(after - before, 0u) << "allocations on the solver thread (or this one) while 200 frames went through";
   EXPECT_EQ(h.loop->counters().frames, 220u);
+  ASSERT_EQ(h.loop->frameLog().size(), 220u);
+  EXPECT_EQ(h.loop->frameLog().back().frame_id, 220u);
+  EXPECT_EQ(h.loop->frameLogMarkers(219).size(), 16u);
 }
 
 }  // namespace

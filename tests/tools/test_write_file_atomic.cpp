@@ -68,9 +68,10 @@ TEST(WriteFileAtomically, DemoOutThroughTheAtomicWriter) {
   const TempDir dir("tetrig-demo-out");
   const auto victim = dir.write("victim", "secret");
   std::filesystem::create_symlink(victim, dir / "final.obj.tmp");  // where a plain writer put its temporary
-  const std::string exe = std::string("'") + TETRIG_EXE + "'";
+  // The default character's rig is cached in the test's own folder.
+  const std::string exe = "XDG_CACHE_HOME='" + (dir / "cache").string() + "' '" + TETRIG_EXE + "'";
   const std::string quiet = " >'" + (dir / "out.txt").string() + "' 2>'" + (dir / "err.txt").string() + "'";
-  ASSERT_EQ(shell("umask 077; " + exe + " demo --frames 30 --quiet --out '" + (dir / "final.obj").string() + "'" + quiet), 0)
+  ASSERT_EQ(shell("umask 077; " + exe + " demo --frames 30 --quiet --no-report --out '" + (dir / "final.obj").string() + "'" + quiet), 0)
       << readText(dir / "err.txt");
   EXPECT_EQ(readText(victim), "secret");
   EXPECT_TRUE(std::filesystem::is_symlink(dir / "final.obj.tmp"));
@@ -79,7 +80,7 @@ TEST(WriteFileAtomically, DemoOutThroughTheAtomicWriter) {
   EXPECT_TRUE(temporaries(dir.path()).empty());
   // A failing --out (a directory there): one error line, exit 1, no temporary, no partial file.
   std::filesystem::create_directory(dir / "taken.obj");
-  EXPECT_EQ(shell(exe + " demo --frames 10 --quiet --out '" + (dir / "taken.obj").string() + "'" + quiet), 1);
+  EXPECT_EQ(shell(exe + " demo --frames 10 --quiet --no-report --out '" + (dir / "taken.obj").string() + "'" + quiet), 1);
   const std::string err = readText(dir / "err.txt");  // the consumer's status lines, then ours
   const std::string line = "tetrig demo: error: " + (dir / "taken.obj").string() + ": cannot rename the temporary file into place: Is a directory\n";
   EXPECT_CONTAINS(err, line);

@@ -127,6 +127,24 @@ MarkerSet readMarkers(const MarkerClip& mc, std::int64_t frame) {
   return set;
 }
 
+// Marker positions given directly (BuildRigInputs::marker_positions), checked.
+MarkerSet checkedMarkerPositions(const MarkerPositions& given) {
+  if (given.labels.empty()) throw RigBuildError(given.what + ": no markers given");
+  if (given.labels.size() != given.device_mm.size()) {
+    throw RigBuildError(given.what + ": " + std::to_string(given.labels.size()) + " labels but " + std::to_string(given.device_mm.size()) +
+                        " positions");
+  }
+  for (std::size_t i = 0; i < given.labels.size(); ++i) {
+    const std::string& label = given.labels[i];
+    if (label.empty()) throw RigBuildError(given.what + ": marker " + std::to_string(i) + " has no label");
+    if (std::find(given.labels.begin(), given.labels.begin() + static_cast<std::ptrdiff_t>(i), label) != given.labels.begin() + static_cast<std::ptrdiff_t>(i)) {
+      throw RigBuildError(given.what + ": two markers are labelled " + label);
+    }
+    if (!given.device_mm[i].allFinite()) throw RigBuildError(given.what + ": marker " + label + " has a non-finite position");
+  }
+  return MarkerSet{given.labels, given.device_mm};
+}
+
 // Everything a selection can be resolved against.
 struct Context {
   const TetMesh* body = nullptr;
@@ -314,7 +332,12 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
   }
   // Nothing would drive a rig without handles: say so before any heavy work.
   const std::optional<std::filesystem::path> clip = inputs.clip ? inputs.clip : (mopt.clip.empty() ? std::nullopt : std::optional(mopt.clip));
-  if (!clip && desc.vertex_handles.empty() && desc.region_handles.empty() && desc.point_handles.empty()) {
+  const bool given = inputs.marker_positions.has_value();
+  if (clip && given) {
+    throw RigBuildError("markers from both a clip (" + clip->string() + ") and given marker positions (" + inputs.marker_positions->what +
+                        "): choose one");
+  }
+  if (!clip && !given && desc.vertex_handles.empty() && desc.region_handles.empty() && desc.point_handles.empty()) {
     throw RigBuildError("the rig would have no handles, so nothing could move it: add markers (--markers CLIP.c3d) or a rig description "
                         "(--rig RIG.json) with vertex_handles, region_handles or point_handles (docs/rig-format.md)");
   }
@@ -437,9 +460,10 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
   MarkerSet markers;
   std::vector<Eigen::Vector3d> marker_rig;
   std::vector<double> marker_distance;
-  if (clip) {
+  if (clip || given) {
     auto t0 = Clock::now();
-    const MarkerClip source = openMarkerClip(*clip, mopt);
+    const std::optional<MarkerClip> source = clip ? std::optional<MarkerClip>(openMarkerClip(*clip, mopt)) : std::nullopt;
+    const std::string origin = clip ? clip->string() : inputs.marker_positions->what;
     AlignmentOptions aopt;
     aopt.device_up = mopt.device_up;
     aopt.rig_up = desc.mesh_up;
@@ -467,9 +491,9 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
     limits.check_scale = automatic && mopt.checks.check_scale && !inputs.accept_implausible_alignment;
     limits.check_pose = automatic && mopt.checks.check_pose && !inputs.accept_implausible_alignment && !inputs.accept_pose_mismatch;
 
-    const bool frame_auto = inputs.frame_auto || (!inputs.frame && mopt.frame_auto);
+    const bool frame_auto = clip && (inputs.frame_auto || (!inputs.frame && mopt.frame_auto));
     std::int64_t frame = inputs.frame.value_or(mopt.frame);
-    std::string frame_text = "frame " + std::to_string(frame);
+    std::string frame_text = clip ? "frame " + std::to_string(frame) : std::string("the given positions");
     if (frame_auto) {
       prog.begin("searching " + clip->filename().string() + " for the frame that fits the mesh's rest pose");
       RestFrameSearchOptions sopt;
@@ -477,15 +501,15 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
       RestFrameSearch found;
       try {
         found = searchRestFrame(
-            static_cast<std::int64_t>(source.clip.frameCount()),
-            [&source](std::int64_t f, std::vector<Eigen::Vector3d>& out) { return markersAt(source, f, out); }, source.labels, fine, aopt,
+            static_cast<std::int64_t>(source->clip.frameCount()),
+            [&source](std::int64_t f, std::vector<Eigen::Vector3d>& out) { return markersAt(*source, f, out); }, source->labels, fine, aopt,
             desc.mesh_up, limits, sopt);
       } catch (const RigBuildError& e) {
         throw RigBuildError(clip->string() + ": --frame auto: " + e.what());
       }
       frame = found.frame;
       frame_text = "frame " + std::to_string(frame) + " (chosen by --frame auto)";
-      const double rate = source.clip.frameRate();
+      const double rate = source->clip.frameRate();
       const std::string when = rate > 0 ? " (" + fmt("%.3f", static_cast<double>(frame) / rate) + " s)" : std::string();
       const std::string line = "--frame auto chose frame " + std::to_string(frame) + when + " of " + std::to_string(found.clip_frames) +
                                ": fit scale " + fmt("%.4g", found.chosen.fit_scale) + ", median marker distance about " +
@@ -496,9 +520,14 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
       report.notes.push_back(line);
       report.frame_search = found;
     }
-    report.rest_frame = frame;
-    prog.begin("aligning markers of " + clip->filename().string() + " (frame " + std::to_string(frame) + ")");
-    markers = readMarkers(source, frame);
+    if (clip) {
+      report.rest_frame = frame;
+      prog.begin("aligning markers of " + clip->filename().string() + " (frame " + std::to_string(frame) + ")");
+      markers = readMarkers(*source, frame);
+    } else {
+      prog.begin("aligning " + origin);
+      markers = checkedMarkerPositions(*inputs.marker_positions);
+    }
     aopt.progress = [&prog](double f) { prog.update(f); };
     AlignmentResult aligned = alignMarkers(markers.device_mm, fine, aopt);
     rig.alignment = aligned.alignment;
@@ -536,12 +565,12 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
                 "--max-fit-scale widen the range)";
       }
       if (!decided.pose_failures.empty()) {
-        todo += std::string(todo.empty() ? "" : "; ") + "the clip's " + frame_text +
-                " is not in the mesh's rest pose (e.g. arms down on a T-pose mesh) or the markers cover only part of the body: choose a "
+        todo += std::string(todo.empty() ? "" : "; ") + (clip ? "the clip's " + frame_text + " is" : frame_text + " are") +
+                " not in the mesh's rest pose (e.g. arms down on a T-pose mesh) or the markers cover only part of the body: choose a "
                 "frame in the mesh's pose (--frame N, or --frame auto) or a calibration clip, or pass --accept-pose-mismatch for a "
                 "partial marker set";
       }
-      throw RigBuildError(clip->string() + ": " + frame_text + ": the marker alignment is implausible: " + what + ". To fix: " + todo +
+      throw RigBuildError(origin + ": " + frame_text + ": the marker alignment is implausible: " + what + ". To fix: " + todo +
                           " (--accept-implausible-alignment builds anyway)");
     }
     if (!measured.ok()) {
@@ -609,7 +638,7 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
   report.body_vertices = body.vertexCount();
   report.body_tets = body.tetCount();
 
-  if (!clip && !desc.pose_sensors.empty()) {
+  if (!clip && !given && !desc.pose_sensors.empty()) {
     rig.alignment = poseSensorAlignment(mopt, desc.mesh_up, rig.alignment.rig_units_per_mm);
     report.notes.push_back(mopt.alignment == "matrix"
                                ? std::string("pose sensors: no marker clip, device mm -> rig units from markers.matrix")

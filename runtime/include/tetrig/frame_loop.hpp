@@ -17,6 +17,12 @@
 // (FrameLoop::hygiene()) where it does not: flush-to-zero and denormals-are-zero, memory locked
 // (mlockall), optional CPU pinning and SCHED_FIFO.
 //
+// The frame log (optional, FrameLoopOptions::frame_log_capacity): one FrameLogEntry per solved
+// frame, in order, with every phase's timestamp and, if asked (frame_log_markers), the frame's
+// markers as received. Its storage is allocated by the constructor; the solver thread fills it
+// with plain stores (no allocation, lock or I/O; frames past the capacity are counted, not kept)
+// and it is read after join() (the demo report's latency plot and marker dots: tools/demo_report.hpp).
+//
 // Threads: construct, start(), requestStop(), join() and the accessors from one control thread;
 // snapshot() from any thread. The loop owns nothing: the mailbox, live rig and publisher must
 // outlive it, and while it runs only the solver thread touches the live rig and the publisher.
@@ -26,9 +32,12 @@
 #include "tetrig/latency_histogram.hpp"
 
 #include <atomic>
+#include <cstddef>
 #include <cstdint>
+#include <span>
 #include <string>
 #include <thread>
+#include <vector>
 
 namespace tetrig {
 
@@ -45,6 +54,37 @@ struct FrameLoopOptions {
   int cpu = -1;                                  // pin the solver thread to this CPU (-1: no)
   bool realtime_fifo = false;                    // SCHED_FIFO for the solver thread
   int fifo_priority = 50;
+  std::size_t frame_log_capacity = 0;            // frames the frame log keeps (0: no log); allocated by the constructor
+  int frame_log_markers = 0;                     // markers kept per logged frame (0..kMaxMarkers; the first ones of the frame)
+};
+
+// One solved frame of the frame log. Times are the runtime's clock (tetrig/clock.hpp), ns.
+struct FrameLogEntry {
+  std::uint64_t frame_id = 0;       // 1, 2, ...: the frame's id in the segment (the n-th frame published)
+  std::uint64_t source_frame = 0;   // the source's frame counter
+  std::int64_t device_ns = 0;       // the source's device timestamp (0 if unknown)
+  std::int64_t receive_ns = 0, taken_ns = 0, step_done_ns = 0, pose_done_ns = 0, published_ns = 0;
+  std::int64_t step_ns = 0;         // Deformer::step's own time (0 when the pose was held)
+  std::int64_t pose_transfer_ns = 0;
+  std::int32_t iterations = 0;
+  std::uint16_t occluded_markers = 0;
+  std::uint16_t flags = 0;          // FrameLogFlags
+  std::uint32_t marker_count = 0;   // markers kept for this frame (<= frame_log_markers)
+  std::uint32_t pad = 0;
+};                                  // 96 bytes
+
+enum FrameLogFlags : std::uint16_t {
+  kFrameLogBeforeStart = 1u << 0,   // received before the solver was ready: not in the latency histograms
+  kFrameLogBudgetMiss = 1u << 1,    // published after receive + budget
+  kFrameLogPoseHeld = 1u << 2,      // no rig marker measured: the pose was held
+};
+
+// A marker of a logged frame, as the source gave it (device mm, the source's axes).
+struct FrameLogMarker {
+  float position_mm[3] = {0.0f, 0.0f, 0.0f};
+  std::uint16_t id = 0;   // label index in the source's label table
+  std::uint8_t valid = 0; // 1: measured this frame
+  std::uint8_t pad = 0;
 };
 
 // Latency of each phase, per frame (ns).
@@ -101,6 +141,11 @@ class FrameLoop {
   // After the solver thread started: what the real-time hygiene managed ("flush-to-zero on; memory
   // locked; pinned to CPU 1; SCHED_FIFO refused: Operation not permitted").
   [[nodiscard]] std::string hygiene() const;
+  // After join(): the frame log, one entry per solved frame in order (at most frame_log_capacity;
+  // the frames that did not fit are frameLogDropped()), and the markers kept for entry `index`.
+  [[nodiscard]] std::span<const FrameLogEntry> frameLog() const noexcept { return {frame_log_.data(), frame_log_count_}; }
+  [[nodiscard]] std::span<const FrameLogMarker> frameLogMarkers(std::size_t index) const noexcept;
+  [[nodiscard]] std::uint64_t frameLogDropped() const noexcept { return frame_log_dropped_; }
 
  private:
   void run() noexcept;
@@ -121,6 +166,11 @@ class FrameLoop {
   std::atomic<std::int64_t> last_latency_ns_{0}, recent_p50_ns_{0}, recent_p99_ns_{0};
   std::uint64_t mailbox_dropped_at_start_ = 0;
   std::int64_t start_ns_ = 0;  // when the solver thread was ready (written before hygiene_ready_)
+  // The frame log (sized by the constructor; the solver thread writes, read after join()).
+  std::vector<FrameLogEntry> frame_log_;
+  std::vector<FrameLogMarker> frame_log_markers_;  // frame_log_capacity * frame_log_markers
+  std::size_t frame_log_count_ = 0;
+  std::uint64_t frame_log_dropped_ = 0;
 };
 
 }  // namespace tetrig

@@ -10,6 +10,9 @@
 //   synthetic        synthetic markers (drivers::makeSyntheticSource); synthetic:N for N markers
 //                    (1..256; default: as many as synthetic_rest_mm, else as many as
 //                    synthetic_labels, else 41)
+//   synthetic:character  the default character's performance (drivers::characterSyntheticOptions():
+//                    its 41 HDM05-named markers at 120 Hz, 0.5 mm noise, dropouts, looped);
+//                    synthetic_rest_mm and synthetic_labels are not used
 //   hid:VID:PID      tetrig marker stream over HID (VID and PID hex, 1-4 digits: hid:1209:0001)
 //   usb:VID:PID      tetrig marker stream over USB bulk
 //   hydra            Razer Hydra (1532:0300); hydra:SERIAL opens only the device with that serial
@@ -52,7 +55,7 @@ struct SourceOpenOptions {
 std::unique_ptr<drivers::MarkerSource> openMarkerSource(std::string_view spec, const SourceOpenOptions& options);
 
 // The accepted forms, one line, for usage messages:
-// "c3d:PATH, replay:PATH, synthetic[:N], hid:VID:PID, usb:VID:PID, hydra[:SERIAL] (VID, PID in hex)".
+// "c3d:PATH, replay:PATH, synthetic[:N], synthetic:character, hid:VID:PID, usb:VID:PID, hydra[:SERIAL] (VID, PID in hex)".
 // Any thread; static string.
 [[nodiscard]] std::string_view markerSourceSpecForms() noexcept;
 

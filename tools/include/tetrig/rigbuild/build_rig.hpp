@@ -4,7 +4,8 @@
 //   surface --import, validate--> fine mesh --decimate, TetGen--> body tet mesh
 //   ready tet mesh (.node/.ele, .mesh) --> body tet mesh, fine mesh = its boundary surface
 //   --> pose-transfer weights B (section 2.4)
-//   --> markers: rest frame of the clip (given, or --frame auto: rest_frame_search.hpp), aligned
+//   --> markers: rest frame of the clip (given, or --frame auto: rest_frame_search.hpp) or marker
+//       positions given directly (BuildRigInputs::marker_positions), aligned
 //       to the fine surface (align_markers.hpp), checked for plausibility (alignment_checks.hpp)
 //       and against the distance limit, all before decimation and TetGen; bound by invisible tets
 //       (bind_markers.hpp), made vertex handles
@@ -29,10 +30,20 @@
 
 namespace tetrig::rigbuild {
 
+// Marker rest positions given directly instead of a clip frame (e.g. a generated character's
+// T-pose markers): labels[i] at device_mm[i] (mm, device axes as markers.device_up says). They
+// are aligned, checked and bound exactly like a clip's rest frame.
+struct MarkerPositions {
+  std::vector<std::string> labels;
+  std::vector<Eigen::Vector3d> device_mm;
+  std::string what = "the given marker positions";  // names them in messages
+};
+
 struct BuildRigInputs {
   std::filesystem::path mesh;                     // surface (OBJ, PLY, OFF, ...) or tet mesh (.node/.ele, .mesh)
   RigDescription description;                     // defaults when no JSON is given
   std::optional<std::filesystem::path> clip;      // overrides description.markers.clip
+  std::optional<MarkerPositions> marker_positions;  // markers without a clip (not together with one)
   std::optional<std::int32_t> tet_vertices;       // overrides description.tet_vertices
   std::optional<std::int64_t> frame;              // overrides description.markers.frame (and "auto")
   bool frame_auto = false;                        // search the clip for the rest frame (overrides frame)
