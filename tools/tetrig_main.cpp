@@ -240,7 +240,7 @@ int main(int argc, char** argv) {
   CLI::App* view_cmd = app.add_subcommand(
       "view", "A window showing a shared-memory segment live: shaded mesh, orbit/zoom, frame id, rate, latency (docs/view.md)");
   view_cmd->add_option("NAME", view.name, "Segment name (the --publish name of tetrig run / tetrig demo)")->required();
-  view_cmd->add_flag("--markers", view.markers, "Show the segment's marker information (labels, occluded this frame)");
+  view_cmd->add_flag("--markers", view.markers, "Draw the markers as dots coloured by state (measured, blended, predicted) with their counts (M toggles)");
   view_cmd->add_flag("--follow", view.follow, "Keep the camera on the figure as it moves (F toggles it)");
   view_cmd->add_option("--screenshot", view.screenshot, "Write the window's picture to this PNG after --after-frames new frames, then exit 0");
   view_cmd->add_option("--after-frames", view.after_frames, "New frames before the screenshot")

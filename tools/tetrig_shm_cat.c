@@ -3,9 +3,11 @@
  * (frame id, source frame, iterations, receive->publish and publish->seen latencies), tells a
  * dead producer from a slow one and a restarted producer from the old one, and can write latency
  * percentiles as JSON (--json: receive->published, published->seen, receive->seen) and every frame's positions as raw binary (--dump).
+ * --markers adds, under each frame line, one line per marker of a layout 1.1 segment (label, state,
+ * position in rig units), read with the frame's mesh in one read.
  *
  *   tetrig-shm-cat NAME [--frames N] [--timeout-ms T] [--json FILE] [--dump FILE]
- *                       [--follow] [--quiet] [--poll-us U] [--stale-ms S]
+ *                       [--follow] [--quiet] [--markers] [--poll-us U] [--stale-ms S]
  *
  * Exit status: 0 after N frames or when the producer stopped cleanly; 1 usage or file error;
  * 2 timeout (no segment / no new frame for T ms); 3 producer died (without --follow);
@@ -37,6 +39,7 @@ typedef struct Options {
   const char* dump_path;
   int follow; /* keep waiting for a new producer after a crash */
   int quiet;  /* no per-frame lines */
+  int markers; /* a line per marker under each frame line (layout 1.1) */
   long poll_us;
   int64_t stale_ms;
 } Options;
@@ -107,7 +110,7 @@ static int parseInteger(const char* text, long long min, long long* out) {
 static void usage(void) {
   fprintf(stderr,
           "usage: tetrig-shm-cat NAME [--frames N] [--timeout-ms T] [--json FILE] [--dump FILE]\n"
-          "                      [--follow] [--quiet] [--poll-us U] [--stale-ms S]\n"
+          "                      [--follow] [--quiet] [--markers] [--poll-us U] [--stale-ms S]\n"
           "  NAME          segment name, e.g. /tetrig (a leading '/' is added when missing)\n"
           "  --frames N    exit 0 after N new frames (default: until the producer stops)\n"
           "  --timeout-ms  give up (exit 2) after T ms without a segment or a new frame (default 5000)\n"
@@ -115,6 +118,7 @@ static void usage(void) {
           "  --dump FILE   write every frame seen: id and positions, raw little-endian (docs/shm.md)\n"
           "  --follow      after a crash, wait for a new producer instead of exiting 3\n"
           "  --quiet       no line per frame\n"
+          "  --markers     under each frame line, each marker's label, state and position (layout 1.1)\n"
           "  --poll-us U   sleep between polls (default 100; 0 = yield)\n"
           "  --stale-ms S  heartbeat age that counts as stale (default 1000)\n");
 }
@@ -149,6 +153,8 @@ static int parseOptions(int argc, char** argv, Options* o, char* name_buf, size_
       o->follow = 1;
     } else if (strcmp(a, "--quiet") == 0) {
       o->quiet = 1;
+    } else if (strcmp(a, "--markers") == 0) {
+      o->markers = 1;
     } else if (strcmp(a, "--help") == 0 || strcmp(a, "-h") == 0) {
       usage();
       exit(EXIT_OK);
@@ -190,6 +196,10 @@ typedef struct Run {
   int open;
   float* positions;
   size_t positions_len;
+  int with_markers;        /* --markers and the segment has the marker block */
+  float* marker_positions; /* marker_count x 3 */
+  uint8_t* marker_states;  /* marker_count */
+  size_t marker_len;       /* markers the buffers hold */
   uint64_t last_frame_id; /* of the current instance */
   uint64_t previous_instance;
   int32_t previous_pid;
@@ -256,6 +266,20 @@ static int tryOpen(Run* run) {
     run->positions = grown;
     run->positions_len = need;
   }
+  run->with_markers = run->opt.markers && tetrig_shm_has_marker_positions(&run->reader);
+  if (run->with_markers && tetrig_shm_marker_count(&run->reader) > run->marker_len) {
+    const size_t m = tetrig_shm_marker_count(&run->reader);
+    float* grown = (float*)realloc(run->marker_positions, m * 3u * sizeof *grown);
+    uint8_t* states;
+    if (grown != NULL) run->marker_positions = grown;
+    states = grown == NULL ? NULL : (uint8_t*)realloc(run->marker_states, m);
+    if (states == NULL) {
+      fprintf(stderr, "tetrig-shm-cat: out of memory\n");
+      return EXIT_USAGE;
+    }
+    run->marker_states = states;
+    run->marker_len = m;
+  }
   if (run->instances > 0) {
     fprintf(stderr, "tetrig-shm-cat: producer restarted: instance %016" PRIx64 " (pid %ld) -> %016" PRIx64 " (pid %ld)\n",
             run->previous_instance, (long)run->previous_pid, run->reader.instance_id, (long)run->reader.producer_pid);
@@ -267,6 +291,11 @@ static int tryOpen(Run* run) {
           (unsigned long)tetrig_shm_triangle_count(&run->reader), (unsigned long)tetrig_shm_slot_count(&run->reader),
           tetrig_shm_has_normals(&run->reader) ? ", normals" : "", run->reader.instance_id,
           (long)run->reader.producer_pid, stateName(tetrig_shm_state(&run->reader)));
+  if (run->opt.markers && !run->with_markers) {
+    fprintf(stderr, "tetrig-shm-cat: %s has no marker positions (layout %u.%u, %lu marker labels): no marker lines\n",
+            run->opt.name, (unsigned)run->reader.header->version_major, (unsigned)run->reader.header->version_minor,
+            (unsigned long)tetrig_shm_marker_count(&run->reader));
+  }
   run->instances += 1;
   run->previous_instance = run->reader.instance_id;
   run->previous_pid = run->reader.producer_pid;
@@ -292,7 +321,11 @@ static int writeDump(Run* run, const TetrigShmFrameInfo* info) {
 static int takeFrame(Run* run) {
   TetrigShmFrameInfo info;
   int64_t seen_ns, recv_pub, pub_seen, recv_seen;
-  const int rc = tetrig_shm_read_latest(&run->reader, run->positions, run->positions_len, NULL, 0, &info);
+  const int rc = run->with_markers
+                     ? tetrig_shm_read_latest_markers(&run->reader, run->positions, run->positions_len, NULL, 0,
+                                                      run->marker_positions, run->marker_len * 3u, run->marker_states,
+                                                      run->marker_len, &info)
+                     : tetrig_shm_read_latest(&run->reader, run->positions, run->positions_len, NULL, 0, &info);
   if (rc != TETRIG_SHM_OK || info.frame_id <= run->last_frame_id) return 0; /* BUSY: next poll retries */
   seen_ns = tetrig_shm_now_ns();
   if (run->last_frame_id != 0) run->frames_missed += info.frame_id - run->last_frame_id - 1u;
@@ -317,6 +350,17 @@ static int takeFrame(Run* run) {
     printf("frame %" PRIu64 " source %" PRIu64 " iter %ld recv->pub %s us pub->seen %.1f us flags 0x%lx occluded %u\n",
            info.frame_id, info.source_frame, (long)info.iterations, recv_text, (double)pub_seen * 1e-3,
            (unsigned long)info.flags, (unsigned)info.occluded_markers);
+    if (run->with_markers) {
+      static const char* const kStateNames[4] = {"unknown", "measured", "predicted", "blended"};
+      uint32_t k;
+      for (k = 0; k < tetrig_shm_marker_count(&run->reader); ++k) {
+        const float* xyz = run->marker_positions + 3u * k;
+        const uint8_t st = run->marker_states[k];
+        fputs("  marker ", stdout);
+        writePrintable(stdout, tetrig_shm_marker_label(&run->reader, k));
+        printf(" %s %.9g %.9g %.9g\n", st < 4u ? kStateNames[st] : "unknown", (double)xyz[0], (double)xyz[1], (double)xyz[2]);
+      }
+    }
     fflush(stdout);
   }
   if (run->dump != NULL && !writeDump(run, &info)) {
@@ -472,6 +516,8 @@ int main(int argc, char** argv) {
   fprintf(stderr, "tetrig-shm-cat: %" PRIu64 " frames seen, %" PRIu64 " missed, %" PRIu64 " producer instance(s)\n",
           run.frames_seen, run.frames_missed, run.instances);
   free(run.positions);
+  free(run.marker_positions);
+  free(run.marker_states);
   free(run.receive_to_publish.values);
   free(run.publish_to_seen.values);
   free(run.receive_to_seen.values);

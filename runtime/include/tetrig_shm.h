@@ -1,5 +1,5 @@
 /* tetrig_shm.h: reader of the tetrig shared-memory segment (runtime -> game engine), layout
- * version 1.0. The format is documented in docs/shm.md; the writer is tetrig::ShmPublisher
+ * version 1.1 (reads 1.0 segments too: they have no marker positions). The format is documented in docs/shm.md; the writer is tetrig::ShmPublisher
  * (runtime/include/tetrig/shm_publisher.hpp).
  *
  * Implements: a POSIX shared-memory segment with a fixed header, static data written once before
@@ -81,7 +81,7 @@
 /* The bytes "TETRIGSM" read as a little-endian uint64. */
 #define TETRIG_SHM_MAGIC UINT64_C(0x4D53474952544554)
 #define TETRIG_SHM_VERSION_MAJOR 1u /* a reader refuses any other major version */
-#define TETRIG_SHM_VERSION_MINOR 0u /* newer minors only append fields in reserved space */
+#define TETRIG_SHM_VERSION_MINOR 1u /* newer minors only append fields in reserved space */
 #define TETRIG_SHM_HEADER_SIZE 256u
 #define TETRIG_SHM_ALIGNMENT 64u    /* every array starts on a 64-byte boundary */
 #define TETRIG_SHM_MIN_SLOTS 3u
@@ -91,6 +91,13 @@
 
 /* TetrigShmHeader.flags */
 #define TETRIG_SHM_HAS_NORMALS 0x1u
+#define TETRIG_SHM_HAS_MARKER_POSITIONS 0x2u /* 1.1: per-slot marker positions and states */
+
+/* Per-marker state byte of the marker block (1.1), one per marker in label order. */
+#define TETRIG_SHM_MARKER_UNKNOWN 0u   /* no target (e.g. a non-finite one was replaced by 0) */
+#define TETRIG_SHM_MARKER_MEASURED 1u  /* the measurement itself */
+#define TETRIG_SHM_MARKER_PREDICTED 2u /* no measurement this frame: predicted (occluded) */
+#define TETRIG_SHM_MARKER_BLENDED 3u   /* measured again, blending from the prediction back */
 
 /* TetrigShmHeader.state (the producer's state; 0 only before the first heartbeat) */
 #define TETRIG_SHM_STATE_RUNNING 1u      /* frames arrive from the source */
@@ -116,6 +123,8 @@
 #define TETRIG_SHM_E_ACCESS (-6)     /* permission denied (segments are 0600 by default) */
 #define TETRIG_SHM_E_SYSTEM (-7)     /* another system error: see TetrigShmReader.error */
 #define TETRIG_SHM_E_ARGUMENT (-8)   /* bad name, NULL reader or a buffer too small */
+#define TETRIG_SHM_NO_MARKERS 3      /* read markers: the segment has no marker positions (a 1.0
+                                        producer, no markers, or the producer left them out) */
 
 /* tetrig_shm_producer_status() */
 #define TETRIG_SHM_PRODUCER_ALIVE 0   /* pid alive and heartbeat fresh */
@@ -168,7 +177,10 @@ typedef struct TetrigShmHeader {
   uint64_t slot_stride;           /* 200 bytes from one slot to the next (multiple of 64) */
   uint64_t slot_positions_offset; /* 208 from the slot start: float x 3 per vertex */
   uint64_t slot_normals_offset;   /* 216 from the slot start: float x 3 per vertex, 0 = none */
-  uint64_t reserved4[4];          /* 224 */
+  /* 1.1 (0 in 1.0 segments; read only when version_minor >= 1 and TETRIG_SHM_HAS_MARKER_POSITIONS) */
+  uint64_t slot_marker_positions_offset; /* 224 from the slot start: float x 3 per marker, rig units */
+  uint64_t slot_marker_states_offset;    /* 232 from the slot start: uint8 per marker (TETRIG_SHM_MARKER_*) */
+  uint64_t reserved4[2];                 /* 240 */
 } TetrigShmHeader;
 
 /* Per-frame information, inside each slot at offset 16 (80 bytes). Times are nanoseconds of
@@ -190,7 +202,8 @@ typedef struct TetrigShmFrameInfo {
 } TetrigShmFrameInfo;
 
 /* Slot: uint64 sequence at 0 (odd while written), 8 reserved bytes, TetrigShmFrameInfo at 16,
- * reserved to 128, then positions at slot_positions_offset and normals at slot_normals_offset. */
+ * reserved to 128, then positions at slot_positions_offset, normals at slot_normals_offset and
+ * (1.1) marker positions and states at slot_marker_positions_offset / slot_marker_states_offset. */
 #define TETRIG_SHM_SLOT_SEQUENCE_OFFSET 0u
 #define TETRIG_SHM_SLOT_INFO_OFFSET 16u
 
@@ -202,6 +215,8 @@ TETRIG_SHM_STATIC_ASSERT(offsetof(TetrigShmHeader, latest_frame_id) == 80, "late
 TETRIG_SHM_STATIC_ASSERT(offsetof(TetrigShmHeader, vertex_count) == 128, "counts at 128");
 TETRIG_SHM_STATIC_ASSERT(offsetof(TetrigShmHeader, triangles_offset) == 152, "offsets at 152");
 TETRIG_SHM_STATIC_ASSERT(offsetof(TetrigShmHeader, slot_normals_offset) == 216, "normals at 216");
+TETRIG_SHM_STATIC_ASSERT(offsetof(TetrigShmHeader, slot_marker_positions_offset) == 224, "markers at 224");
+TETRIG_SHM_STATIC_ASSERT(offsetof(TetrigShmHeader, slot_marker_states_offset) == 232, "marker states at 232");
 TETRIG_SHM_STATIC_ASSERT(sizeof(TetrigShmFrameInfo) == 80, "frame info is 80 bytes");
 TETRIG_SHM_STATIC_ASSERT(offsetof(TetrigShmFrameInfo, device_ns) == 32, "device_ns at 32");
 TETRIG_SHM_STATIC_ASSERT(offsetof(TetrigShmFrameInfo, publish_ns) == 72, "publish_ns at 72");
@@ -235,6 +250,7 @@ static inline const char* tetrig_shm_status_string(int code) {
     case TETRIG_SHM_OK: return "ok";
     case TETRIG_SHM_NO_FRAME: return "no frame published yet";
     case TETRIG_SHM_BUSY: return "writer lapped the reader on every attempt";
+    case TETRIG_SHM_NO_MARKERS: return "segment has no marker positions (layout 1.0, no markers, or left out)";
     case TETRIG_SHM_E_NOT_FOUND: return "no such shared-memory segment";
     case TETRIG_SHM_E_NOT_READY: return "segment is still being created";
     case TETRIG_SHM_E_MAGIC: return "not a tetrig segment (bad magic)";
@@ -332,6 +348,19 @@ static inline int tetrig_shm_attach(TetrigShmReader* reader, const void* base, u
     }
   } else if (h->slot_normals_offset != 0u) {
     return TETRIG_SHM_E_SIZE;
+  }
+  /* 1.1 marker block: checked only when the segment says it has one (a 1.0 segment never does) */
+  if (h->version_minor >= 1u && (h->flags & TETRIG_SHM_HAS_MARKER_POSITIONS) != 0u) {
+    const uint64_t m = h->marker_count;
+    if (m == 0u || h->slot_marker_positions_offset % TETRIG_SHM_ALIGNMENT != 0u ||
+        h->slot_marker_states_offset % TETRIG_SHM_ALIGNMENT != 0u ||
+        h->slot_marker_positions_offset < TETRIG_SHM_SLOT_HEADER_SIZE ||
+        h->slot_marker_states_offset < TETRIG_SHM_SLOT_HEADER_SIZE ||
+        h->slot_marker_positions_offset > h->slot_stride || h->slot_marker_states_offset > h->slot_stride ||
+        m * 12u > h->slot_stride - h->slot_marker_positions_offset ||
+        (m + 3u) / 4u * 4u > h->slot_stride - h->slot_marker_states_offset) {
+      return TETRIG_SHM_E_SIZE;
+    }
   }
   if (h->slot_stride == 0u || h->slot_stride > size / h->slot_count) return TETRIG_SHM_E_SIZE;
   slot_end = h->slot_stride * h->slot_count;
@@ -433,6 +462,13 @@ static inline const char* tetrig_shm_rig_name(const TetrigShmReader* r) {
   return TETRIG_SHM_PTR(const char*, r->base + r->header->rig_name_offset);
 }
 static inline uint32_t tetrig_shm_marker_count(const TetrigShmReader* r) { return r->header->marker_count; }
+/* 1 when every slot carries the markers' positions and states (layout 1.1 with the block; see
+ * tetrig_shm_read_latest_markers), 0 for a 1.0 segment, a rig without markers, or a producer that
+ * left them out. */
+static inline int tetrig_shm_has_marker_positions(const TetrigShmReader* r) {
+  return r->header->version_minor >= 1u && (r->header->flags & TETRIG_SHM_HAS_MARKER_POSITIONS) != 0u &&
+         r->header->marker_count > 0u;
+}
 /* Label of marker `index` (< marker_count), or NULL. Walks the label block: O(label bytes). */
 static inline const char* tetrig_shm_marker_label(const TetrigShmReader* r, uint32_t index) {
   const char* p = TETRIG_SHM_PTR(const char*, r->base + r->header->marker_labels_offset);
@@ -462,27 +498,39 @@ static inline uint64_t tetrig_shm_latest_frame_id(const TetrigShmReader* r) {
 #define TETRIG_SHM_READ_WINDOW_HOOK(reader) ((void)0)
 #endif
 
-/* Copies the newest complete frame: positions (vertex_count x 3 floats into `positions`, which
- * holds `positions_len` floats; NULL to skip), normals (same, only when the segment has normals;
- * otherwise `normals` is left untouched; NULL to skip) and its info (NULL to skip). Seqlock read:
- * load latest_frame_id, load the slot's sequence (acquire; odd = being written: retry), copy with
- * relaxed word loads, acquire fence, reload the sequence: unchanged means no write overlapped the
- * copy. Retries (counted in reader->retries) at most reader->max_attempts times in all; returns
- * TETRIG_SHM_OK, TETRIG_SHM_NO_FRAME, TETRIG_SHM_BUSY (buffers then hold garbage) or
- * TETRIG_SHM_E_ARGUMENT. The frame returned is the one latest_frame_id named when the successful
- * attempt began, so ids returned to one reader never go backwards. Wait-free apart from the
- * bounded retries; no system call, no allocation. */
-static inline int tetrig_shm_read_latest(TetrigShmReader* r, float* positions, size_t positions_len,
-                                         float* normals, size_t normals_len, TetrigShmFrameInfo* info) {
+/* Copies `bytes` bytes (any count) of the 8-byte aligned segment address `src`, whose block is
+ * padded to a multiple of 4 bytes, into `dst` with relaxed atomic loads; never writes past
+ * dst + bytes. */
+static inline void tetrig_shm_load_bytes(void* dst, const void* src, uint64_t bytes) {
+  const uint64_t whole = bytes / 4u * 4u;
+  unsigned char* d = TETRIG_SHM_PTR(unsigned char*, dst);
+  tetrig_shm_load_words(d, src, whole);
+  if (whole != bytes) {
+    const uint32_t w = __atomic_load_n(TETRIG_SHM_PTR(const uint32_t*, TETRIG_SHM_PTR(const unsigned char*, src) + whole),
+                                       __ATOMIC_RELAXED);
+    memcpy(d + whole, &w, TETRIG_SHM_CONV(size_t, bytes - whole));
+  }
+}
+
+/* The seqlock read behind tetrig_shm_read_latest and tetrig_shm_read_latest_markers (the marker
+ * buffers are NULL for the former, and only used when the segment has the marker block). */
+static inline int tetrig_shm_internal_read(TetrigShmReader* r, float* positions, size_t positions_len, float* normals,
+                                           size_t normals_len, float* marker_positions, size_t marker_positions_len,
+                                           uint8_t* marker_states, size_t marker_states_len, TetrigShmFrameInfo* info) {
   const TetrigShmHeader* h;
-  uint64_t float_bytes, need;
+  uint64_t float_bytes, need, markers;
   int attempt, with_normals;
   if (r == NULL || r->header == NULL) return TETRIG_SHM_E_ARGUMENT;
   h = r->header;
   need = TETRIG_SHM_CONV(uint64_t, h->vertex_count) * 3u;
   float_bytes = need * 4u;
+  markers = h->marker_count;
   with_normals = normals != NULL && (h->flags & TETRIG_SHM_HAS_NORMALS) != 0u;
   if ((positions != NULL && positions_len < need) || (with_normals && normals_len < need)) return TETRIG_SHM_E_ARGUMENT;
+  if ((marker_positions != NULL && marker_positions_len < markers * 3u) ||
+      (marker_states != NULL && marker_states_len < markers)) {
+    return TETRIG_SHM_E_ARGUMENT;
+  }
   for (attempt = 0; attempt < r->max_attempts; ++attempt) {
     TetrigShmFrameInfo tmp;
     uint64_t seq1, seq2, slot_index;
@@ -502,6 +550,8 @@ static inline int tetrig_shm_read_latest(TetrigShmReader* r, float* positions, s
     TETRIG_SHM_READ_WINDOW_HOOK(r);
     if (positions != NULL) tetrig_shm_load_words(positions, slot + h->slot_positions_offset, float_bytes);
     if (with_normals) tetrig_shm_load_words(normals, slot + h->slot_normals_offset, float_bytes);
+    if (marker_positions != NULL) tetrig_shm_load_words(marker_positions, slot + h->slot_marker_positions_offset, markers * 12u);
+    if (marker_states != NULL) tetrig_shm_load_bytes(marker_states, slot + h->slot_marker_states_offset, markers);
     __atomic_thread_fence(__ATOMIC_ACQUIRE);
     seq2 = __atomic_load_n(seq, __ATOMIC_RELAXED);
     /* tmp.frame_id > latest: the writer lapped us before seq1 (a complete newer frame, but
@@ -517,6 +567,39 @@ static inline int tetrig_shm_read_latest(TetrigShmReader* r, float* positions, s
   }
   ++r->busy;
   return TETRIG_SHM_BUSY;
+}
+
+/* Copies the newest complete frame: positions (vertex_count x 3 floats into `positions`, which
+ * holds `positions_len` floats; NULL to skip), normals (same, only when the segment has normals;
+ * otherwise `normals` is left untouched; NULL to skip) and its info (NULL to skip). Seqlock read:
+ * load latest_frame_id, load the slot's sequence (acquire; odd = being written: retry), copy with
+ * relaxed word loads, acquire fence, reload the sequence: unchanged means no write overlapped the
+ * copy. Retries (counted in reader->retries) at most reader->max_attempts times in all; returns
+ * TETRIG_SHM_OK, TETRIG_SHM_NO_FRAME, TETRIG_SHM_BUSY (buffers then hold garbage) or
+ * TETRIG_SHM_E_ARGUMENT. The frame returned is the one latest_frame_id named when the successful
+ * attempt began, so ids returned to one reader never go backwards. Wait-free apart from the
+ * bounded retries; no system call, no allocation. */
+static inline int tetrig_shm_read_latest(TetrigShmReader* r, float* positions, size_t positions_len,
+                                         float* normals, size_t normals_len, TetrigShmFrameInfo* info) {
+  return tetrig_shm_internal_read(r, positions, positions_len, normals, normals_len, NULL, 0u, NULL, 0u, info);
+}
+
+/* Layout 1.1: tetrig_shm_read_latest plus the same frame's marker block, in one seqlock read (the
+ * mesh and the markers always belong to one frame). marker_positions: marker_count x 3 floats
+ * (rig units, label order; `marker_positions_len` floats; NULL to skip); marker_states:
+ * marker_count bytes, TETRIG_SHM_MARKER_* (NULL to skip). positions / normals / info as in
+ * tetrig_shm_read_latest (each may be NULL). Returns TETRIG_SHM_NO_MARKERS, reading nothing, when
+ * the segment has no marker positions (tetrig_shm_has_marker_positions() == 0: a 1.0 producer,
+ * no markers, or the producer left them out): call tetrig_shm_read_latest instead. Otherwise the
+ * codes of tetrig_shm_read_latest (E_ARGUMENT also when a marker buffer is too small). */
+static inline int tetrig_shm_read_latest_markers(TetrigShmReader* r, float* positions, size_t positions_len,
+                                                 float* normals, size_t normals_len, float* marker_positions,
+                                                 size_t marker_positions_len, uint8_t* marker_states,
+                                                 size_t marker_states_len, TetrigShmFrameInfo* info) {
+  if (r == NULL || r->header == NULL) return TETRIG_SHM_E_ARGUMENT;
+  if (!tetrig_shm_has_marker_positions(r)) return TETRIG_SHM_NO_MARKERS;
+  return tetrig_shm_internal_read(r, positions, positions_len, normals, normals_len, marker_positions,
+                                  marker_positions_len, marker_states, marker_states_len, info);
 }
 
 /* ---- producer liveness ---- */

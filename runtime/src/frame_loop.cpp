@@ -10,6 +10,7 @@
 #include <cerrno>
 #include <chrono>
 #include <cstring>
+#include <stdexcept>
 #include <thread>
 
 #if defined(__linux__)
@@ -45,6 +46,31 @@ bool flushDenormals() noexcept {
 #endif
 }
 
+// The segment's marker block (layout 1.1): each rig marker's target of this frame (rig units,
+// rig.markers order = the segment's label order) and its state. A non-finite target (the live rig
+// never steps with one) is published as 0 with the state unknown. No allocation.
+void stageMarkers(const LiveRig& live, float* positions, std::uint8_t* states, std::size_t count) noexcept {
+  const std::span<const Eigen::Vector3d> targets = live.markerTargets();
+  for (std::size_t k = 0; k < count; ++k) {
+    const Eigen::Vector3d& t = targets[k];
+    float* p = positions + 3 * k;
+    if (!t.allFinite()) {
+      p[0] = p[1] = p[2] = 0.0f;
+      states[k] = kShmMarkerUnknown;
+      continue;
+    }
+    p[0] = static_cast<float>(t.x());
+    p[1] = static_cast<float>(t.y());
+    p[2] = static_cast<float>(t.z());
+    switch (live.markerState(static_cast<std::int32_t>(k))) {
+      case MarkerTrackState::kMeasured: states[k] = kShmMarkerMeasured; break;
+      case MarkerTrackState::kReturning: states[k] = kShmMarkerBlended; break;
+      case MarkerTrackState::kPredicted: states[k] = kShmMarkerPredicted; break;
+      default: states[k] = kShmMarkerUnknown; break;
+    }
+  }
+}
+
 std::chrono::steady_clock::time_point steadyAt(std::int64_t ns) {
   return std::chrono::steady_clock::time_point(std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::nanoseconds(ns)));
 }
@@ -53,6 +79,11 @@ std::chrono::steady_clock::time_point steadyAt(std::int64_t ns) {
 
 FrameLoop::FrameLoop(FrameMailbox& mailbox, LiveRig& live_rig, ShmPublisher& publisher, const FrameLoopOptions& options)
     : mailbox_(mailbox), live_(live_rig), publisher_(publisher), options_(options) {
+  if (publisher_.hasMarkerPositions() && static_cast<std::size_t>(publisher_.markerCount()) != live_.rig().markers.size()) {
+    throw std::invalid_argument("frame loop: the segment '" + publisher_.name() + "' has " + std::to_string(publisher_.markerCount()) +
+                                " marker labels but the rig has " + std::to_string(live_.rig().markers.size()) +
+                                " markers: publish the rig's own labels (rig.markers order)");
+  }
   options_.frame_log_markers = std::clamp(options_.frame_log_markers, 0, kMaxMarkers);
   // value-initialised: every page is touched here, not on the solver thread
   frame_log_.resize(options_.frame_log_capacity);
@@ -177,6 +208,8 @@ void FrameLoop::run() noexcept {
     const LiveFrameStats stats = live_.processFrame(*frame, budget, publisher_.beginPositions(), publisher_.beginNormals());
     const std::int64_t pose_done_ns = monotonicNowNs();
     const std::int64_t step_done_ns = pose_done_ns - stats.pose_transfer_ns;
+    if (float* marker_positions = publisher_.beginMarkerPositions())
+      stageMarkers(live_, marker_positions, publisher_.beginMarkerStates(), static_cast<std::size_t>(publisher_.markerCount()));
 
     ShmFrameInfo info;
     info.source_frame = frame->frame_counter;

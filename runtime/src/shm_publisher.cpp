@@ -1,5 +1,5 @@
 // Shared-memory publisher (tetrig/shm_publisher.hpp): the writer side of the tetrig segment,
-// layout version 1.0 (runtime/include/tetrig_shm.h, docs/shm.md). Implements a seqlock writer
+// layout version 1.1 (runtime/include/tetrig_shm.h, docs/shm.md). Implements a seqlock writer
 // (Lamport 1977; the fence form for the C/C++ memory model from Boehm, "Can seqlocks get along
 // with programming language memory models?", 2012) over N >= 3 round-robin slots: sequence odd
 // (relaxed), release fence, relaxed word stores of the payload, sequence even (release), newest
@@ -34,6 +34,10 @@ static_assert(kShmFramePoseHeld == TETRIG_SHM_FRAME_POSE_HELD);
 static_assert(kShmFrameBudgetMiss == TETRIG_SHM_FRAME_BUDGET_MISS);
 static_assert(kShmFrameMarkersPredicted == TETRIG_SHM_FRAME_MARKERS_PREDICTED);
 static_assert(kShmFrameInputRejected == TETRIG_SHM_FRAME_INPUT_REJECTED);
+static_assert(kShmMarkerUnknown == TETRIG_SHM_MARKER_UNKNOWN);
+static_assert(kShmMarkerMeasured == TETRIG_SHM_MARKER_MEASURED);
+static_assert(kShmMarkerPredicted == TETRIG_SHM_MARKER_PREDICTED);
+static_assert(kShmMarkerBlended == TETRIG_SHM_MARKER_BLENDED);
 
 namespace {
 
@@ -180,7 +184,9 @@ struct CreationGuard {
 }  // namespace
 
 ShmPublisher::ShmPublisher(const ShmPublisherOptions& options, std::int32_t vertex_count, const ShmStaticData& data)
-    : name_(options.name), vertex_count_(vertex_count), slot_count_(options.slot_count), normals_(options.normals) {
+    : name_(options.name), vertex_count_(vertex_count), slot_count_(options.slot_count), normals_(options.normals),
+      marker_count_(static_cast<std::int32_t>(std::min<std::size_t>(data.marker_labels.size(), 0x10000u))),
+      markers_(options.marker_positions && !data.marker_labels.empty()) {
   validateName(name_);
   const std::string where = "shm segment '" + name_ + "'";
   if (vertex_count <= 0) throw ShmError(where + ": vertex count must be positive (got " + std::to_string(vertex_count) + ")");
@@ -230,6 +236,16 @@ ShmPublisher::ShmPublisher(const ShmPublisherOptions& options, std::int32_t vert
   slot_positions_offset_ = TETRIG_SHM_SLOT_HEADER_SIZE;
   slot_normals_offset_ = normals_ ? TETRIG_SHM_SLOT_HEADER_SIZE + array_region : 0;
   slot_stride_ = TETRIG_SHM_SLOT_HEADER_SIZE + array_region * (normals_ ? 2 : 1);
+  // 1.1: the marker block after the arrays (a 1.0 reader follows the offsets and never sees it).
+  const auto m = static_cast<std::uint64_t>(data.marker_labels.size());
+  if (markers_) {
+    slot_marker_positions_offset_ = slot_stride_;
+    slot_stride_ += alignUp(m * 12);
+    slot_marker_states_offset_ = slot_stride_;
+    slot_stride_ += alignUp(m);
+    marker_position_bytes_ = (m * 12 + 7) / 8 * 8;
+    marker_state_bytes_ = (m + 7) / 8 * 8;
+  }
   const std::uint64_t total = slots_offset + slot_stride_ * static_cast<std::uint64_t>(slot_count_);
   if (total > static_cast<std::uint64_t>(std::numeric_limits<off_t>::max())) throw ShmError(where + ": segment too large");
   size_ = total;
@@ -239,6 +255,10 @@ ShmPublisher::ShmPublisher(const ShmPublisherOptions& options, std::int32_t vert
   staging_positions_.assign(array_bytes_ / sizeof(float), 0.0f);
   std::copy(data.rest_positions.begin(), data.rest_positions.end(), staging_positions_.begin());
   if (normals_) staging_normals_.assign(array_bytes_ / sizeof(float), 0.0f);
+  if (markers_) {
+    staging_marker_positions_.assign(marker_position_bytes_ / sizeof(float), 0.0f);
+    staging_marker_states_.assign(marker_state_bytes_, std::uint8_t{TETRIG_SHM_MARKER_UNKNOWN});
+  }
 
   // ---- create (O_EXCL), replacing a dead or stopped producer's segment ----
   CreationGuard guard{name_};
@@ -289,7 +309,7 @@ ShmPublisher::ShmPublisher(const ShmPublisherOptions& options, std::int32_t vert
   h.start_unix_ns = static_cast<std::int64_t>(
       std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch()).count());
   h.start_monotonic_ns = now_ns;
-  h.flags = normals_ ? TETRIG_SHM_HAS_NORMALS : 0u;
+  h.flags = (normals_ ? TETRIG_SHM_HAS_NORMALS : 0u) | (markers_ ? TETRIG_SHM_HAS_MARKER_POSITIONS : 0u);
   h.vertex_count = static_cast<std::uint32_t>(vertex_count);
   h.triangle_count = static_cast<std::uint32_t>(triangle_count);
   h.slot_count = static_cast<std::uint32_t>(slot_count_);
@@ -304,6 +324,8 @@ ShmPublisher::ShmPublisher(const ShmPublisherOptions& options, std::int32_t vert
   h.slot_stride = slot_stride_;
   h.slot_positions_offset = slot_positions_offset_;
   h.slot_normals_offset = slot_normals_offset_;
+  h.slot_marker_positions_offset = slot_marker_positions_offset_;
+  h.slot_marker_states_offset = slot_marker_states_offset_;
   writeStatic(data);
   atomicAt(h.heartbeat_ns).store(now_ns, std::memory_order_relaxed);
   atomicAt(h.state).store(TETRIG_SHM_STATE_RUNNING, std::memory_order_relaxed);
@@ -352,6 +374,10 @@ std::uint64_t ShmPublisher::commit(const ShmFrameInfo& info) noexcept {
   std::atomic_thread_fence(std::memory_order_release);              // orders the odd value before the payload
   storeWords(slot + slot_positions_offset_, staging_positions_.data(), array_bytes_);
   if (normals_) storeWords(slot + slot_normals_offset_, staging_normals_.data(), array_bytes_);
+  if (markers_) {
+    storeWords(slot + slot_marker_positions_offset_, staging_marker_positions_.data(), marker_position_bytes_);
+    storeWords(slot + slot_marker_states_offset_, staging_marker_states_.data(), marker_state_bytes_);
+  }
   TetrigShmFrameInfo out{};
   out.frame_id = frame_id;
   out.source_frame = info.source_frame;

@@ -3,7 +3,9 @@
 // tools/tetrig_shm_cat.c. Round trip, refusal of bad segments, the seqlock under concurrent
 // readers (no torn frame, ids never go backwards, the retry path exercised), processes (killed
 // reader, killed writer seen dead, replacement by a new producer, live producer refused),
-// permissions, no allocation on the frame path, and the consumer's output and --dump.
+// permissions, no allocation on the frame path, and the consumer's output and --dump. Layout
+// 1.1: the marker block round trip, left out, a 1.0 segment read as "no markers", and the marker
+// block inside the seqlock under the concurrent readers.
 // Also built with -fsanitize=thread (test_shm_tsan, fewer stress frames).
 #include "tetrig/shm_publisher.hpp"
 
@@ -103,6 +105,8 @@ float positionValue(std::uint64_t frame_id, std::size_t i) {
   return static_cast<float>((frame_id * 4099u + static_cast<std::uint64_t>(i) * 7u) & 0xFFFFFFu);  // exact in float
 }
 float normalValue(std::uint64_t frame_id, std::size_t i) { return -positionValue(frame_id, i) - 0.5f; }
+float markerValue(std::uint64_t frame_id, std::size_t i) { return 0.25f * positionValue(frame_id, i + 100003u); }
+std::uint8_t markerStateValue(std::uint64_t frame_id, std::size_t k) { return static_cast<std::uint8_t>((frame_id + k) % 4u); }
 
 ShmFrameInfo infoFor(std::uint64_t frame_id) {
   ShmFrameInfo info;
@@ -127,6 +131,12 @@ std::uint64_t publishPattern(ShmPublisher& pub) {
   if (float* q = pub.beginNormals()) {
     for (std::size_t i = 0; i < n; ++i) q[i] = normalValue(id, i);
   }
+  if (float* m = pub.beginMarkerPositions()) {
+    const auto markers = static_cast<std::size_t>(pub.markerCount());
+    for (std::size_t i = 0; i < markers * 3; ++i) m[i] = markerValue(id, i);
+    std::uint8_t* states = pub.beginMarkerStates();
+    for (std::size_t k = 0; k < markers; ++k) states[k] = markerStateValue(id, k);
+  }
   const std::uint64_t got = pub.commit(infoFor(id));
   return got;
 }
@@ -148,6 +158,17 @@ bool consistent(const std::vector<float>& positions, const std::vector<float>* n
     for (std::size_t i = 0; i < normals->size(); ++i) {
       if ((*normals)[i] != normalValue(id, i)) return false;
     }
+  }
+  return true;
+}
+
+// True when the marker block belongs to frame `id`.
+bool markersConsistent(std::uint64_t id, const std::vector<float>& marker_positions, const std::vector<std::uint8_t>& states) {
+  for (std::size_t i = 0; i < marker_positions.size(); ++i) {
+    if (marker_positions[i] != markerValue(id, i)) return false;
+  }
+  for (std::size_t k = 0; k < states.size(); ++k) {
+    if (states[k] != markerStateValue(id, k)) return false;
   }
   return true;
 }
@@ -404,6 +425,153 @@ TEST(Shm, WithoutNormalsTheNormalsBufferIsLeftAlone) {
   tetrig_shm_close(&r);
 }
 
+// Layout 1.1: the marker block (positions + state bytes, label order) of the newest frame comes
+// with that frame's mesh; 5 markers = 5 state bytes, so the copy ends inside a 4-byte word and
+// must not write past the caller's buffer.
+TEST(Shm, MarkerPositionsAndStatesRoundTripWithTheirFrame) {
+  const std::string name = uniqueName("markers");
+  NameGuard guard{name};
+  Mesh mesh(6);
+  mesh.labels = {"LFHD", "RFHD", "C7", "T10", "STRN"};
+  ShmPublisher pub(optionsFor(name, 3, true), 6, mesh.data());
+  ASSERT_TRUE(pub.hasMarkerPositions());
+  ASSERT_EQ(pub.markerCount(), 5);
+  // staged markers start as zeros, state unknown
+  for (int i = 0; i < 15; ++i) EXPECT_EQ(pub.beginMarkerPositions()[i], 0.0f);
+  for (int k = 0; k < 5; ++k) EXPECT_EQ(pub.beginMarkerStates()[k], TETRIG_SHM_MARKER_UNKNOWN);
+  TetrigShmReader r;
+  ASSERT_EQ(tetrig_shm_open(&r, name.c_str()), TETRIG_SHM_OK);
+  EXPECT_EQ(r.header->version_minor, 1u);
+  EXPECT_NE(r.header->flags & TETRIG_SHM_HAS_MARKER_POSITIONS, 0u);
+  EXPECT_EQ(tetrig_shm_has_marker_positions(&r), 1);
+  EXPECT_EQ(r.header->slot_marker_positions_offset % 64, 0u);
+  EXPECT_EQ(r.header->slot_marker_states_offset % 64, 0u);
+  std::vector<float> pos(18), nrm(18), markers(16, -7.0f);
+  std::vector<std::uint8_t> states(6, 0xEE);
+  TetrigShmFrameInfo info{};
+  EXPECT_EQ(tetrig_shm_read_latest_markers(&r, pos.data(), 18, nrm.data(), 18, markers.data(), 15, states.data(), 5, &info),
+            TETRIG_SHM_NO_FRAME);
+  for (std::uint64_t k = 1; k <= 7; ++k) {  // more frames than slots
+    ASSERT_EQ(publishPattern(pub), k);
+    ASSERT_EQ(tetrig_shm_read_latest_markers(&r, pos.data(), 18, nrm.data(), 18, markers.data(), 15, states.data(), 5, &info),
+              TETRIG_SHM_OK);
+    EXPECT_EQ(info.frame_id, k);
+    EXPECT_TRUE(consistent(pos, &nrm, info)) << "frame " << k;
+    EXPECT_TRUE(markersConsistent(k, std::vector<float>(markers.begin(), markers.begin() + 15),
+                                  std::vector<std::uint8_t>(states.begin(), states.begin() + 5)))
+        << "frame " << k;
+    EXPECT_EQ(markers[15], -7.0f) << "wrote past the marker positions";
+    EXPECT_EQ(states[5], 0xEE) << "wrote past the marker states";
+  }
+  // only the markers (mesh buffers NULL) and only the states
+  std::vector<float> markers_only(15);
+  ASSERT_EQ(tetrig_shm_read_latest_markers(&r, nullptr, 0, nullptr, 0, markers_only.data(), 15, nullptr, 0, &info),
+            TETRIG_SHM_OK);
+  EXPECT_TRUE(markersConsistent(7, markers_only, {}));
+  std::vector<std::uint8_t> states_only(5);
+  ASSERT_EQ(tetrig_shm_read_latest_markers(&r, nullptr, 0, nullptr, 0, nullptr, 0, states_only.data(), 5, nullptr),
+            TETRIG_SHM_OK);
+  EXPECT_TRUE(markersConsistent(7, {}, states_only));
+  // the 1.0 call still reads the mesh of a 1.1 segment
+  ASSERT_EQ(tetrig_shm_read_latest(&r, pos.data(), 18, nrm.data(), 18, &info), TETRIG_SHM_OK);
+  EXPECT_TRUE(consistent(pos, &nrm, info));
+  // marker buffers too small: refused, untouched
+  std::vector<float> small(14, 3.0f);
+  EXPECT_EQ(tetrig_shm_read_latest_markers(&r, nullptr, 0, nullptr, 0, small.data(), 14, nullptr, 0, nullptr),
+            TETRIG_SHM_E_ARGUMENT);
+  EXPECT_EQ(small, std::vector<float>(14, 3.0f));
+  std::vector<std::uint8_t> small_states(4, 9);
+  EXPECT_EQ(tetrig_shm_read_latest_markers(&r, nullptr, 0, nullptr, 0, nullptr, 0, small_states.data(), 4, nullptr),
+            TETRIG_SHM_E_ARGUMENT);
+  EXPECT_EQ(small_states, std::vector<std::uint8_t>(4, 9));
+  tetrig_shm_close(&r);
+}
+
+// Without labels, or with ShmPublisherOptions::marker_positions off, a 1.1 segment has no marker
+// block: smaller slots, and the marker read reports TETRIG_SHM_NO_MARKERS.
+TEST(Shm, TheMarkerBlockIsLeftOutWithoutLabelsOrWhenTurnedOff) {
+  Mesh mesh(4);
+  std::size_t with_size = 0;
+  {
+    const std::string name = uniqueName("withmarkers");
+    NameGuard guard{name};
+    ShmPublisher pub(optionsFor(name), 4, mesh.data());
+    with_size = pub.segmentSize();
+  }
+  for (int variant = 0; variant < 2; ++variant) {
+    const std::string name = uniqueName("nomarkers");
+    NameGuard guard{name};
+    ShmPublisherOptions o = optionsFor(name);
+    Mesh m(4);
+    if (variant == 0) {
+      o.marker_positions = false;
+    } else {
+      m.labels.clear();
+    }
+    ShmPublisher pub(o, 4, m.data());
+    EXPECT_FALSE(pub.hasMarkerPositions()) << variant;
+    EXPECT_EQ(pub.beginMarkerPositions(), nullptr) << variant;
+    EXPECT_EQ(pub.beginMarkerStates(), nullptr) << variant;
+    EXPECT_LT(pub.segmentSize(), with_size) << variant;
+    publishPattern(pub);
+    TetrigShmReader r;
+    ASSERT_EQ(tetrig_shm_open(&r, name.c_str()), TETRIG_SHM_OK);
+    EXPECT_EQ(tetrig_shm_marker_count(&r), variant == 0 ? 3u : 0u);
+    EXPECT_EQ(tetrig_shm_has_marker_positions(&r), 0);
+    EXPECT_EQ(r.header->slot_marker_positions_offset, 0u);
+    std::vector<float> pos(12), markers(9, 5.0f);
+    EXPECT_EQ(tetrig_shm_read_latest_markers(&r, pos.data(), 12, nullptr, 0, markers.data(), 9, nullptr, 0, nullptr),
+              TETRIG_SHM_NO_MARKERS);
+    EXPECT_EQ(markers, std::vector<float>(9, 5.0f));
+    TetrigShmFrameInfo info{};
+    ASSERT_EQ(tetrig_shm_read_latest(&r, pos.data(), 12, nullptr, 0, &info), TETRIG_SHM_OK);
+    EXPECT_TRUE(consistent(pos, nullptr, info));
+    tetrig_shm_close(&r);
+  }
+}
+
+// A layout 1.0 segment (minor 0: the marker fields are reserved zeros) is still accepted by a 1.1
+// reader, which reports "no marker positions" and reads the mesh as before. A minor-0 header with
+// a stray flag bit is not trusted either.
+TEST(Shm, ALayout10SegmentIsAcceptedWithNoMarkers) {
+  const std::string name = uniqueName("v10");
+  NameGuard guard{name};
+  const Mesh mesh(5);
+  ShmPublisher pub(optionsFor(name, 3, true), 5, mesh.data());
+  publishPattern(pub);
+  RawMapping raw(name);
+  ASSERT_TRUE(raw.ok());
+  TetrigShmHeader& h = raw.header();
+  // what a 1.0 producer writes: minor 0, flags without the marker bit, the 1.1 fields zero
+  h.version_minor = 0;
+  h.flags = TETRIG_SHM_HAS_NORMALS;
+  h.slot_marker_positions_offset = 0;
+  h.slot_marker_states_offset = 0;
+  for (int stray = 0; stray < 2; ++stray) {
+    if (stray == 1) h.flags |= TETRIG_SHM_HAS_MARKER_POSITIONS;  // ignored in minor 0 (offsets 0 would fail in 1.1)
+    TetrigShmReader r;
+    ASSERT_EQ(tetrig_shm_open(&r, name.c_str()), TETRIG_SHM_OK) << stray;
+    EXPECT_EQ(tetrig_shm_has_marker_positions(&r), 0) << stray;
+    EXPECT_EQ(tetrig_shm_marker_count(&r), 3u);
+    EXPECT_STREQ(tetrig_shm_marker_label(&r, 2), "C7");
+    std::vector<float> pos(15), nrm(15), markers(9, 5.0f);
+    std::vector<std::uint8_t> states(3, 0xEE);
+    EXPECT_EQ(tetrig_shm_read_latest_markers(&r, pos.data(), 15, nrm.data(), 15, markers.data(), 9, states.data(), 3, nullptr),
+              TETRIG_SHM_NO_MARKERS);
+    EXPECT_EQ(markers, std::vector<float>(9, 5.0f));
+    EXPECT_EQ(states, std::vector<std::uint8_t>(3, 0xEE));
+    EXPECT_STRNE(tetrig_shm_status_string(TETRIG_SHM_NO_MARKERS), "unknown status");
+    TetrigShmFrameInfo info{};
+    ASSERT_EQ(tetrig_shm_read_latest(&r, pos.data(), 15, nrm.data(), 15, &info), TETRIG_SHM_OK);
+    EXPECT_TRUE(consistent(pos, &nrm, info));
+    tetrig_shm_close(&r);
+  }
+  // the same header as 1.1 with the flag but no offsets is inconsistent
+  h.version_minor = 1;
+  TetrigShmReader r;
+  EXPECT_EQ(tetrig_shm_open(&r, name.c_str()), TETRIG_SHM_E_SIZE);
+}
+
 TEST(Shm, FirstFrameDefaultsToRestPoseAndOddVertexCountsCopyExactly) {
   const std::string name = uniqueName("odd");
   NameGuard guard{name};
@@ -506,7 +674,8 @@ TEST(Shm, ReaderRefusesBadMagicVersionAndSizes) {
   const std::uint64_t stride = h.slot_stride;
   expectOpen("slot stride", [&] { h.slot_stride = stride + 8; }, [&] { h.slot_stride = stride; }, TETRIG_SHM_E_SIZE);
   expectOpen("slot stride large", [&] { h.slot_stride = stride * 2; }, [&] { h.slot_stride = stride; }, TETRIG_SHM_E_SIZE);
-  expectOpen("normals flag", [&] { h.flags = 0; }, [&] { h.flags = TETRIG_SHM_HAS_NORMALS; }, TETRIG_SHM_E_SIZE);
+  const std::uint32_t flags = h.flags;
+  expectOpen("normals flag", [&] { h.flags = flags & ~TETRIG_SHM_HAS_NORMALS; }, [&] { h.flags = flags; }, TETRIG_SHM_E_SIZE);
   const std::uint64_t normals_offset = h.slot_normals_offset;
   expectOpen("normals offset", [&] { h.slot_normals_offset = stride; }, [&] { h.slot_normals_offset = normals_offset; },
              TETRIG_SHM_E_SIZE);
@@ -520,7 +689,18 @@ TEST(Shm, ReaderRefusesBadMagicVersionAndSizes) {
   h.version_minor = 7;
   ASSERT_EQ(tetrig_shm_open(&r, name.c_str()), TETRIG_SHM_OK);
   tetrig_shm_close(&r);
-  h.version_minor = 0;
+  h.version_minor = TETRIG_SHM_VERSION_MINOR;
+  // 1.1 marker block: offsets checked like the other arrays
+  const std::uint64_t mp = h.slot_marker_positions_offset, ms = h.slot_marker_states_offset;
+  ASSERT_NE(mp, 0u);
+  expectOpen("marker positions misaligned", [&] { h.slot_marker_positions_offset = mp + 4; },
+             [&] { h.slot_marker_positions_offset = mp; }, TETRIG_SHM_E_SIZE);
+  expectOpen("marker positions past the slot", [&] { h.slot_marker_positions_offset = stride; },
+             [&] { h.slot_marker_positions_offset = mp; }, TETRIG_SHM_E_SIZE);
+  expectOpen("marker states in the slot header", [&] { h.slot_marker_states_offset = 64; },
+             [&] { h.slot_marker_states_offset = ms; }, TETRIG_SHM_E_SIZE);
+  expectOpen("marker states past the slot", [&] { h.slot_marker_states_offset = stride; },
+             [&] { h.slot_marker_states_offset = ms; }, TETRIG_SHM_E_SIZE);
 
   EXPECT_EQ(tetrig_shm_open(&r, uniqueName("absent").c_str()), TETRIG_SHM_E_NOT_FOUND);
   EXPECT_EQ(tetrig_shm_open(&r, "no_slash"), TETRIG_SHM_E_ARGUMENT);
@@ -625,7 +805,9 @@ TEST(Shm, ConcurrentReadersNeverSeeTornFrames) {
   const std::string name = uniqueName("stress");
   NameGuard guard{name};
   const int v = 256;
-  const Mesh mesh(v);
+  Mesh mesh(v);
+  mesh.labels.clear();
+  for (int k = 0; k < 41; ++k) mesh.labels.push_back(std::to_string(k).insert(0, 1, 'M'));  // 41 markers: 492 + 41 bytes
   ShmPublisher pub(optionsFor(name, 3, true), v, mesh.data());  // 3 slots: lapped as soon as possible
   const std::uint64_t min_frames = TETRIG_SHM_STRESS_FRAMES;
   const std::uint64_t max_frames = 10 * min_frames;
@@ -651,15 +833,21 @@ TEST(Shm, ConcurrentReadersNeverSeeTornFrames) {
       if (rc != TETRIG_SHM_OK) return;
       shm_test_hook::lap_every = t < 2 ? 8 : 0;
       std::vector<float> pos(static_cast<std::size_t>(v) * 3), nrm(static_cast<std::size_t>(v) * 3);
+      std::vector<float> markers(41 * 3);
+      std::vector<std::uint8_t> states(41);
+      const bool with_markers = t == 1 || t == 2;  // one lapping and one plain reader read the marker block too
       TetrigShmFrameInfo info{};
       for (;;) {
         const bool finished = done.load(std::memory_order_acquire);
         const std::uint64_t latest = tetrig_shm_latest_frame_id(&r);
         if (latest > s.last) {
-          const int got = tetrig_shm_read_latest(&r, pos.data(), pos.size(), nrm.data(), nrm.size(), &info);
+          const int got = with_markers ? tetrig_shm_read_latest_markers(&r, pos.data(), pos.size(), nrm.data(), nrm.size(),
+                                                                        markers.data(), markers.size(), states.data(),
+                                                                        states.size(), &info)
+                                       : tetrig_shm_read_latest(&r, pos.data(), pos.size(), nrm.data(), nrm.size(), &info);
           if (got == TETRIG_SHM_OK) {
             ++s.reads;
-            if (!consistent(pos, &nrm, info)) ++s.torn;
+            if (!consistent(pos, &nrm, info) || (with_markers && !markersConsistent(info.frame_id, markers, states))) ++s.torn;
             if (info.frame_id < s.last) ++s.backwards;
             if (info.frame_id > s.last) s.distinct.fetch_add(1, std::memory_order_relaxed);
             s.last = info.frame_id;
@@ -1134,6 +1322,11 @@ void publishUntilExit(ShmPublisher& pub, CatRun& cat, std::chrono::microseconds 
     const std::size_t n = static_cast<std::size_t>(pub.vertexCount()) * 3;
     float* p = pub.beginPositions();
     for (std::size_t i = 0; i < n; ++i) p[i] = positionValue(id, i);
+    if (float* m = pub.beginMarkerPositions()) {
+      const auto markers = static_cast<std::size_t>(pub.markerCount());
+      for (std::size_t i = 0; i < markers * 3; ++i) m[i] = markerValue(id, i);
+      for (std::size_t k = 0; k < markers; ++k) pub.beginMarkerStates()[k] = markerStateValue(id, k);
+    }
     ShmFrameInfo info = infoFor(id);
     info.receive_ns = tetrig::monotonicNowNs() - 50'000;  // "received" 50 us ago
     pub.commit(info);
@@ -1211,6 +1404,67 @@ TEST(ShmCat, PrintsFramesAndDumpsThemBitForBit) {
   EXPECT_LE(s99, smax);
   std::cout << "[ cat      ] receive->publish p50 " << p50 << " us; publish->seen p50 " << s50 << " us, p99 " << s99
             << " us, max " << smax << " us (poll 50 us, 2 shared cores); missed " << missed << "\n";
+}
+
+// --markers: under each frame line one line per marker (label, state, position printed exactly
+// with %.9g), belonging to that frame; a segment without the block gets one note and no lines.
+TEST(ShmCat, PrintsEachFramesMarkersWithMarkers) {
+  const std::string name = uniqueName("cat_markers");
+  NameGuard guard{name};
+  const Mesh mesh(10);
+  ShmPublisher pub(optionsFor(name), 10, mesh.data());
+  CatRun cat;
+  ASSERT_TRUE(spawnCat(cat, {name, "--frames", "10", "--timeout-ms", "10000", "--markers", "--poll-us", "50"}));
+  publishUntilExit(pub, cat, std::chrono::microseconds(1000));
+  ASSERT_TRUE(cat.exited());
+  EXPECT_EQ(cat.exit_code, 0) << cat.read("err.txt");
+  std::istringstream out(cat.read("out.txt"));
+  std::string line;
+  std::uint64_t id = 0;
+  std::size_t frames = 0, marker_lines = 0, k = 0;
+  static const char* const kStates[4] = {"unknown", "measured", "predicted", "blended"};
+  while (std::getline(out, line)) {
+    if (line.rfind("frame ", 0) == 0) {
+      if (frames > 0) {
+        EXPECT_EQ(k, 3u) << "frame " << id << " had " << k << " marker lines";
+      }
+      id = std::stoull(line.substr(6));
+      ++frames;
+      k = 0;
+      continue;
+    }
+    ASSERT_EQ(line.rfind("  marker ", 0), 0u) << line;
+    ASSERT_LT(k, 3u) << line;
+    std::istringstream fields(line.substr(9));
+    std::string label, state, x, y, z;
+    fields >> label >> state >> x >> y >> z;
+    EXPECT_EQ(label, mesh.labels[k]) << line;
+    EXPECT_EQ(state, kStates[markerStateValue(id, k)]) << line;
+    EXPECT_EQ(std::strtof(x.c_str(), nullptr), markerValue(id, 3 * k)) << line;
+    EXPECT_EQ(std::strtof(y.c_str(), nullptr), markerValue(id, 3 * k + 1)) << line;
+    EXPECT_EQ(std::strtof(z.c_str(), nullptr), markerValue(id, 3 * k + 2)) << line;
+    ++k;
+    ++marker_lines;
+  }
+  EXPECT_EQ(k, 3u);
+  EXPECT_EQ(frames, 10u);
+  EXPECT_EQ(marker_lines, 30u);
+
+  // without the block: a note on stderr, frame lines only
+  const std::string plain = uniqueName("cat_nomarkers");
+  NameGuard plain_guard{plain};
+  ShmPublisherOptions o = optionsFor(plain);
+  o.marker_positions = false;
+  ShmPublisher without(o, 10, mesh.data());
+  CatRun cat2;
+  ASSERT_TRUE(spawnCat(cat2, {plain, "--frames", "3", "--timeout-ms", "10000", "--markers", "--poll-us", "50"}));
+  publishUntilExit(without, cat2, std::chrono::microseconds(1000));
+  ASSERT_TRUE(cat2.exited());
+  EXPECT_EQ(cat2.exit_code, 0) << cat2.read("err.txt");
+  EXPECT_NE(cat2.read("err.txt").find("has no marker positions (layout 1.1, 3 marker labels)"), std::string::npos)
+      << cat2.read("err.txt");
+  EXPECT_EQ(cat2.read("out.txt").find("marker"), std::string::npos) << cat2.read("out.txt");
+  EXPECT_EQ(cat2.frameLines(), 3);
 }
 
 TEST(ShmCat, ExitsZeroWhenTheProducerStopsCleanly) {

@@ -3,7 +3,8 @@
 // every published frame equals an offline LiveRig run of the same frames with the same iteration
 // counts, bit for bit; stale sources are reported and cleared; --frames stops the loop; budget
 // misses are counted and flagged; nothing is allocated on the solver thread per frame; the frame
-// log holds exactly the solved frames, with the segment's own timestamps and the frames' markers.
+// log holds exactly the solved frames, with the segment's own timestamps and the frames' markers;
+// the segment's marker block (layout 1.1) holds the live rig's marker targets and states.
 #include "counting_allocator.hpp"
 #include "tetrig/clock.hpp"
 #include "tetrig/drivers/synthetic_source.hpp"
@@ -58,7 +59,7 @@ std::string segmentName(const char* what) { return "/tetrig-test-loop-" + std::s
 
 struct Harness {
   explicit Harness(const char* what, FrameLoopOptions options, LiveRigOptions live_options = {})
-      : live(demoRig(), live_options), mailbox(std::make_unique<FrameMailbox>()) {
+      : live(demoRig(), live_options), mailbox(std::make_unique<FrameMailbox>()), labels(rigLabels(demoRig())) {
     live.bindLabels(rigLabels(demoRig()));
     ShmPublisherOptions shm;
     shm.name = segmentName(what);
@@ -67,6 +68,7 @@ struct Harness {
     data.triangles = live.fineTriangles();
     data.rest_positions = live.restPositions();
     data.rig_name = demoRig().name;
+    data.marker_labels = labels;  // the marker block (layout 1.1) in rig order
     publisher = std::make_unique<ShmPublisher>(shm, live.fineVertexCount(), data);
     EXPECT_EQ(tetrig_shm_attach(&reader, publisher->segmentData(), publisher->segmentSize()), TETRIG_SHM_OK);
     loop = std::make_unique<FrameLoop>(*mailbox, live, *publisher, options);
@@ -85,6 +87,7 @@ struct Harness {
   }
   LiveRig live;
   std::unique_ptr<FrameMailbox> mailbox;
+  std::vector<std::string> labels;
   std::unique_ptr<ShmPublisher> publisher;
   TetrigShmReader reader{};
   std::unique_ptr<FrameLoop> loop;
@@ -103,15 +106,23 @@ TEST(FrameLoop, EveryPublishedFrameEqualsAnOfflineRunBitForBit) {
   const auto source = makeSource(demoRig());
   const std::size_t n = static_cast<std::size_t>(h.live.fineVertexCount()) * 3;
   std::vector<float> got(n), got_normals(n), want(n), want_normals(n);
+  const std::size_t markers = demoRig().markers.size();
+  ASSERT_EQ(tetrig_shm_has_marker_positions(&h.reader), 1);
+  ASSERT_EQ(tetrig_shm_marker_count(&h.reader), markers);
+  std::vector<float> marker_positions(markers * 3);
+  std::vector<std::uint8_t> marker_states(markers);
   LiveRig offline(demoRig(), live_options);
   offline.bindLabels(rigLabels(demoRig()));
   auto frame = std::make_unique<MarkerFrame>();
   int predicted_frames = 0;
+  int state_counts[4] = {0, 0, 0, 0};
   for (std::uint64_t k = 0; k < 240; ++k) {
     source->fillFrame(k, *frame);
     ASSERT_TRUE(h.publishAndWait(*frame)) << "frame " << k << " was not published within 10 s";
     TetrigShmFrameInfo info{};
-    ASSERT_EQ(tetrig_shm_read_latest(&h.reader, got.data(), n, got_normals.data(), n, &info), TETRIG_SHM_OK);
+    ASSERT_EQ(tetrig_shm_read_latest_markers(&h.reader, got.data(), n, got_normals.data(), n, marker_positions.data(),
+                                             marker_positions.size(), marker_states.data(), markers, &info),
+              TETRIG_SHM_OK);
     EXPECT_EQ(info.frame_id, k + 1);
     EXPECT_EQ(info.source_frame, k);
     EXPECT_EQ(info.iterations, 3);
@@ -124,7 +135,27 @@ TEST(FrameLoop, EveryPublishedFrameEqualsAnOfflineRunBitForBit) {
     EXPECT_EQ(s.occluded_markers, info.occluded_markers);
     ASSERT_EQ(std::memcmp(got.data(), want.data(), n * sizeof(float)), 0) << "positions differ at frame " << k;
     ASSERT_EQ(std::memcmp(got_normals.data(), want_normals.data(), n * sizeof(float)), 0) << "normals differ at frame " << k;
+    // the marker block: the offline rig's targets (as floats) and states, marker by marker
+    int occluded = 0;
+    for (std::size_t m = 0; m < markers; ++m) {
+      const Eigen::Vector3d& t = offline.markerTargets()[m];
+      for (int c = 0; c < 3; ++c)
+        ASSERT_EQ(marker_positions[3 * m + static_cast<std::size_t>(c)], static_cast<float>(t[c])) << "marker " << m << " frame " << k;
+      const MarkerTrackState state = offline.markerState(static_cast<std::int32_t>(m));
+      const std::uint8_t want_state = state == MarkerTrackState::kMeasured    ? TETRIG_SHM_MARKER_MEASURED
+                                      : state == MarkerTrackState::kReturning ? TETRIG_SHM_MARKER_BLENDED
+                                                                              : TETRIG_SHM_MARKER_PREDICTED;
+      ASSERT_EQ(marker_states[m], want_state) << "marker " << m << " frame " << k;
+      ASSERT_LT(marker_states[m], 4);
+      ++state_counts[marker_states[m]];
+      if (marker_states[m] == TETRIG_SHM_MARKER_PREDICTED) ++occluded;
+    }
+    EXPECT_EQ(occluded, info.occluded_markers) << "frame " << k << ": predicted markers are the occluded ones";
   }
+  EXPECT_EQ(state_counts[TETRIG_SHM_MARKER_UNKNOWN], 0);
+  EXPECT_GT(state_counts[TETRIG_SHM_MARKER_MEASURED], 0);
+  EXPECT_GT(state_counts[TETRIG_SHM_MARKER_PREDICTED], 0) << "the dropouts were meant to occlude markers";
+  EXPECT_GT(state_counts[TETRIG_SHM_MARKER_BLENDED], 0) << "returning markers were meant to blend back";
   h.loop->requestStop();
   h.loop->join();
   EXPECT_GT(predicted_frames, 0) << "the dropouts were meant to exercise the occlusion prediction";
@@ -321,6 +352,30 @@ TEST(FrameLoop, TheFrameLogKeepsItsCapacityAndCountsTheRest) {
   }
 }
 
+TEST(FrameLoop, RefusesASegmentWhoseMarkerBlockDoesNotMatchTheRig) {
+  LiveRig live(demoRig());
+  FrameMailbox mailbox;
+  const std::vector<std::string> labels{"only", "two"};
+  ShmPublisherOptions shm;
+  shm.name = segmentName("mismatch");
+  ShmStaticData data;
+  data.triangles = live.fineTriangles();
+  data.rest_positions = live.restPositions();
+  data.marker_labels = labels;
+  ShmPublisher publisher(shm, live.fineVertexCount(), data);
+  try {
+    FrameLoop loop(mailbox, live, publisher, FrameLoopOptions{});
+    ADD_FAILURE() << "a 2-label marker block was accepted for a rig of " << demoRig().markers.size() << " markers";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("2 marker labels"), std::string::npos) << e.what();
+  }
+  // without the block (options.marker_positions off) the same labels are fine
+  shm.name = segmentName("mismatch-off");
+  shm.marker_positions = false;
+  ShmPublisher without(shm, live.fineVertexCount(), data);
+  EXPECT_NO_THROW(FrameLoop(mailbox, live, without, FrameLoopOptions{}));
+}
+
 TEST(FrameLoop, NoHeapAllocationPerFrameAfterWarmUp) {
   FrameLoopOptions options;
   options.lock_memory = false;
@@ -353,6 +408,7 @@ TEST(FrameLoop, NoHeapAllocationPerFrameAfterWarmUp) {
   ASSERT_EQ(h.loop->frameLog().size(), 220u);
   EXPECT_EQ(h.loop->frameLog().back().frame_id, 220u);
   EXPECT_EQ(h.loop->frameLogMarkers(219).size(), 16u);
+  EXPECT_EQ(tetrig_shm_has_marker_positions(&h.reader), 1) << "the marker block was staged on every frame counted";
 }
 
 }  // namespace

@@ -10,6 +10,9 @@
 //    the new instance (its id printed by the viewer);
 //  - `tetrig run` (synthetic source, the small rig) as the producer: the screenshot shows its rig;
 //  - a producer killed with SIGKILL ("died"), then a new one on the name: the viewer follows it;
+//  - --markers on a layout 1.1 segment: the same frame with and without it differs exactly by
+//    dots in the state colours (measured green, blended yellow, predicted red) near the markers'
+//    projections, and the overlay counts them;
 //  - errors: no display (says xvfb-run), bad arguments, no producer within --timeout, a segment
 //    that is not a tetrig segment: one line, non-zero exit, no screenshot file.
 // xvfb-run missing: the Xvfb tests are skipped with a message, and FAIL under CI=true (CI installs
@@ -184,6 +187,18 @@ void tubeFrame(std::uint64_t id, float* out) {
   }
 }
 
+// The producer's markers (labels TIP, MID, BASE) in frame `id`: beside the bent tube on its +x
+// side at heights 0.68 (measured) and 0.4 (blended), below the bottom cap (predicted); all in view
+// of the default camera and below the overlay panel.
+void tubeMarkers(std::uint64_t id, float* xyz, std::uint8_t* states) {
+  const float bend = 0.45f * std::min(1.0f, static_cast<float>(id) / 200.0f);
+  const float m[9] = {0.4624f * bend + 0.16f, 0.0f, 0.68f, 0.16f * bend + 0.16f, 0.0f, 0.4f, 0.0f, 0.0f, -0.08f};
+  std::copy(m, m + 9, xyz);
+  states[0] = kShmMarkerMeasured;
+  states[1] = kShmMarkerBlended;
+  states[2] = kShmMarkerPredicted;
+}
+
 // Publishes tube frames at about 100 Hz on its own thread until stopped or `frames` were published.
 class Producer {
  public:
@@ -193,9 +208,12 @@ class Producer {
           while (!stop_.load() && (frames == 0 || pub_.framesPublished() < frames)) {
             const std::uint64_t id = pub_.framesPublished() + 1 + first_id_offset;
             tubeFrame(id, pub_.beginPositions());
+            tubeMarkers(id, pub_.beginMarkerPositions(), pub_.beginMarkerStates());
             ShmFrameInfo info;
             info.source_frame = id;
             info.iterations = 3;
+            info.occluded_markers = 1;
+            info.flags = kShmFrameMarkersPredicted;
             info.receive_ns = monotonicNowNs();
             (void)pub_.commit(info);
             std::this_thread::sleep_for(std::chrono::milliseconds(10));
@@ -209,7 +227,7 @@ class Producer {
   std::uint64_t instance() const { return pub_.instanceId(); }
 
  private:
-  std::vector<std::string> labels_ = {"TIP", "BASE"};
+  std::vector<std::string> labels_ = {"TIP", "MID", "BASE"};
   ShmPublisher pub_;
   std::atomic<bool> stop_{false};
   std::thread thread_;
@@ -294,6 +312,67 @@ TEST(View, ScreenshotShowsTheMeshAndFollowsThePerformance) {
   for (int y = 8; y < 60; ++y)
     for (int x = 8; x < 300; ++x) light += px(e, x, y)[0] > 200 && px(e, x, y)[1] > 200 && px(e, x, y)[2] > 200 ? 1 : 0;
   EXPECT_GT(light, 100u);
+}
+
+// Marker colours as drawn (the dot's centre or its darker rim): measured green, blended yellow,
+// predicted red-orange. Clay, background, grid and overlay text are none of these.
+bool isMeasuredDot(const std::uint8_t* p) { return int{p[1]} - int{p[0]} > 50 && int{p[1]} - int{p[2]} > 40; }
+bool isBlendedDot(const std::uint8_t* p) { return int{p[0]} > 120 && int{p[1]} > 100 && int{p[0]} - int{p[2]} > 100; }
+bool isPredictedDot(const std::uint8_t* p) { return int{p[0]} - int{p[1]} > 70 && int{p[0]} - int{p[2]} > 90; }
+
+TEST(View, MarkersAreDrawnAsDotsColouredByState) {
+  TETRIG_REQUIRE_XVFB(xvfb_run);
+  const TempDir dir("tetrig-view-markers");
+  const std::string name = segment("markers");
+  const Producer producer(name, 40);  // 40 frames, then the segment keeps frame 40: both pictures show it
+  while (producer.published() < 40) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  const std::vector<std::string> common = {name.substr(1), "--up", "z", "--width", "480", "--height", "360", "--after-frames", "1",
+                                           "--timeout", "20"};
+  std::vector<std::string> a = common, b = common;
+  a.insert(a.end(), {"--markers", "--screenshot", (dir / "dots.png").string()});
+  b.insert(b.end(), {"--screenshot", (dir / "plain.png").string()});
+  const ViewerRun with = finish(startViewer(*xvfb_run, a, dir, "dots"), dir, "dots");
+  ASSERT_EQ(with.status, 0) << with.err;
+  const ViewerRun without = finish(startViewer(*xvfb_run, b, dir, "plain"), dir, "plain");
+  ASSERT_EQ(without.status, 0) << without.err;
+  EXPECT_EQ(shotFrameAndInstance(with.out).first, 40u) << with.out;
+  EXPECT_EQ(shotFrameAndInstance(without.out).first, 40u) << without.out;
+  const Image d = render::readPng(dir / "dots.png"), p = render::readPng(dir / "plain.png");
+  ASSERT_EQ(d.width, 480);
+  ASSERT_EQ(p.width, 480);
+  ASSERT_EQ(d.height, p.height);
+  // Below the overlay panel (whose markers line differs): the pictures differ only by the dots.
+  std::size_t measured = 0, blended = 0, predicted = 0, differ = 0, differ_not_dot = 0;
+  for (int y = 120; y < d.height; ++y) {
+    for (int x = 0; x < d.width; ++x) {
+      const std::uint8_t* q = px(d, x, y);
+      const std::uint8_t* r = px(p, x, y);
+      const bool dot = isMeasuredDot(q) || isBlendedDot(q) || isPredictedDot(q);
+      measured += isMeasuredDot(q) ? 1 : 0;
+      blended += isBlendedDot(q) ? 1 : 0;
+      predicted += isPredictedDot(q) ? 1 : 0;
+      EXPECT_FALSE(isMeasuredDot(r) || isBlendedDot(r) || isPredictedDot(r)) << "a dot colour without --markers at " << x << "," << y;
+      if (std::memcmp(q, r, 3) != 0) {
+        ++differ;
+        if (!dot) ++differ_not_dot;
+      }
+    }
+  }
+  // a 9-pixel dot covers about 60 pixels (multisampled edges blend with what is behind)
+  EXPECT_GE(measured, 20u) << "the measured marker (TIP) is not drawn green";
+  EXPECT_GE(blended, 20u) << "the blended marker (MID) is not drawn yellow";
+  EXPECT_GE(predicted, 20u) << "the predicted marker (BASE) is not drawn red";
+  EXPECT_LE(measured + blended + predicted, 3u * 90u) << "more than three dots' worth of marker colour";
+  EXPECT_GE(differ, measured + blended + predicted);
+  EXPECT_LE(differ_not_dot, 3u * 40u) << "the pictures differ beyond the dots' antialiased edges";
+  // the overlay counts them (stderr carries the status lines, not the overlay: check the picture's panel grew)
+  std::size_t light_with = 0, light_without = 0;
+  for (int y = 8; y < 110; ++y)
+    for (int x = 8; x < 470; ++x) {
+      light_with += px(d, x, y)[0] > 200 && px(d, x, y)[1] > 200 && px(d, x, y)[2] > 200 ? 1 : 0;
+      light_without += px(p, x, y)[0] > 200 && px(p, x, y)[1] > 200 && px(p, x, y)[2] > 200 ? 1 : 0;
+    }
+  EXPECT_GT(light_with, light_without + 200) << "no markers line in the overlay";
 }
 
 TEST(View, SurvivesTheProducerStoppingAndRestarting) {

@@ -1,8 +1,8 @@
 # tetrig live: a Blender add-on that reads the tetrig shared-memory segment and updates a mesh
 # object live, and imports a `tetrig export` (OBJ + PC2 through the Mesh Cache modifier).
 #
-# The segment (docs/shm.md, layout 1.0; the C99 reader is runtime/include/tetrig_shm.h) is mapped
-# read-only from /dev/shm/<name>. Its static data (rest positions, triangles, rig name) builds the
+# The segment (docs/shm.md, layout 1.x: any minor of major 1; the 1.1 marker block is not read; the
+# C99 reader is runtime/include/tetrig_shm.h) is mapped read-only from /dev/shm/<name>. Its static data (rest positions, triangles, rig name) builds the
 # mesh; each new frame is read with the segment's seqlock protocol: load latest_frame_id, load the
 # slot's sequence word (odd: being written, retry), copy the frame info and positions, load the
 # sequence again; a changed sequence or a frame id other than the one named means the writer
@@ -59,7 +59,7 @@ try:
 except ImportError:  # the reader part also works outside Blender (tests, tools)
     bpy = None
 
-# ---- segment layout 1.0 (docs/shm.md, runtime/include/tetrig_shm.h) ----------------------------
+# ---- segment layout 1.x, the 1.0 fields (docs/shm.md, runtime/include/tetrig_shm.h) -------------
 
 MAGIC = 0x4D53474952544554  # bytes "TETRIGSM"
 VERSION_MAJOR = 1

@@ -2,7 +2,9 @@
 // (tetrig_shm.h: open, newest frame, producer status, name status; the protocol of docs/shm.md
 // section 3, as tetrig-shm-cat follows it), draw the newest frame into a multisampled
 // offscreen target (the renderer's MeshDrawer + the overlay as a textured quad), blit it to
-// the window, and read the same target back for --screenshot.
+// the window, and read the same target back for --screenshot. With --markers (M) and a layout 1.1
+// segment, the frame's marker block (tetrig_shm_read_latest_markers: the same frame as the mesh)
+// is drawn as round dots coloured by state (MarkerDots below).
 #include "view.hpp"
 
 #include "tetrig/render/camera.hpp"
@@ -30,6 +32,7 @@
 #include <filesystem>
 #include <memory>
 #include <optional>
+#include <span>
 #include <stdexcept>
 #include <string>
 #include <thread>
@@ -164,6 +167,117 @@ void main() { o_color = texture(u_image, v_uv); }
   int width_ = 0, height_ = 0;
 };
 
+// Marker dots with a colour per dot (the renderer's MeshDrawer draws one colour for all): round
+// points of `kMarkerPx` pixels with a dark rim, depth-tested against the mesh just drawn into the
+// bound framebuffer, like the picture sheet's dots.
+constexpr float kMarkerPx = 9.0f;
+// Colour of each TETRIG_SHM_MARKER_* state: unknown grey, measured green, predicted (occluded)
+// red-orange, blended (returning) yellow.
+constexpr float kMarkerRgb[4][3] = {{0.62f, 0.62f, 0.66f}, {0.20f, 0.85f, 0.30f}, {1.00f, 0.30f, 0.10f}, {1.00f, 0.85f, 0.10f}};
+
+class MarkerDots {
+ public:
+  MarkerDots() {
+    const char* vs = R"(#version 330 core
+layout(location = 0) in vec3 a_position;
+layout(location = 1) in vec3 a_color;
+uniform mat4 u_view;
+uniform mat4 u_projection;
+uniform float u_size;
+out vec3 v_color;
+void main() {
+  gl_Position = u_projection * (u_view * vec4(a_position, 1.0));
+  gl_PointSize = u_size;
+  v_color = a_color;
+}
+)";
+    const char* fs = R"(#version 330 core
+in vec3 v_color;
+out vec4 o_color;
+void main() {
+  vec2 d = gl_PointCoord - vec2(0.5);
+  float r2 = dot(d, d);
+  if (r2 > 0.25) discard;
+  o_color = vec4(v_color * (r2 > 0.12 ? 0.55 : 1.0), 1.0);
+}
+)";
+    auto compile = [](GLenum type, const char* src) {
+      const GLuint sh = glCreateShader(type);
+      glShaderSource(sh, 1, &src, nullptr);
+      glCompileShader(sh);
+      GLint ok = 0;
+      glGetShaderiv(sh, GL_COMPILE_STATUS, &ok);
+      if (!ok) throw std::runtime_error("marker shader does not compile");
+      return sh;
+    };
+    const GLuint v = compile(GL_VERTEX_SHADER, vs), f = compile(GL_FRAGMENT_SHADER, fs);
+    program_ = glCreateProgram();
+    glAttachShader(program_, v);
+    glAttachShader(program_, f);
+    glLinkProgram(program_);
+    glDeleteShader(v);
+    glDeleteShader(f);
+    GLint ok = 0;
+    glGetProgramiv(program_, GL_LINK_STATUS, &ok);
+    if (!ok) throw std::runtime_error("marker program does not link");
+    glGenVertexArrays(1, &vao_);
+    glGenBuffers(1, &vbo_);
+    glBindVertexArray(vao_);
+    glBindBuffer(GL_ARRAY_BUFFER, vbo_);
+    glVertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, 6 * sizeof(float), nullptr);
+    glEnableVertexAttribArray(0);
+    glVertexAttribPointer(1, 3, GL_FLOAT, GL_FALSE, 6 * sizeof(float), reinterpret_cast<const void*>(3 * sizeof(float)));
+    glEnableVertexAttribArray(1);
+    glBindVertexArray(0);
+  }
+  MarkerDots(const MarkerDots&) = delete;
+  MarkerDots& operator=(const MarkerDots&) = delete;
+  ~MarkerDots() {
+    glDeleteBuffers(1, &vbo_);
+    glDeleteVertexArrays(1, &vao_);
+    glDeleteProgram(program_);
+  }
+  // marker_count x 3 floats and marker_count states; a marker with a non-finite position is left
+  // out, an unknown state byte is drawn as unknown.
+  void set(std::span<const float> xyz, std::span<const std::uint8_t> states) {
+    data_.clear();
+    for (std::size_t k = 0; k < states.size() && 3 * k + 2 < xyz.size(); ++k) {
+      const float* p = &xyz[3 * k];
+      if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2])) continue;
+      const float* c = kMarkerRgb[states[k] < 4 ? states[k] : 0];
+      data_.insert(data_.end(), {p[0], p[1], p[2], c[0], c[1], c[2]});
+    }
+    glBindBuffer(GL_ARRAY_BUFFER, vbo_);
+    glBufferData(GL_ARRAY_BUFFER, static_cast<GLsizeiptr>(data_.size() * sizeof(float)), data_.data(), GL_DYNAMIC_DRAW);
+    count_ = static_cast<GLsizei>(data_.size() / 6);
+  }
+  // Over the mesh just drawn (its depth buffer) in the bound framebuffer of `width` x `height`.
+  void draw(const render::OrbitCamera& camera, int width, int height) const {
+    if (count_ == 0) return;
+    const float aspect = static_cast<float>(width) / static_cast<float>(std::max(height, 1));
+    const Eigen::Matrix4f view = camera.view(aspect), projection = camera.projection(aspect);
+    glViewport(0, 0, width, height);
+    glEnable(GL_DEPTH_TEST);
+    glDepthFunc(GL_LEQUAL);
+    glDisable(GL_BLEND);
+    glEnable(GL_PROGRAM_POINT_SIZE);
+    glUseProgram(program_);
+    glUniformMatrix4fv(glGetUniformLocation(program_, "u_view"), 1, GL_FALSE, view.data());
+    glUniformMatrix4fv(glGetUniformLocation(program_, "u_projection"), 1, GL_FALSE, projection.data());
+    glUniform1f(glGetUniformLocation(program_, "u_size"), kMarkerPx);
+    glBindVertexArray(vao_);
+    glDrawArrays(GL_POINTS, 0, count_);
+    glBindVertexArray(0);
+    glUseProgram(0);
+    glDepthFunc(GL_LESS);
+  }
+
+ private:
+  GLuint program_ = 0, vao_ = 0, vbo_ = 0;
+  GLsizei count_ = 0;
+  std::vector<float> data_;  // per dot: x y z r g b
+};
+
 struct Input {
   bool dragging = false;
   double last_x = 0, last_y = 0;
@@ -272,12 +386,14 @@ class Viewer {
     } catch (...) {
       closeReader();
       drawer_.reset();
+      dots_.reset();
       overlay_.reset();
       target_.reset();
       throw;
     }
     closeReader();
     drawer_.reset();
+    dots_.reset();
     overlay_.reset();
     target_.reset();
     return result;
@@ -343,6 +459,11 @@ class Viewer {
     last_id_ = 0;
     producer_note_.clear();
     marker_count_ = tetrig_shm_marker_count(&reader_);
+    has_marker_positions_ = tetrig_shm_has_marker_positions(&reader_) != 0;
+    marker_positions_.assign(has_marker_positions_ ? std::size_t{marker_count_} * 3 : 0, 0.0f);
+    marker_states_.assign(has_marker_positions_ ? marker_count_ : 0u, std::uint8_t{TETRIG_SHM_MARKER_UNKNOWN});
+    std::fill(std::begin(state_counts_), std::end(state_counts_), 0u);
+    if (dots_) dots_->set({}, {});
   }
 
   render::OrbitCamera home() const { return render::OrbitCamera::framing(rest_bounds_, up_axis_, 30.0f, 12.0f); }
@@ -351,8 +472,18 @@ class Viewer {
   bool takeFrame() {
     if (tetrig_shm_latest_frame_id(&reader_) <= last_id_) return false;
     TetrigShmFrameInfo info;
-    if (tetrig_shm_read_latest(&reader_, positions_.data(), positions_.size(), nullptr, 0, &info) != TETRIG_SHM_OK) return false;
+    // With the marker block: the mesh and the markers of one frame, in one read.
+    const int rc = has_marker_positions_
+                       ? tetrig_shm_read_latest_markers(&reader_, positions_.data(), positions_.size(), nullptr, 0, marker_positions_.data(),
+                                                        marker_positions_.size(), marker_states_.data(), marker_states_.size(), &info)
+                       : tetrig_shm_read_latest(&reader_, positions_.data(), positions_.size(), nullptr, 0, &info);
+    if (rc != TETRIG_SHM_OK) return false;
     if (info.frame_id <= last_id_) return false;
+    if (has_marker_positions_) {
+      std::fill(std::begin(state_counts_), std::end(state_counts_), 0u);
+      for (const std::uint8_t st : marker_states_) ++state_counts_[st < 4 ? st : 0];
+      if (dots_) dots_->set(marker_positions_, marker_states_);
+    }
     const std::int64_t seen = tetrig_shm_now_ns();
     last_id_ = info.frame_id;
     info_ = info;
@@ -451,9 +582,18 @@ class Viewer {
     if (!open_ && instances_ == 0) lines.push_back("waiting for a producer of " + name_ + " ...");
     if (!producer_note_.empty()) lines.push_back(producer_note_);
     if (show_markers_ && instances_ > 0) {
-      lines.push_back(format("markers: %u labelled, %u occluded this frame%s (layout 1.0 publishes labels, not marker positions)", marker_count_,
-                             have_frame_ ? static_cast<unsigned>(info_.occluded_markers) : 0u,
-                             have_frame_ && (info_.flags & TETRIG_SHM_FRAME_MARKERS_PREDICTED) ? ", some predicted" : ""));
+      if (has_marker_positions_ && have_frame_) {
+        lines.push_back(format("markers %u: measured %u  blended %u  predicted %u  unknown %u", marker_count_,
+                               state_counts_[TETRIG_SHM_MARKER_MEASURED], state_counts_[TETRIG_SHM_MARKER_BLENDED],
+                               state_counts_[TETRIG_SHM_MARKER_PREDICTED], state_counts_[TETRIG_SHM_MARKER_UNKNOWN]));
+      } else {
+        lines.push_back(format("markers: %u labelled, %u occluded this frame%s%s", marker_count_,
+                               have_frame_ ? static_cast<unsigned>(info_.occluded_markers) : 0u,
+                               have_frame_ && (info_.flags & TETRIG_SHM_FRAME_MARKERS_PREDICTED) ? ", some predicted" : "",
+                               has_marker_positions_ ? ""
+                               : marker_count_ == 0  ? " (the rig has no markers)"
+                                                     : " (no marker positions: layout 1.0 producer, or left out)"));
+      }
     }
     const int pad = 6;
     int width = 0;
@@ -493,6 +633,7 @@ class Viewer {
   int loop(GLFWwindow* window) {
     text_ = std::make_unique<render::TextRasterizer>(15);
     overlay_ = std::make_unique<OverlayQuad>();
+    dots_ = std::make_unique<MarkerDots>();
     const auto start = Clock::now();
     auto next_open = start, next_check = start, next_redraw = start;
     window_start_ = start;
@@ -534,7 +675,7 @@ class Viewer {
       if (overlay_dirty_) buildOverlay(fw);
       target_->bind();
       if (drawer_) {
-        drawer_->draw(camera_, fw, fh);
+        drawScene(fw, fh);
       } else {
         glClearColor(render::kBackgroundBottom[0], render::kBackgroundBottom[1], render::kBackgroundBottom[2], 1.0f);
         glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
@@ -545,7 +686,7 @@ class Viewer {
         refreshFigures(Clock::now(), true);
         buildOverlay(fw);  // the figures as of this frame
         target_->bind();
-        drawer_->draw(camera_, fw, fh);
+        drawScene(fw, fh);
         overlay_->draw(8, 8, fw, fh);
         Image shot;
         shot.width = fw;
@@ -568,6 +709,12 @@ class Viewer {
     return 0;
   }
 
+  // The mesh, then (--markers / M, with the segment's marker block and a frame) the marker dots.
+  void drawScene(int fw, int fh) {
+    drawer_->draw(camera_, fw, fh);
+    if (show_markers_ && has_marker_positions_ && have_frame_) dots_->draw(camera_, fw, fh);
+  }
+
   void timeoutCheck(Clock::time_point now, Clock::time_point start) const {
     if (o_.screenshot.empty() || now - start <= std::chrono::duration<double>(o_.timeout_s)) return;
     throw std::runtime_error(format("no screenshot: %" PRIu64 " of %d frames came from %s within %.1f s (%s)", frames_taken_, o_.after_frames,
@@ -585,6 +732,10 @@ class Viewer {
   std::uint64_t instances_ = 0, instance_id_ = 0, last_id_ = 0, frames_taken_ = 0;
   std::int32_t pid_ = 0;
   std::uint32_t marker_count_ = 0;
+  bool has_marker_positions_ = false;             // the segment carries the marker block (layout 1.1)
+  std::vector<float> marker_positions_;           // the newest frame's markers (rig units, label order)
+  std::vector<std::uint8_t> marker_states_;       // TETRIG_SHM_MARKER_* per marker
+  unsigned state_counts_[4] = {0, 0, 0, 0};       // markers per state in the newest frame
   std::string rig_name_, status_, producer_note_;
   std::vector<std::uint32_t> triangles_, drawn_triangles_;
   std::vector<float> positions_;
@@ -596,6 +747,7 @@ class Viewer {
   std::unique_ptr<render::OffscreenTarget> target_;
   std::unique_ptr<render::TextRasterizer> text_;
   std::unique_ptr<OverlayQuad> overlay_;
+  std::unique_ptr<MarkerDots> dots_;
   Image overlay_image_;
   bool overlay_dirty_ = true;
   bool figures_valid_ = false;

@@ -2,7 +2,8 @@
 // an OpenGL 3.3 core context (libepoxy), the segment read with the C99 reader tetrig_shm.h like
 // tetrig-shm-cat, the newest frame drawn with the renderer's MeshDrawer (shaded surface, floor
 // grid) plus an overlay (frame id, producer rate, latency from the segment's timestamps,
-// producer state). Orbit by dragging, zoom by scrolling, R resets, F follows the figure. Waits for the producer,
+// producer state) and, with --markers (M), the frame's markers as dots coloured by state (layout
+// 1.1). Orbit by dragging, zoom by scrolling, R resets, F follows the figure. Waits for the producer,
 // keeps the last frame when it stops, re-opens the segment when a new producer replaces it.
 // --screenshot FILE.png writes the picture after N new frames and exits 0 (headless: xvfb-run).
 //
@@ -16,7 +17,7 @@ namespace tetrig::tools {
 
 struct ViewOptions {
   std::string name;              // segment, e.g. tetrig or /tetrig (the leading '/' is added)
-  bool markers = false;          // overlay the segment's marker information
+  bool markers = false;          // marker dots coloured by state (layout 1.1) and the overlay's markers line
   bool follow = false;           // keep the camera on the newest frame's centre (F toggles it)
   std::string screenshot;        // PNG to write after `after_frames` new frames, then exit; "" = interactive
   int after_frames = 30;         // new frames (any producer instance) before the screenshot

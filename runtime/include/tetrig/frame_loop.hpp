@@ -124,6 +124,8 @@ struct FrameLoopSnapshot {
 
 class FrameLoop {
  public:
+  // Throws std::invalid_argument when the segment carries a marker block (layout 1.1) whose
+  // label count is not the rig's marker count (the block is filled in rig.markers order).
   FrameLoop(FrameMailbox& mailbox, LiveRig& live_rig, ShmPublisher& publisher, const FrameLoopOptions& options);
   ~FrameLoop();  // requestStop() + join()
   FrameLoop(const FrameLoop&) = delete;

@@ -44,10 +44,18 @@ inline constexpr std::uint32_t kShmFrameBudgetMiss = 0x4u;        // iteration d
 inline constexpr std::uint32_t kShmFrameMarkersPredicted = 0x8u;  // some targets predicted
 inline constexpr std::uint32_t kShmFrameInputRejected = 0x10u;    // non-finite/absurd input rejected
 
+// Marker state bytes of the marker block (TETRIG_SHM_MARKER_* in tetrig_shm.h; layout 1.1).
+inline constexpr std::uint8_t kShmMarkerUnknown = 0;    // no (finite) target
+inline constexpr std::uint8_t kShmMarkerMeasured = 1;   // the measurement itself
+inline constexpr std::uint8_t kShmMarkerPredicted = 2;  // no measurement: predicted (occluded)
+inline constexpr std::uint8_t kShmMarkerBlended = 3;    // measured again, blending back from the prediction
+
 struct ShmPublisherOptions {
   std::string name;              // "/name": a leading '/', no other '/', at most 255 bytes
   int slot_count = 4;            // 3..64 dynamic slots (more slots: a slow reader is lapped later)
   bool normals = false;          // publish per-vertex normals beside the positions
+  bool marker_positions = true;  // layout 1.1: per slot, each labelled marker's target and state
+                                 // (12 + 1 bytes per marker; no block when there are no labels)
   unsigned permissions = 0600;   // mode of the segment (read/write bits only; set exactly, umask ignored)
 };
 
@@ -104,6 +112,12 @@ class ShmPublisher {
   [[nodiscard]] float* beginPositions() noexcept { return staging_positions_.data(); }
   // The same for normals (vertex_count x 3 floats); nullptr when options.normals was false.
   [[nodiscard]] float* beginNormals() noexcept { return normals_ ? staging_normals_.data() : nullptr; }
+  // The same for the marker block (layout 1.1): markerCount() x 3 floats (rig units, label order)
+  // and markerCount() state bytes (TETRIG_SHM_MARKER_*: 0 unknown, 1 measured, 2 predicted,
+  // 3 blended); nullptr without the block (no labels, or options.marker_positions false). They
+  // start as zeros (state unknown) and keep their values until overwritten.
+  [[nodiscard]] float* beginMarkerPositions() noexcept { return markers_ ? staging_marker_positions_.data() : nullptr; }
+  [[nodiscard]] std::uint8_t* beginMarkerStates() noexcept { return markers_ ? staging_marker_states_.data() : nullptr; }
   // Publishes the staged positions (and normals) with `info` into the next slot round-robin
   // (sequence odd, relaxed word stores, sequence even with release), stamps publish_ns and the
   // heartbeat, sets the state to running and makes the frame the newest (release). Returns its
@@ -120,6 +134,8 @@ class ShmPublisher {
   [[nodiscard]] std::int32_t vertexCount() const noexcept { return vertex_count_; }
   [[nodiscard]] int slotCount() const noexcept { return slot_count_; }
   [[nodiscard]] bool hasNormals() const noexcept { return normals_; }
+  [[nodiscard]] std::int32_t markerCount() const noexcept { return marker_count_; }  // labels
+  [[nodiscard]] bool hasMarkerPositions() const noexcept { return markers_; }
   // Frames committed so far (= the newest frame id). Producer thread, or after it has stopped.
   [[nodiscard]] std::uint64_t framesPublished() const noexcept { return next_frame_id_ - 1; }
   // The producer's own mapping (read-write) and its size in bytes, e.g. for tetrig_shm_attach()
@@ -143,12 +159,20 @@ class ShmPublisher {
   std::size_t slot_positions_offset_ = 0;
   std::size_t slot_normals_offset_ = 0;
   std::size_t array_bytes_ = 0;  // vertex_count x 12, rounded up to 8 (the copy's word count)
+  std::int32_t marker_count_ = 0;
+  bool markers_ = false;  // the slots carry the marker block
+  std::size_t slot_marker_positions_offset_ = 0;
+  std::size_t slot_marker_states_offset_ = 0;
+  std::size_t marker_position_bytes_ = 0;  // marker_count x 12, rounded up to 8
+  std::size_t marker_state_bytes_ = 0;     // marker_count, rounded up to 8
   std::uint64_t file_device_ = 0;
   std::uint64_t file_inode_ = 0;
   std::uint64_t next_frame_id_ = 1;
   std::uint32_t state_ = 0;  // last state stored (producer thread)
   AlignedVector<float> staging_positions_;
   AlignedVector<float> staging_normals_;
+  AlignedVector<float> staging_marker_positions_;
+  AlignedVector<std::uint8_t> staging_marker_states_;
 };
 
 }  // namespace tetrig
