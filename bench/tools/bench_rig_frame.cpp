@@ -7,7 +7,8 @@
 //   pose-transfer matrix as loaded (double weights), from the deformer's padded positions
 //   (applyPoseTransferPadded). Counters split the frame into the step and the pose transfer.
 //   The yardstick of the deformation core's frame cost (kept as it was for comparisons).
-//   BM_RigFrame/smpl_hdm05_predicted: the same with the temporal prediction of the warm start.
+//   BM_RigFrame/smpl_hdm05_predicted: the same with the temporal prediction of the warm start;
+//   _relaxed, _predicted_relaxed: with the over-relaxation of the rotation update (omega 1.8).
 //   BM_LiveRigFrame/smpl_hdm05: the same frames through the live path's own per-frame call,
 //   LiveRig::processFrame (clip frame as the C3D playback source fills it -> labels bound once ->
 //   targets incl. occlusion prediction -> step(3) -> pose transfer into a float buffer, what
@@ -62,7 +63,7 @@ const RigScene* rigScene(std::string& error) {
       error);
 }
 
-void rigFrame(benchmark::State& state, double extrapolation) {
+void rigFrame(benchmark::State& state, double extrapolation, double relaxation = 1.0) {
   std::string error;
   const RigScene* scene = rigScene(error);
   if (scene == nullptr) {
@@ -73,6 +74,7 @@ void rigFrame(benchmark::State& state, double extrapolation) {
   tetrig::DeformerSetup setup = rig.setup;
   setup.options.padded_positions = true;  // the input of applyPoseTransferPadded
   setup.options.rotation_extrapolation = extrapolation;
+  setup.options.rotation_relaxation = relaxation;
   tetrig::Deformer deformer(rig.tet_mesh, setup);
   std::vector<Eigen::Vector3d> targets;
   for (const std::int32_t v : rig.setup.vertex_handles) targets.push_back(rig.tet_mesh.vertices.row(v).transpose());
@@ -120,6 +122,12 @@ BENCHMARK(BM_RigFrame)->Name("BM_RigFrame/smpl_hdm05")->Unit(benchmark::kMicrose
 // issue #12): what it adds to a frame.
 void BM_RigFramePredicted(benchmark::State& state) { rigFrame(state, 1.0); }
 BENCHMARK(BM_RigFramePredicted)->Name("BM_RigFrame/smpl_hdm05_predicted")->Unit(benchmark::kMicrosecond);
+// With the over-relaxation of the rotation update (DeformerOptions::rotation_relaxation = 1.8, the live
+// rig's default), alone and with the temporal prediction.
+void BM_RigFrameRelaxed(benchmark::State& state) { rigFrame(state, 0.0, 1.8); }
+BENCHMARK(BM_RigFrameRelaxed)->Name("BM_RigFrame/smpl_hdm05_relaxed")->Unit(benchmark::kMicrosecond);
+void BM_RigFramePredictedRelaxed(benchmark::State& state) { rigFrame(state, 1.0, 1.8); }
+BENCHMARK(BM_RigFramePredictedRelaxed)->Name("BM_RigFrame/smpl_hdm05_predicted_relaxed")->Unit(benchmark::kMicrosecond);
 
 void BM_LiveRigFrame(benchmark::State& state) {
   std::string error;

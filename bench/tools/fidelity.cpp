@@ -37,6 +37,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <exception>
 #include <memory>
 #include <sstream>
@@ -221,6 +222,15 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
       sum2 += d2;
       w = std::max(w, d2);
     }
+    if (const char* dump = std::getenv("TETRIG_FID_DUMP"); dump != nullptr && std::to_string(f) == dump) {
+      FILE* fp = std::fopen(("/tmp/fid/dump_" + std::to_string(f) + ".bin").c_str(), "wb");
+      const std::int64_t n = static_cast<std::int64_t>(x.size()), nb = rig.body_vertex_count;
+      std::fwrite(&n, 8, 1, fp);
+      std::fwrite(&nb, 8, 1, fp);
+      std::fwrite(x.data(), 8, x.size(), fp);
+      std::fwrite(xc.data(), 8, xc.size(), fp);
+      std::fclose(fp);
+    }
     rms.push_back(to_mm * std::sqrt(sum2 / rig.body_vertex_count));
     worst.push_back(to_mm * std::sqrt(w));
     e_budget.push_back(mb.energy);
@@ -329,6 +339,9 @@ int main(int argc, char** argv) {
   app.add_option("--extrapolate-max-deg", cfg.live.rotation_extrapolation_max_deg,
                  "Temporal prediction: cap of a tet's predicted rotation per frame, degrees (default 5)")
       ->check(CLI::Range(0.001, 180.0));
+  app.add_option("--relax", cfg.live.rotation_relaxation,
+                 "Over-relaxation of each iteration's rotation update, omega (default 1.8, the live rig's; 1: off)")
+      ->check(CLI::Range(1.0, 1.999));
   CLI11_PARSE(app, argc, argv);
   try {
     const std::vector<int> ks = parseIterations(iterations);

@@ -43,6 +43,9 @@ Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(s
   if (!(options_.rotation_extrapolation >= 0.0 && options_.rotation_extrapolation <= 1.0)) {
     fail("rotation_extrapolation must be in [0, 1]");
   }
+  if (!(options_.rotation_relaxation >= 1.0 && options_.rotation_relaxation < 2.0)) {
+    fail("rotation_relaxation must be in [1, 2)");
+  }
   if (!(options_.rotation_extrapolation_max_deg > 0.0 && options_.rotation_extrapolation_max_deg <= 180.0)) {
     fail("rotation_extrapolation_max_deg must be in (0, 180]");
   }
@@ -488,7 +491,7 @@ StepStats Deformer::step(const HandleTargets& targets, const StepBudget& budget)
       std::fill(delta_.begin(), delta_.end(), 0.0f);
       const RotationPassStats pass =
           rotationPass(blocks_.data(), block_count, u_.data(), has_groups ? nullptr : delta_.data(),
-                       options_.rotation_steps, exact_lanes_.data());
+                       options_.rotation_steps, exact_lanes_.data(), static_cast<float>(options_.rotation_relaxation - 1.0));
       stats.energy = pass.energy;
       stats.exact_rotations += pass.exact_fallbacks;
       std::int64_t rigid_ns = 0;

@@ -28,6 +28,7 @@ DeformerSetup liveSetup(const Rig& rig, const LiveRigOptions& options) {
   setup.options.padded_positions = true;  // the input of applyPoseTransferPadded
   setup.options.rotation_extrapolation = options.rotation_extrapolation;
   setup.options.rotation_extrapolation_max_deg = options.rotation_extrapolation_max_deg;
+  setup.options.rotation_relaxation = options.rotation_relaxation;
   return setup;
 }
 

@@ -213,8 +213,8 @@ TETRIG_INLINE unsigned laneBits(FMask m) {
 
 // The pass over N consecutive blocks. `energy` accumulates in double (two halves): a float sum
 // over thousands of tets would lose the small terms.
-template <int N>
-TETRIG_INLINE void passBlocks(TetBlock* blocks, const double* u, float* delta, int steps, Lanes (&energy)[2],
+template <int N, bool kRelax>
+TETRIG_INLINE void passBlocks(TetBlock* blocks, const double* u, float* delta, int steps, float relax, Lanes (&energy)[2],
                               std::uint16_t* exact_lanes, std::int64_t& flagged) {
   using V = Pack<N>;
   using M = PackMask<N>;
@@ -275,6 +275,7 @@ TETRIG_INLINE void passBlocks(TetBlock* blocks, const double* u, float* delta, i
   V qx = loadField<N>(blocks, TETRIG_FIELD(rotation, 1));
   V qy = loadField<N>(blocks, TETRIG_FIELD(rotation, 2));
   V qz = loadField<N>(blocks, TETRIG_FIELD(rotation, 3));
+  const V q0w = qw, q0x = qx, q0y = qy, q0z = qz;  // the rotation this pass started from (over-relaxation)
   V norm2 = qw * qw + qx * qx + qy * qy + qz * qz;  // 1 up to rounding
   V gw = n00 * qw + n01 * qx + n02 * qy + n03 * qz;
   V gx = n01 * qw + n11 * qx + n12 * qy + n13 * qz;
@@ -330,6 +331,26 @@ TETRIG_INLINE void passBlocks(TetBlock* blocks, const double* u, float* delta, i
   // in registers. (Padding lanes have F = I, det 1: never flagged.)
   const M out_of_range = notBelow(absolute(qw * qw + qx * qx + qy * qy + qz * qz - 1.0f), 1e-3f);
   const M needs_exact = notAbove(det, 1e-12f) | out_of_range;  // NaN too
+  if constexpr (kRelax) {
+    // Over-relaxation (rotation_relaxation.hpp): q <- D^relax q with D = q q0^-1, the change this pass made,
+    // taken in the hemisphere of the identity; D^relax scales D's half-angle tangent by relax.
+    V dw = qw * q0w + qx * q0x + qy * q0y + qz * q0z;
+    const V sign = select(dw >= splat<N>(0.0f), splat<N>(1.0f), splat<N>(-1.0f));
+    dw = dw * sign;
+    const V k = relax * sign;
+    const V dx = k * (-qw * q0x + qx * q0w - qy * q0z + qz * q0y);
+    const V dy = k * (-qw * q0y + qx * q0z + qy * q0w - qz * q0x);
+    const V dz = k * (-qw * q0z - qx * q0y + qy * q0x + qz * q0w);
+    const V rw = dw * qw - dx * qx - dy * qy - dz * qz;
+    const V rx = dw * qx + dx * qw + dy * qz - dz * qy;
+    const V ry = dw * qy - dx * qz + dy * qw + dz * qx;
+    const V rz = dw * qz + dx * qy - dy * qx + dz * qw;
+    const V inv_r = 1.0f / squareRoot(rw * rw + rx * rx + ry * ry + rz * rz);
+    qw = rw * inv_r;
+    qx = rx * inv_r;
+    qy = ry * inv_r;
+    qz = rz * inv_r;
+  }
   qw = select(out_of_range, splat<N>(1.0f), qw);
   qx = select(out_of_range, splat<N>(0.0f), qx);
   qy = select(out_of_range, splat<N>(0.0f), qy);
@@ -408,12 +429,10 @@ __attribute__((noinline, cold)) void fixExactRotations(TetBlock* blocks, std::in
   }
 }
 
-}  // namespace
-
-TETRIG_MULTIVERSION
-RotationPassStats rotationPass(TetBlock* blocks, std::int32_t block_count, const double* u, float* delta,
-                               int steps, std::uint16_t* exact_lanes) {
-  RotationPassStats stats;
+// The pass over all blocks (kRelax: with over-relaxation).
+template <bool kRelax>
+TETRIG_INLINE void passAll(TetBlock* blocks, std::int32_t block_count, const double* u, float* delta, int steps, float relax,
+                           std::uint16_t* exact_lanes, RotationPassStats& stats) {
   Lanes energy[2] = {};
   std::int64_t flagged = 0;
   std::int32_t b = 0;
@@ -425,15 +444,29 @@ RotationPassStats rotationPass(TetBlock* blocks, std::int32_t block_count, const
       const char* next = reinterpret_cast<const char*>(blocks + b + 2);
 #pragma GCC unroll 64
       for (std::size_t line = 0; line < 2 * sizeof(TetBlock); line += 64) __builtin_prefetch(next + line);
-      passBlocks<2>(blocks + b, u, delta, steps, energy, exact_lanes + b, flagged);
+      passBlocks<2, kRelax>(blocks + b, u, delta, steps, relax, energy, exact_lanes + b, flagged);
     }
   }
-  for (; b + 2 <= block_count; b += 2) passBlocks<2>(blocks + b, u, delta, steps, energy, exact_lanes + b, flagged);
-  for (; b < block_count; ++b) passBlocks<1>(blocks + b, u, delta, steps, energy, exact_lanes + b, flagged);
+  for (; b + 2 <= block_count; b += 2) passBlocks<2, kRelax>(blocks + b, u, delta, steps, relax, energy, exact_lanes + b, flagged);
+  for (; b < block_count; ++b) passBlocks<1, kRelax>(blocks + b, u, delta, steps, relax, energy, exact_lanes + b, flagged);
   double total = 0.0;
   for (int l = 0; l < kHalf; ++l) total += energy[0][l] + energy[1][l];
   stats.energy = total;
   if (flagged != 0) fixExactRotations(blocks, block_count, u, delta, exact_lanes, stats);
+}
+
+
+}  // namespace
+
+TETRIG_MULTIVERSION
+RotationPassStats rotationPass(TetBlock* blocks, std::int32_t block_count, const double* u, float* delta,
+                               int steps, std::uint16_t* exact_lanes, float relax) {
+  RotationPassStats stats;
+  if (relax != 0.0f) {
+    passAll<true>(blocks, block_count, u, delta, steps, relax, exact_lanes, stats);
+  } else {
+    passAll<false>(blocks, block_count, u, delta, steps, relax, exact_lanes, stats);
+  }
   return stats;
 }
 

@@ -123,6 +123,40 @@ TEST(Deformer, EnergyNeverIncreasesWithoutInterpolationOrRigidGroups) {
   EXPECT_TRUE(saw_exact) << "the jump was meant to invert some tets and exercise the exact fallback";
 }
 
+// The exact ARAP energy of the deformer's pose: sum_j vol_j ||F_j - R_j||^2 with R_j the closest rotation (double).
+double exactEnergy(const TetMesh& mesh, const Deformer& deformer) {
+  double e = 0.0;
+  for (std::int32_t t = 0; t < mesh.tetCount(); ++t) {
+    Eigen::Matrix3d rest, now;
+    for (int k = 0; k < 3; ++k) {
+      rest.col(k) = (mesh.vertices.row(mesh.tets(t, k)) - mesh.vertices.row(mesh.tets(t, 3))).transpose();
+      now.col(k) = deformer.position(mesh.tets(t, k)) - deformer.position(mesh.tets(t, 3));
+    }
+    const Eigen::Matrix3d f = now * rest.inverse();
+    e += std::abs(rest.determinant()) / 6.0 * (f - closestRotation(f).toRotationMatrix()).squaredNorm();
+  }
+  return e;
+}
+
+// Over-relaxation gives up the per-iteration energy decrease of the plain iteration; after the jump
+// above (which inverts tets) it still ends every budget of iterations at no higher exact energy than
+// the plain iteration with the same budget.
+TEST(Deformer, OverRelaxationEndsNoHigherThanThePlainIterationAfterAJump) {
+  const auto bar = scenes::makeBarScene(4, 4, 33);
+  const auto targets =
+      test::endTargets(bar, scenes::barAxisTransform(bar, 150.0 / 180.0 * M_PI, Eigen::Vector3d(3, -2, -20)));
+  DeformerSetup relaxed_setup = test::endVertexHandles(bar);
+  relaxed_setup.options.rotation_relaxation = 1.8;
+  for (const int k : {1, 2, 3, 5, 10, 20, 50, 100}) {
+    Deformer plain(bar.mesh, test::endVertexHandles(bar)), relaxed(bar.mesh, relaxed_setup);
+    plain.step(vertexTargets(targets), StepBudget{k});
+    relaxed.step(vertexTargets(targets), StepBudget{k});
+    const double ep = exactEnergy(bar.mesh, plain), er = exactEnergy(bar.mesh, relaxed);
+    std::printf("jump, %3d iterations: exact energy plain %.6g, relaxed %.6g\n", k, ep, er);
+    EXPECT_LE(er, ep * (1.0 + 1e-9)) << k << " iterations";
+  }
+}
+
 // Twist angle (radians, unwrapped against `previous`) of vertex v about the bar axis.
 double twistAngle(const scenes::BarScene& bar, const Deformer& deformer, std::int32_t v, double previous) {
   const Eigen::Vector3d p = deformer.position(v) - bar.axis_point;
@@ -206,9 +240,10 @@ struct BendChase {
   double lag_stopped = 0.0;  // the same, 20 frames after the motion stopped
 };
 
-BendChase chaseBend(const scenes::BarScene& bar, double extrapolation) {
+BendChase chaseBend(const scenes::BarScene& bar, double extrapolation, double relaxation = 1.0) {
   DeformerSetup setup = test::endVertexHandles(bar);
   setup.options.rotation_extrapolation = extrapolation;
+  setup.options.rotation_relaxation = relaxation;
   Deformer deformer(bar.mesh, setup);
   const auto lag = [&](const std::vector<Eigen::Vector3d>& targets) {
     Deformer converged(bar.mesh, test::endVertexHandles(bar));
@@ -241,6 +276,44 @@ TEST(Deformer, TemporalPredictionFollowsASteadyBend) {
   // After the stop the prediction overshoots for a few frames and settles: 20 frames later it is
   // within 5 % of the plain chain's lag while moving (both are then a few thousandths of the length).
   EXPECT_LT(predicted.lag_stopped, 0.05 * plain.lag_moving);
+}
+
+// Over-relaxation of the rotation update (rotation_kernel.hpp) speeds up the slow mode of the bend
+// within each frame's 3 iterations, alone and with the temporal prediction.
+TEST(Deformer, OverRelaxationFollowsASteadyBendCloser) {
+  const auto bar = scenes::makeBarScene(4, 4, 33);
+  const BendChase plain = chaseBend(bar, 0.0), relaxed = chaseBend(bar, 0.0, 1.8);
+  const BendChase predicted = chaseBend(bar, 1.0), both = chaseBend(bar, 1.0, 1.8);
+  std::printf("bend 1.5 deg/frame, 3 iterations/frame: lag while moving %.4f plain, %.4f relaxed (omega 1.8), %.4f predicted, "
+              "%.4f predicted + relaxed; 20 frames after stopping %.4f / %.4f / %.4f / %.4f\n",
+              plain.lag_moving, relaxed.lag_moving, predicted.lag_moving, both.lag_moving, plain.lag_stopped,
+              relaxed.lag_stopped, predicted.lag_stopped, both.lag_stopped);
+  EXPECT_LT(relaxed.lag_moving, 0.6 * plain.lag_moving);
+  EXPECT_LT(relaxed.lag_stopped, plain.lag_stopped);
+  EXPECT_LT(both.lag_moving, predicted.lag_moving);
+  EXPECT_LT(both.lag_stopped, predicted.lag_stopped);
+}
+
+// The relaxed iteration has the plain one's fixed points: both converge to the same pose.
+TEST(Deformer, OverRelaxationConvergesToThePlainFixedPoint) {
+  const auto bar = scenes::makeBarScene(4, 4, 33);
+  const auto targets = test::endTargets(bar, scenes::barBendTransform(bar, 0.5 * M_PI));
+  DeformerSetup plain_setup = test::endVertexHandles(bar), relaxed_setup = plain_setup;
+  relaxed_setup.options.rotation_relaxation = 1.8;
+  Deformer plain(bar.mesh, plain_setup), relaxed(bar.mesh, relaxed_setup);
+  const auto distance = [&] { return (test::deformedVertices(plain) - test::deformedVertices(relaxed)).rowwise().norm().maxCoeff(); };
+  plain.step(vertexTargets(targets), StepBudget{10});
+  relaxed.step(vertexTargets(targets), StepBudget{10});
+  const double early = distance();
+  plain.step(vertexTargets(targets), StepBudget{3000});
+  relaxed.step(vertexTargets(targets), StepBudget{3000});
+  std::printf("90 degree bend: plain and relaxed differ by %.3g after 10 iterations, %.3g after 3010 (bar length %.0f)\n", early,
+              distance(), bar.length);
+  EXPECT_GT(early, 1e-2);
+  EXPECT_LT(distance(), 1e-4);
+  DeformerSetup bad = plain_setup;
+  bad.options.rotation_relaxation = 2.0;
+  EXPECT_THROW(Deformer(bar.mesh, bad), std::invalid_argument);
 }
 
 TEST(Deformer, RecoversTheRestShapeFromRandomRotations) {

@@ -285,9 +285,11 @@ TEST(Export, ConvergenceGetsCloseToAVeryLongSolve) {
               "(%.2f), 1 iteration %.3g m\n",
               worst_converged, static_cast<double>(r.iterations) / kFrames, worst_closer, static_cast<double>(rt.iterations) / kFrames,
               worst_one);
-  // Measured: 9.6e-6 m at 8.3 iterations per frame (default 1e-4), 1.0e-6 m at 20.7 (1e-6), one iteration 3.7e-4 m.
+  // Measured with the live rig's over-relaxation (omega 1.8): 9.3e-7 m at 8.0 iterations per frame (default
+  // 1e-4), 1.0e-6 m at 15.0 (1e-6), one iteration 2.3e-4 m; plain (omega 1): 9.6e-6 m at 8.3, 1.0e-6 m at 20.7,
+  // 3.7e-4 m. About 1e-6 m is the float floor of the rotation pass here: a tighter tolerance gets closer, down to it.
   EXPECT_LT(worst_converged, 5e-5);
-  EXPECT_LT(worst_closer, worst_converged / 3);
+  EXPECT_LT(worst_closer, std::max(worst_converged / 3, 2e-6));
   EXPECT_GT(worst_one, 10 * worst_converged);
   EXPECT_GT(rt.iterations, r.iterations);
   EXPECT_GT(r.iterations, kFrames * static_cast<std::uint64_t>(tools::kConvergeChunkIterations));

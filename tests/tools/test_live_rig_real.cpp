@@ -332,7 +332,8 @@ TEST(LiveRigReal, Hdm05OccludedMarkersAgainstTheUnoccludedRun) {
   // Keeping the offset (in the anchor's frame) follows the unoccluded run closer where the
   // occluded markers pulled the body away from their rest offsets (the head, the knee).
   EXPECT_LE(kept_error[0], 0.030);
-  EXPECT_LE(kept_error[1], 0.7 * error[1]);
+  // Knee: 4.3 against 5.5 mm with the live rig's over-relaxation (3.2 against 4.8 mm without).
+  EXPECT_LE(kept_error[1], 0.8 * error[1]);
   EXPECT_LE(kept_error[2], 0.7 * error[2]);
 }
 

@@ -78,6 +78,8 @@ struct DeformerOptions {
   double rotation_extrapolation = 0.0;  // alpha in [0, 1]: a frame starts from every tet's rotation carried
                                         // on by alpha times its last frame's rotation (rotation_extrapolation.hpp);
                                         // 0: the plain warm start
+  double rotation_relaxation = 1.0;  // omega in [1, 2): each iteration's rotation update is carried on by
+                                     // omega times itself (rotation_kernel.hpp, over-relaxation); 1: plain
   double rotation_extrapolation_max_deg = 5.0;  // a tet's predicted rotation per frame is capped at this angle
 };
 

@@ -80,6 +80,7 @@ struct LiveRigOptions {
   // off by default until those are solved.
   double rotation_extrapolation = 0.0;          // DeformerOptions::rotation_extrapolation
   double rotation_extrapolation_max_deg = 5.0;  // DeformerOptions::rotation_extrapolation_max_deg
+  double rotation_relaxation = 1.8;             // DeformerOptions::rotation_relaxation (docs/fidelity.md: 1.8 measured best on HDM05)
 };
 
 enum LiveFrameFlags : std::uint32_t {

@@ -46,8 +46,14 @@ struct RotationPassStats {
 // a (R - I) G into it (kVectorStride floats per vertex, same order; the caller zeroes it first). `exact_lanes` is the caller's
 // scratch of block_count entries: the pass writes there which lanes took the exact rotation
 // (bit l = lane l).
+// Over-relaxation: with relax = omega - 1 > 0, each tet's rotation is carried past the refined one,
+//   D = R_refined R_start^-1 (in the hemisphere of the identity),  R = D^relax R_refined,
+// where D^relax scales D's half-angle tangent by relax (its angle by relax, to first order). The
+// fixed points are those of the plain iteration (D = I there); the slow, smooth modes of the
+// local/global iteration contract by 1 - omega (1 - rho) instead of rho per iteration
+// (docs/fidelity.md, "Over-relaxation"). Tets that take the exact rotation are not relaxed.
 RotationPassStats rotationPass(TetBlock* blocks, std::int32_t block_count, const double* u, float* delta,
-                               int steps, std::uint16_t* exact_lanes);
+                               int steps, std::uint16_t* exact_lanes, float relax = 0.0f);
 
 // The instruction set the kernels run with on this machine ("avx512f", "avx2", "baseline").
 const char* rotationKernelInstructionSet();
