@@ -222,15 +222,6 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
       sum2 += d2;
       w = std::max(w, d2);
     }
-    if (const char* dump = std::getenv("TETRIG_FID_DUMP"); dump != nullptr && std::to_string(f) == dump) {
-      FILE* fp = std::fopen(("/tmp/fid/dump_" + std::to_string(f) + ".bin").c_str(), "wb");
-      const std::int64_t n = static_cast<std::int64_t>(x.size()), nb = rig.body_vertex_count;
-      std::fwrite(&n, 8, 1, fp);
-      std::fwrite(&nb, 8, 1, fp);
-      std::fwrite(x.data(), 8, x.size(), fp);
-      std::fwrite(xc.data(), 8, xc.size(), fp);
-      std::fclose(fp);
-    }
     rms.push_back(to_mm * std::sqrt(sum2 / rig.body_vertex_count));
     worst.push_back(to_mm * std::sqrt(w));
     e_budget.push_back(mb.energy);
