@@ -85,7 +85,9 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
   live_options.normals = options.normals;
   const int pose_threads = options.pose_threads > 0 ? options.pose_threads : 1;
   live_options.split_pose_transfer = pose_threads >= 2;
-  LiveRig live(rig, live_options);
+  std::optional<Rig> coarse;
+  if (!options.coarse_rig_path.empty()) coarse = loadRigFile(options.coarse_rig_path);
+  LiveRig live(rig, live_options, coarse ? &*coarse : nullptr);
 
   // 2. The source, its labels, the binding.
   devices::SourceOpenOptions open;
@@ -130,6 +132,9 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
     std::printf("tetrig run: %s\n", printableText(source->describe()).c_str());
     std::printf("  rig: %s: %d tet vertices, %d tets, %d fine vertices, %zu markers; %d bound by label\n", printableText(rig.name, 256).c_str(),
                 rig.tet_mesh.vertexCount(), rig.tet_mesh.tetCount(), live.fineVertexCount(), rig.markers.size(), binding.matched);
+    if (live.coarseLevel() != nullptr)
+      std::printf("  coarse level: %d tets, %d iterations per frame\n", live.coarseLevel()->deformer().tetCount(),
+                  live.coarseLevel()->options().iterations);
     if (!binding.missing.empty())
       std::printf("  note: %zu rig markers the source never names are treated as occluded: %s\n", binding.missing.size(),
                   joinLabels(binding.missing).c_str());

@@ -170,6 +170,9 @@ int main(int argc, char** argv) {
   tetrig::tools::RunOptions run;
   CLI::App* run_cmd = app.add_subcommand("run", "Run the live path: a marker source -> the rig, frame after frame -> shared memory");
   run_cmd->add_option("--rig", run.rig_path, "Rig file (tetrig build-rig)")->required();
+  run_cmd->add_option("--coarse-rig", run.coarse_rig_path,
+                      "Coarse level: the same mesh and markers built with fewer --tet-vertices (e.g. 300), solved first every "
+                      "frame; lands nearer the converged pose (docs/fidelity.md)");
   run_cmd->add_option("--source", run.source,
                       "Marker source: c3d:PATH, replay:PATH, synthetic[:N], synthetic:character, hid:VID:PID, usb:VID:PID (hex ids), hydra[:SERIAL]")
       ->required();

@@ -8,13 +8,17 @@
 //   (applyPoseTransferPadded). Counters split the frame into the step and the pose transfer.
 //   The yardstick of the deformation core's frame cost (kept as it was for comparisons).
 //   BM_RigFrame/smpl_hdm05_predicted: the same with the temporal prediction of the warm start;
-//   _relaxed, _predicted_relaxed: with the over-relaxation of the rotation update (omega 1.8).
+//   _relaxed, _predicted_relaxed: with the over-relaxation of the rotation update (omega 1.8);
+//   _coarse_relaxed, _coarse_predicted_relaxed: with the coarse level too (tetrig/coarse_level.hpp:
+//   the same mesh and markers built with 150 tet vertices, 5 coarse iterations per frame, counted
+//   in the frame and in step_us; coarse_us is its share).
 //   BM_LiveRigFrame/smpl_hdm05: the same frames through the live path's own per-frame call,
 //   LiveRig::processFrame (clip frame as the C3D playback source fills it -> labels bound once ->
 //   targets incl. occlusion prediction -> step(3) -> pose transfer into a float buffer, what
 //   `tetrig run` writes into the shared-memory slot); /1: the pose transfer split over two threads.
 #include "bench_data.hpp"
 
+#include "tetrig/coarse_level.hpp"
 #include "tetrig/deformer.hpp"
 #include "tetrig/drivers/c3d_playback.hpp"
 #include "tetrig/live_rig.hpp"
@@ -39,6 +43,7 @@ struct RigScene {
   tetrig::Rig rig;
   tetrig::drivers::C3DClip clip;
   std::vector<int> clip_point;  // per rig marker: its point in the clip
+  tetrig::Rig coarse;           // the same with 150 tet vertices (the coarse level)
 };
 
 // Built once (the rig build takes seconds); null with `error` set when the data is absent.
@@ -52,7 +57,9 @@ const RigScene* rigScene(std::string& error) {
         in.tet_vertices = 1500;
         in.max_marker_distance = 0.15;  // the subject's wider stance: see test_rig_markers_real.cpp
         in.check_deformer = false;
-        auto s = std::make_unique<RigScene>(RigScene{tetrig::rigbuild::buildRig(in), tetrig::drivers::C3DClip::load(clip), {}});
+        auto s = std::make_unique<RigScene>(RigScene{tetrig::rigbuild::buildRig(in), tetrig::drivers::C3DClip::load(clip), {}, {}});
+        in.tet_vertices = 150;
+        s->coarse = tetrig::rigbuild::buildRig(in);
         for (const tetrig::RigMarker& m : s->rig.markers) {
           const int point = s->clip.findPoint(m.label);  // subject prefixes ("meinard:LFHD") allowed
           if (point < 0) throw std::runtime_error("marker " + m.label + " is not in the clip");
@@ -63,7 +70,7 @@ const RigScene* rigScene(std::string& error) {
       error);
 }
 
-void rigFrame(benchmark::State& state, double extrapolation, double relaxation = 1.0) {
+void rigFrame(benchmark::State& state, double extrapolation, double relaxation = 1.0, bool with_coarse = false) {
   std::string error;
   const RigScene* scene = rigScene(error);
   if (scene == nullptr) {
@@ -75,11 +82,29 @@ void rigFrame(benchmark::State& state, double extrapolation, double relaxation =
   setup.options.padded_positions = true;  // the input of applyPoseTransferPadded
   setup.options.rotation_extrapolation = extrapolation;
   setup.options.rotation_relaxation = relaxation;
+  setup.options.frame_guide = with_coarse;
   tetrig::Deformer deformer(rig.tet_mesh, setup);
   std::vector<Eigen::Vector3d> targets;
   for (const std::int32_t v : rig.setup.vertex_handles) targets.push_back(rig.tet_mesh.vertices.row(v).transpose());
   tetrig::HandleTargets handle_targets;
   handle_targets.vertex_positions = targets;
+  // Coarse level: its deformer, its handle targets and per rig marker its coarse vertex handle.
+  const tetrig::Rig& coarse_rig = scene->coarse;
+  std::unique_ptr<tetrig::CoarseLevel> coarse;
+  std::vector<Eigen::Vector3d> coarse_targets;
+  std::vector<std::int32_t> coarse_handle(rig.markers.size(), -1);
+  tetrig::HandleTargets coarse_handle_targets;
+  if (with_coarse) {
+    tetrig::DeformerSetup cs = coarse_rig.setup;
+    cs.options.rotation_relaxation = relaxation;
+    coarse = std::make_unique<tetrig::CoarseLevel>(rig.tet_mesh, coarse_rig.tet_mesh, cs);
+    for (const std::int32_t v : cs.vertex_handles) coarse_targets.push_back(coarse_rig.tet_mesh.vertices.row(v).transpose());
+    for (std::size_t m = 0; m < rig.markers.size(); ++m)
+      for (const tetrig::RigMarker& c : coarse_rig.markers)
+        if (c.label == rig.markers[m].label) coarse_handle[m] = c.vertex_handle;
+    coarse_handle_targets.vertex_positions = coarse_targets;
+  }
+  std::int64_t coarse_ns = 0;
   const auto b = rig.pose_transfer.view();
   std::vector<double> fine(static_cast<std::size_t>(rig.pose_transfer.rows) * 3);
   const double to_mm = scene->clip.unitsToMm();
@@ -93,8 +118,13 @@ void rigFrame(benchmark::State& state, double extrapolation, double relaxation =
       if (!scene->clip.isValid(frame, point)) continue;
       const Eigen::Vector3d mm(to_mm * p[3 * point], to_mm * p[3 * point + 1], to_mm * p[3 * point + 2]);
       targets[static_cast<std::size_t>(rig.markers[m].vertex_handle)] = rig.alignment.apply(mm);
+      if (coarse && coarse_handle[m] >= 0) coarse_targets[static_cast<std::size_t>(coarse_handle[m])] = rig.alignment.apply(mm);
     }
-    const tetrig::StepStats stats = deformer.step(handle_targets, tetrig::StepBudget{3});
+    std::int64_t frame_coarse_ns = 0;
+    if (coarse) frame_coarse_ns = coarse->guide(coarse_handle_targets, deformer).total_ns;
+    tetrig::StepStats stats = deformer.step(handle_targets, tetrig::StepBudget{3});
+    stats.total_ns += frame_coarse_ns;
+    coarse_ns += frame_coarse_ns;
     const auto t1 = std::chrono::steady_clock::now();
     tetrig::applyPoseTransferPadded(b, deformer.paddedPositions().data(), fine.data());
     benchmark::DoNotOptimize(fine.data());
@@ -108,6 +138,10 @@ void rigFrame(benchmark::State& state, double extrapolation, double relaxation =
   }
   const auto n = static_cast<double>(state.iterations());
   state.counters["step_us"] = static_cast<double>(step_ns) / n * 1e-3;
+  if (with_coarse) {
+    state.counters["coarse_us"] = static_cast<double>(coarse_ns) / n * 1e-3;
+    state.counters["coarse_tets"] = coarse_rig.tet_mesh.tetCount();
+  }
   state.counters["pose_transfer_us"] = static_cast<double>(pose_ns) / n * 1e-3;
   state.counters["solve_us"] = static_cast<double>(solve_ns) / n * 1e-3;
   state.counters["exact_rotations"] = static_cast<double>(exact) / n;
@@ -128,6 +162,10 @@ void BM_RigFrameRelaxed(benchmark::State& state) { rigFrame(state, 0.0, 1.8); }
 BENCHMARK(BM_RigFrameRelaxed)->Name("BM_RigFrame/smpl_hdm05_relaxed")->Unit(benchmark::kMicrosecond);
 void BM_RigFramePredictedRelaxed(benchmark::State& state) { rigFrame(state, 1.0, 1.8); }
 BENCHMARK(BM_RigFramePredictedRelaxed)->Name("BM_RigFrame/smpl_hdm05_predicted_relaxed")->Unit(benchmark::kMicrosecond);
+void BM_RigFrameCoarseRelaxed(benchmark::State& state) { rigFrame(state, 0.0, 1.8, true); }
+BENCHMARK(BM_RigFrameCoarseRelaxed)->Name("BM_RigFrame/smpl_hdm05_coarse_relaxed")->Unit(benchmark::kMicrosecond);
+void BM_RigFrameCoarsePredictedRelaxed(benchmark::State& state) { rigFrame(state, 1.0, 1.8, true); }
+BENCHMARK(BM_RigFrameCoarsePredictedRelaxed)->Name("BM_RigFrame/smpl_hdm05_coarse_predicted_relaxed")->Unit(benchmark::kMicrosecond);
 
 void BM_LiveRigFrame(benchmark::State& state) {
   std::string error;

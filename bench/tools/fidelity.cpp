@@ -146,6 +146,7 @@ struct Config {
   int frame_count = 0;  // 0: to the end
   bool quiet = false;
   tetrig::LiveRigOptions live;
+  const Rig* coarse = nullptr;  // --coarse-rig
 };
 
 nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::drivers::C3DClip& clip,
@@ -155,7 +156,7 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
   const tetrig::drivers::C3DPlayback playback(clip, options);
   std::vector<std::string> labels(static_cast<std::size_t>(clip.pointCount()));
   for (const int p : playback.selectedPoints()) labels[static_cast<std::size_t>(p)] = clip.labels()[static_cast<std::size_t>(p)];
-  tetrig::LiveRig live(rig, cfg.live);
+  tetrig::LiveRig live(rig, cfg.live, cfg.coarse);
   const tetrig::MarkerBindingReport binding = live.bindLabels(labels);
   if (binding.matched == 0) throw std::runtime_error("no rig marker is named in " + clip_name);
 
@@ -330,6 +331,12 @@ int main(int argc, char** argv) {
   app.add_option("--extrapolate-max-deg", cfg.live.rotation_extrapolation_max_deg,
                  "Temporal prediction: cap of a tet's predicted rotation per frame, degrees (default 5)")
       ->check(CLI::Range(0.001, 180.0));
+  std::string coarse_path;
+  app.add_option("--coarse-rig", coarse_path,
+                 "Coarse level: a rig of the same mesh and markers with fewer tet vertices, solved every frame first")
+      ->check(CLI::ExistingFile);
+  app.add_option("--coarse-iterations", cfg.live.coarse_iterations, "Coarse level: its iterations per frame (default 5)")
+      ->check(CLI::PositiveNumber);
   app.add_option("--relax", cfg.live.rotation_relaxation,
                  "Over-relaxation of each iteration's rotation update, omega (default 1.8, the live rig's; 1: off)")
       ->check(CLI::Range(1.0, 1.999));
@@ -337,13 +344,25 @@ int main(int argc, char** argv) {
   try {
     const std::vector<int> ks = parseIterations(iterations);
     const Rig rig = tetrig::loadRigFile(cfg.rig_path);
+    Rig coarse_rig;
+    if (!coarse_path.empty()) {
+      coarse_rig = tetrig::loadRigFile(coarse_path);
+      cfg.coarse = &coarse_rig;
+    }
     const Measurer measurer(rig);
     nlohmann::json out = {{"rig", cfg.rig_path},
                           {"tet_vertices", rig.tet_mesh.vertexCount()},
                           {"tets", rig.tet_mesh.tetCount()},
                           {"body_tets", rig.body_tet_count},
                           {"reference_every", cfg.reference_every},
+                          {"relax", cfg.live.rotation_relaxation},
+                          {"extrapolate", cfg.live.rotation_extrapolation},
                           {"runs", nlohmann::json::array()}};
+    if (cfg.coarse != nullptr) {
+      out["coarse_rig"] = coarse_path;
+      out["coarse_tets"] = cfg.coarse->tet_mesh.tetCount();
+      out["coarse_iterations"] = cfg.live.coarse_iterations;
+    }
     for (const std::string& clip_path : cfg.clips) {
       const auto clip = tetrig::drivers::C3DClip::load(clip_path);
       const std::string name = std::filesystem::path(clip_path).filename().string();

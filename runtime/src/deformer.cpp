@@ -205,8 +205,13 @@ Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(s
   const std::int32_t block_count = (tet_count_ + kTetBlockWidth - 1) / kTetBlockWidth;
   blocks_.assign(static_cast<size_t>(block_count), TetBlock{});
   exact_lanes_.assign(static_cast<size_t>(block_count), 0);
-  if (options_.rotation_extrapolation > 0.0) {
+  if (options_.rotation_extrapolation > 0.0 || options_.frame_guide) {
     previous_rotation_.assign(static_cast<size_t>(block_count) * 4 * kTetBlockWidth, 0.0f);
+  }
+  if (options_.frame_guide) {
+    guide_.assign(static_cast<size_t>(block_count) * 4 * kTetBlockWidth, 0.0f);
+    for (size_t b = 0; b < static_cast<size_t>(block_count); ++b)
+      std::fill_n(&guide_[4 * b * kTetBlockWidth], kTetBlockWidth, 1.0f);  // w = 1: identity
   }
   tet_slot_.assign(static_cast<size_t>(tet_count_), -1);
   for (std::int32_t b = 0; b < block_count; ++b) {
@@ -306,6 +311,7 @@ void Deformer::reset() {
     vertex_targets_[static_cast<size_t>(h)] = Eigen::Vector3d(p[0], p[1], p[2]);
   }
   for (auto& region : region_targets_) region = RigidTransform{};
+  guide_pending_ = false;
   std::copy(point_rest_.begin(), point_rest_.end(), point_targets_.begin());
   for (auto& q : interpolated_rotation_) q = Eigen::Quaterniond::Identity();
   rememberRotations();
@@ -466,10 +472,14 @@ StepStats Deformer::step(const HandleTargets& targets, const StepBudget& budget)
   updateConstantRhs();
   if (options_.update_rotations) {
     const auto t0 = Clock::now();
-    if (!previous_rotation_.empty() && !budget.continues_frame) {
-      // Temporal prediction: each tet carried on by its last frame's rotation (rotation_prediction.hpp).
+    if (!previous_rotation_.empty() && !budget.continues_frame &&
+        (options_.rotation_extrapolation > 0.0 || guide_pending_)) {
+      // Temporal prediction: each tet carried on by its last frame's rotation, and the frame guide
+      // composed in (rotation_prediction.hpp).
       predictFrameRotations(blocks_.data(), static_cast<std::int32_t>(blocks_.size()), previous_rotation_.data(),
-                            static_cast<float>(options_.rotation_extrapolation), extrapolation_max_sin_half_);
+                            guide_pending_ ? guide_.data() : nullptr, static_cast<float>(options_.rotation_extrapolation),
+                            extrapolation_max_sin_half_);
+      guide_pending_ = false;
       rebuildDelta();
     }
     interpolateRotations();
@@ -525,6 +535,17 @@ Eigen::Quaterniond Deformer::rotation(std::int32_t t) const {
   const TetBlock& block = blocks_[static_cast<size_t>(s / kTetBlockWidth)];
   const int l = s % kTetBlockWidth;
   return {block.rotation[0][l], block.rotation[1][l], block.rotation[2][l], block.rotation[3][l]};
+}
+
+bool Deformer::setFrameGuide(std::span<const float> wxyz_per_tet) noexcept {
+  if (guide_.empty() || wxyz_per_tet.size() != 4 * static_cast<size_t>(tet_count_)) return false;
+  for (std::int32_t t = 0; t < tet_count_; ++t) {
+    const std::int32_t s = slotOfTet(t);
+    const size_t base = 4 * static_cast<size_t>(s / kTetBlockWidth) * kTetBlockWidth + static_cast<size_t>(s % kTetBlockWidth);
+    for (size_t c = 0; c < 4; ++c) guide_[base + c * kTetBlockWidth] = wxyz_per_tet[4 * static_cast<size_t>(t) + c];
+  }
+  guide_pending_ = true;
+  return true;
 }
 
 void Deformer::setRotations(std::span<const Eigen::Quaterniond> rotations) {

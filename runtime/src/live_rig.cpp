@@ -5,6 +5,7 @@
 
 #include "tetrig/clock.hpp"
 #include "tetrig/pose_transfer.hpp"
+#include "tetrig/printable_text.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -23,8 +24,9 @@ const Rig& validated(const Rig& rig) {
   return rig;
 }
 
-DeformerSetup liveSetup(const Rig& rig, const LiveRigOptions& options) {
+DeformerSetup liveSetup(const Rig& rig, const LiveRigOptions& options, bool frame_guide) {
   DeformerSetup setup = rig.setup;
+  setup.options.frame_guide = frame_guide;
   setup.options.padded_positions = true;  // the input of applyPoseTransferPadded
   setup.options.rotation_extrapolation = options.rotation_extrapolation;
   setup.options.rotation_extrapolation_max_deg = options.rotation_extrapolation_max_deg;
@@ -84,10 +86,10 @@ void vertexNormals(const float* x, std::span<const std::int32_t> triangles, std:
 
 }  // namespace
 
-LiveRig::LiveRig(const Rig& rig, const LiveRigOptions& options)
+LiveRig::LiveRig(const Rig& rig, const LiveRigOptions& options, const Rig* coarse_rig)
     : rig_(&validated(rig)),
       options_(options),
-      deformer_(rig.tet_mesh, liveSetup(rig, options)),
+      deformer_(rig.tet_mesh, liveSetup(rig, options, coarse_rig != nullptr)),
       predictor_(rig.tet_mesh, rig.body_vertex_count, rig.body_tet_count, markerVertices(rig), predictionOptions(options)) {
   if (!(options.occlusion_blend_s >= 0.0) || !std::isfinite(options.occlusion_blend_s)) {
     throw std::invalid_argument("live rig: occlusion_blend_s must be finite and >= 0");
@@ -119,6 +121,7 @@ LiveRig::LiveRig(const Rig& rig, const LiveRigOptions& options)
   measured_.assign(markers, 0);
   skip_prediction_.assign(markers, 0);
   if (options.split_pose_transfer) split_ = std::make_unique<PoseTransferSplit>(rig.pose_transfer.view());
+  if (coarse_rig != nullptr) buildCoarseLevel(validated(*coarse_rig));
   prediction_.resize(markers);
   for (std::size_t k = 0; k < markers; ++k) {
     // The deformer starts at rest, where every prediction is the marker's rest position.
@@ -149,6 +152,40 @@ LiveRig::LiveRig(const Rig& rig, const LiveRigOptions& options)
     vertexNormals(rest_positions_.data(), fineTriangles(), normal_sum_, outward.data(), rest_normals_.data());
     last_normals_ = rest_normals_;
   }
+}
+
+void LiveRig::buildCoarseLevel(const Rig& coarse) {
+  const DeformerSetup& cs = coarse.setup;
+  if (cs.region_handles.size() != rig_->setup.region_handles.size()) {
+    throw std::invalid_argument("live rig: the coarse rig has " + std::to_string(cs.region_handles.size()) +
+                                " region handles and the rig " + std::to_string(rig_->setup.region_handles.size()) +
+                                ": build both from the same rig description");
+  }
+  for (const RigMarker& m : coarse.markers) {
+    std::int32_t match = -1;
+    for (std::size_t k = 0; k < rig_->markers.size(); ++k)
+      if (rig_->markers[k].label == m.label) match = static_cast<std::int32_t>(k);
+    if (match < 0) {
+      throw std::invalid_argument("live rig: the coarse rig's marker '" + printableText(m.label) +
+                                  "' is not in the rig: build both from the same marker clip");
+    }
+    coarse_marker_handles_.emplace_back(m.vertex_handle, match);
+  }
+  for (const std::int32_t v : cs.vertex_handles) coarse_vertex_targets_.push_back(coarse.tet_mesh.vertices.row(v).transpose());
+  for (const PointHandle& p : cs.point_handles) {
+    Eigen::Vector3d rest = Eigen::Vector3d::Zero();
+    for (int c = 0; c < 4; ++c) rest += p.barycentric[c] * coarse.tet_mesh.vertices.row(coarse.tet_mesh.tets(p.tet, c)).transpose();
+    coarse_point_targets_.push_back(rest);
+  }
+  coarse_region_targets_.assign(cs.region_handles.size(), RigidTransform{});
+  DeformerSetup setup = cs;
+  setup.options.padded_positions = false;
+  setup.options.rotation_extrapolation = 0.0;  // measured: no gain on the coarse chain (docs/fidelity.md)
+  setup.options.rotation_relaxation = options_.rotation_relaxation;
+  setup.options.frame_guide = false;
+  CoarseLevelOptions co;
+  co.iterations = options_.coarse_iterations;
+  coarse_ = std::make_unique<CoarseLevel>(rig_->tet_mesh, coarse.tet_mesh, setup, co);
 }
 
 std::span<const std::int32_t> LiveRig::fineTriangles() const noexcept {
@@ -354,6 +391,18 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
   for (std::size_t k = 0; k < markers; ++k) anchored += tracks_[k].state == MarkerTrackState::kMeasured ? 1u : 0u;
   const bool refresh = options_.refresh_predictions && budget.max_iterations >= 2 && anchored > 0 &&
                        (stats.occluded_markers > 0 || blending > 0);
+  if (coarse_) {
+    // The coarse level on the same frame's marker targets: it sets the fine frame's start.
+    for (const auto& [handle, marker] : coarse_marker_handles_)
+      coarse_vertex_targets_[static_cast<std::size_t>(handle)] = marker_target_[static_cast<std::size_t>(marker)];
+    std::copy(region_targets_.begin(), region_targets_.end(), coarse_region_targets_.begin());
+    HandleTargets coarse_targets;
+    coarse_targets.vertex_positions = coarse_vertex_targets_;
+    coarse_targets.region_transforms = coarse_region_targets_;
+    coarse_targets.point_positions = coarse_point_targets_;
+    const StepStats cs = coarse_->guide(coarse_targets, deformer_);
+    stats.coarse_ns = cs.total_ns;
+  }
   if (!refresh) {
     stats.step = deformer_.step(targets, budget);
   } else {
@@ -382,6 +431,7 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
       stats.step.flags |= kStepDeadlineHit;
     }
   }
+  stats.step.total_ns += stats.coarse_ns;
   stepped_ = true;
   if (stats.step.flags & kStepDeadlineHit) stats.flags |= kLiveDeadlineHit;
   if (stats.step.flags & (kStepTargetsRejected | kStepTargetsWrongSize)) stats.flags |= kLiveTargetsRejected;
@@ -408,6 +458,7 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
     writeLastPose(positions, normals);
     deformer_.reset();
     predictor_.reset();
+    if (coarse_) coarse_->reset();
   }
   stats.pose_transfer_ns = monotonicNowNs() - t0;
   return stats;

@@ -620,11 +620,16 @@ TEST(LiveRig, SameFramesGiveBitIdenticalOutputs) {
   }
 }
 
-TEST(LiveRig, NoAllocationPerFrameAfterWarmUp) {
+// With and without the coarse level (the rig as its own coarse level) and the temporal prediction.
+class LiveRigAllocations : public ::testing::TestWithParam<bool> {};
+
+TEST_P(LiveRigAllocations, NonePerFrameAfterWarmUp) {
   const Rig rig = makeBarRig();
   LiveRigOptions options;
   options.normals = true;
-  LiveRig live(rig, options);
+  const bool coarse = GetParam();
+  if (coarse) options.rotation_extrapolation = 1.0;
+  LiveRig live(rig, options, coarse ? &rig : nullptr);
   std::vector<std::string> labels = labelTable();
   labels[6] = "";  // one rig marker never named
   live.bindLabels(labels);
@@ -655,6 +660,8 @@ TEST(LiveRig, NoAllocationPerFrameAfterWarmUp) {
   EXPECT_TRUE(flags & kLiveMarkersPredicted);
   EXPECT_TRUE(flags & kLiveMarkersBlending);
 }
+INSTANTIATE_TEST_SUITE_P(CoarseLevel, LiveRigAllocations, ::testing::Bool(),
+                         [](const ::testing::TestParamInfo<bool>& i) { return i.param ? "WithCoarseLevel" : "Plain"; });
 
 TEST(LiveRig, NormalsAreUnitAndOutward) {
   const Rig rig = makeBarRig();
@@ -771,6 +778,62 @@ TEST(LiveRig, RejectsInvalidRigsAndOptions) {
   EXPECT_THROW(LiveRig(rig, bad), std::invalid_argument);
   rig.markers[0].vertex_handle = 5;  // not the handle of its vertex
   EXPECT_THROW(LiveRig{rig}, std::invalid_argument);
+}
+
+// ---------------------------------------------------------------------------------------------
+// The coarse level (tetrig/coarse_level.hpp) through the live rig.
+
+TEST(LiveRigCoarse, RefusesACoarseRigThatDoesNotFit) {
+  const Rig rig = makeBarRig();
+  Rig renamed = rig;
+  renamed.markers[3].label = "Q3";
+  EXPECT_THROW(LiveRig(rig, {}, &renamed), std::invalid_argument);
+  const Rig with_region = makeBarRig(false, true);
+  EXPECT_THROW(LiveRig(rig, {}, &with_region), std::invalid_argument);
+  EXPECT_THROW(LiveRig(with_region, {}, &rig), std::invalid_argument);
+  LiveRigOptions bad;
+  bad.coarse_iterations = 0;
+  EXPECT_THROW(LiveRig(rig, bad, &rig), std::invalid_argument);
+  EXPECT_NO_THROW(LiveRig(rig, {}, &rig));
+  EXPECT_EQ(LiveRig(rig).coarseLevel(), nullptr);
+}
+
+// The rig as its own coarse level: its 10-iteration rotation change starts the frame, so 3
+// iterations per frame land nearer the converged pose of a fast twist than the plain chain, and
+// the result is written like any other frame.
+TEST(LiveRigCoarse, TheCoarseLevelStartsTheFrameNearerTheConvergedPose) {
+  const Rig rig = makeBarRig();
+  LiveRigOptions options;
+  LiveRig plain(rig, options), guided(rig, options, &rig);
+  ASSERT_NE(guided.coarseLevel(), nullptr);
+  plain.bindLabels(labelTable());
+  guided.bindLabels(labelTable());
+  const std::vector<bool> all(rig.markers.size(), true);
+  std::vector<float> xp(static_cast<std::size_t>(plain.fineVertexCount()) * 3), xg = xp;
+  LiveFrameStats sg;
+  for (int f = 1; f <= 20; ++f) {
+    const MarkerFrame frame = makeFrame(rig, movedMarkers(rig, 0.06 * f, 0.02 * f, Eigen::Vector3d::Zero()), all, static_cast<std::uint64_t>(f));
+    plain.processFrame(frame, StepBudget{3}, xp.data(), nullptr);
+    sg = guided.processFrame(frame, StepBudget{3}, xg.data(), nullptr);
+  }
+  EXPECT_GT(sg.coarse_ns, 0);
+  EXPECT_GE(sg.step.total_ns, sg.coarse_ns);
+  // Converged pose of the last frame's targets.
+  Deformer converged(rig.tet_mesh, rig.setup);
+  HandleTargets targets;
+  targets.vertex_positions = guided.vertexTargets();
+  targets.region_transforms = guided.regionTargets();
+  targets.point_positions = guided.pointTargets();
+  converged.step(targets, StepBudget{3000});
+  std::vector<float> xc(xp.size());
+  std::vector<double> fine(xp.size());
+  applyPoseTransfer(rig.pose_transfer.view(), converged.positions().data(), fine.data());
+  for (std::size_t i = 0; i < xc.size(); ++i) xc[i] = static_cast<float>(fine[i]);
+  const double lag_plain = maxDistance(xp, xc), lag_guided = maxDistance(xg, xc);
+  std::printf("bar twisted 3.4 degrees per frame at its end, 3 iterations per frame: %.4f plain, %.4f with the rig as its own "
+              "coarse level (bar length 8)\n",
+              lag_plain, lag_guided);
+  EXPECT_LT(lag_guided, 0.5 * lag_plain);
 }
 
 }  // namespace

@@ -7,6 +7,7 @@
 #include "tetrig/ldlt_factor.hpp"
 #include "tetrig/polar.hpp"
 #include "tetrig/rotation_kernel.hpp"
+#include "tetrig/rotation_prediction.hpp"
 
 #include <gtest/gtest.h>
 
@@ -253,6 +254,78 @@ TEST(RotationKernel, MixedInvertedTetsGetTheExactRotationInDeltaAndEnergy) {
   const std::int32_t used = s.mesh.tetCount() % kTetBlockWidth;
   if (used != 0) {
     EXPECT_EQ(s.exact_lanes.back() >> used, 0);
+  }
+}
+
+// The frame-start kernel (rotation_prediction.hpp) against its formula in double, on every path:
+// velocity (alpha 1) with and without a guide, the angle cap on and off, guide only (alpha 0), and
+// a damped alpha (the scalar loop).
+TEST(RotationPrediction, MatchesTheQuaternionFormulaInDouble) {
+  std::mt19937 rng(5);
+  std::normal_distribution<double> normal;
+  const auto random = [&](double spread) {
+    return Eigen::Quaterniond(1.0 + normal(rng) * spread, normal(rng) * spread, normal(rng) * spread, normal(rng) * spread).normalized();
+  };
+  constexpr int kBlocks = 3, W = kTetBlockWidth, n = kBlocks * W;
+  const double cap = 5.0 * M_PI / 180.0;
+  const float max_sin_half = static_cast<float>(std::sin(0.5 * cap));
+  std::vector<Eigen::Quaterniond> r(n), p(n), g(n);
+  for (int t = 0; t < n; ++t) {
+    r[static_cast<std::size_t>(t)] = random(10.0);
+    // Half the lanes move less than the cap since P, half more.
+    p[static_cast<std::size_t>(t)] = random(t % 2 == 0 ? 0.01 : 0.5) * r[static_cast<std::size_t>(t)];
+    g[static_cast<std::size_t>(t)] = random(0.3);
+  }
+  for (const float alpha : {1.0f, 0.0f, 0.5f}) {
+    for (const bool with_guide : {false, true}) {
+      std::vector<TetBlock> blocks(kBlocks);
+      std::vector<float> previous(4 * n), guide(4 * n);
+      for (int t = 0; t < n; ++t) {
+        const int b = t / W, l = t % W;
+        const auto put = [&](float* base, const Eigen::Quaterniond& q) {
+          base[l] = static_cast<float>(q.w());
+          base[W + l] = static_cast<float>(q.x());
+          base[2 * W + l] = static_cast<float>(q.y());
+          base[3 * W + l] = static_cast<float>(q.z());
+        };
+        put(&blocks[static_cast<std::size_t>(b)].rotation[0][0], r[static_cast<std::size_t>(t)]);
+        put(&previous[static_cast<std::size_t>(4 * b * W)], p[static_cast<std::size_t>(t)]);
+        put(&guide[static_cast<std::size_t>(4 * b * W)], g[static_cast<std::size_t>(t)]);
+      }
+      predictFrameRotations(blocks.data(), kBlocks, previous.data(), with_guide ? guide.data() : nullptr, alpha, max_sin_half);
+      double worst = 0.0, worst_previous = 0.0;
+      int capped = 0;
+      for (int t = 0; t < n; ++t) {
+        const auto i = static_cast<std::size_t>(t);
+        const Eigen::Quaterniond base = with_guide ? (g[i] * r[i]).normalized() : r[i];
+        Eigen::Quaterniond expect = base;
+        if (alpha != 0.0f) {
+          Eigen::Quaterniond d = r[i] * p[i].conjugate();
+          if (d.w() < 0.0) d.coeffs() = -d.coeffs();
+          Eigen::AngleAxisd aa(d);
+          if (aa.angle() > cap) {
+            aa.angle() = cap;
+            ++capped;
+          }
+          aa.angle() *= alpha;
+          expect = (Eigen::Quaterniond(aa) * base).normalized();
+        }
+        const int b = t / W, l = t % W;
+        const auto get = [&](const float* q) {
+          return Eigen::Quaterniond(q[l], q[W + l], q[2 * W + l], q[3 * W + l]);
+        };
+        const Eigen::Quaterniond got = get(&blocks[static_cast<std::size_t>(b)].rotation[0][0]);
+        const Eigen::Quaterniond got_previous = get(&previous[static_cast<std::size_t>(4 * b * W)]);
+        worst = std::max(worst, std::min((got.coeffs() - expect.coeffs()).norm(), (got.coeffs() + expect.coeffs()).norm()));
+        worst_previous = std::max(worst_previous, (got_previous.coeffs() - base.coeffs()).norm());
+      }
+      EXPECT_LT(worst, 2e-6) << "alpha " << alpha << (with_guide ? " with" : " without") << " a guide";
+      EXPECT_LT(worst_previous, 2e-6) << "alpha " << alpha << (with_guide ? " with" : " without") << " a guide";
+      if (alpha != 0.0f) {
+        EXPECT_GT(capped, n / 4);  // both paths of the cap ran
+        EXPECT_LT(capped, 3 * n / 4);
+      }
+    }
   }
 }
 

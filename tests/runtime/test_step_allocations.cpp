@@ -3,6 +3,7 @@
 #include "deformer_test_util.hpp"
 #include "counting_allocator.hpp"
 #include "test_data.hpp"
+#include "tetrig/coarse_level.hpp"
 #include "tetrig/tet_mesh_io.hpp"
 
 #include <gtest/gtest.h>
@@ -64,6 +65,46 @@ TEST(StepAllocations, NoneWithTheTemporalPrediction) {
   std::vector<HandleTargets> frames(positions.size());
   for (size_t f = 0; f < positions.size(); ++f) frames[f].vertex_positions = positions[f];
   EXPECT_EQ(allocationsDuringSteps(deformer, frames, 3, nullptr), 0u);
+}
+
+// The coarse level's frame (its own step, the rotation change, the fine deformer's frame guide) and
+// the guided fine step, with the temporal prediction on too.
+TEST(StepAllocations, NoneWithTheCoarseLevel) {
+  const auto fine = scenes::makeBarScene(4, 4, 32);
+  auto coarse_bar = scenes::makeBarScene(2, 2, 16);
+  coarse_bar.mesh.vertices *= 2.0;
+  DeformerSetup setup = test::endVertexHandles(fine);
+  setup.options.frame_guide = true;
+  setup.options.rotation_extrapolation = 1.0;
+  Deformer deformer(fine.mesh, setup);
+  CoarseLevel coarse(fine.mesh, coarse_bar.mesh, test::endVertexHandles(coarse_bar));
+  std::vector<std::vector<Eigen::Vector3d>> fine_targets, coarse_targets;
+  for (int f = 0; f < 8; ++f) {
+    const Eigen::Isometry3d far = scenes::barAxisTransform(fine, 0.3 * f, Eigen::Vector3d(0, f, 0));
+    fine_targets.push_back(test::endTargets(fine, far));
+    auto c = scenes::transformedPositions(coarse_bar.mesh, coarse_bar.near_vertices, Eigen::Isometry3d::Identity());
+    const auto cf = scenes::transformedPositions(coarse_bar.mesh, coarse_bar.far_vertices, far);
+    c.insert(c.end(), cf.begin(), cf.end());
+    coarse_targets.push_back(std::move(c));
+  }
+  const auto run = [&](std::size_t f) {
+    HandleTargets ft, ct;
+    ft.vertex_positions = fine_targets[f];
+    ct.vertex_positions = coarse_targets[f];
+    coarse.guide(ct, deformer);
+    return deformer.step(ft, StepBudget{3});
+  };
+  run(0);  // warm-up
+  Eigen::internal::set_is_malloc_allowed(false);
+  const std::uint64_t before = ::tetrig::test::allocationCount();
+  for (std::size_t f = 1; f < fine_targets.size(); ++f) run(f);
+  const std::uint64_t after = ::tetrig::test::allocationCount();
+  Eigen::internal::set_is_malloc_allowed(true);
+  EXPECT_EQ(after - before, 0u);
+  // The guide was used: the coarse level moved.
+  EXPECT_GT(coarse.deformer().rotation(0).angularDistance(Eigen::Quaterniond::Identity()) +
+                coarse.deformer().rotation(coarse.deformer().tetCount() - 1).angularDistance(Eigen::Quaterniond::Identity()),
+            0.01);
 }
 
 TEST(StepAllocations, NoneWithRegionsInterpolationRigidGroupsAndPointHandles) {

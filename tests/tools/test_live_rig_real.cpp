@@ -44,6 +44,7 @@ struct Scene {
   Rig rig;
   drivers::C3DClip clip;
   std::vector<std::string> labels;  // by C3D point index, as a playback source names them
+  std::unique_ptr<Rig> coarse;      // the same rig with 300 tet vertices (coarse level), when asked for
 };
 
 // Labels by point index: the clip's label, or "point<p>" for a point without one (the name
@@ -70,7 +71,7 @@ const Scene& cachedScene(const std::string& key, const SceneBuilder& build) {
 // it (the occlusion tests below need a rig, not a good one; the build refuses such a frame otherwise).
 std::unique_ptr<Scene> buildScene(const std::filesystem::path& mesh, const std::filesystem::path& rig_clip, std::int64_t frame,
                                   double max_distance, std::vector<std::string> exclude, const std::filesystem::path& drive_clip,
-                                  bool accept_pose_mismatch = false) {
+                                  bool accept_pose_mismatch = false, bool with_coarse = false) {
   rigbuild::BuildRigInputs in;
   in.mesh = mesh;
   in.clip = rig_clip;
@@ -80,8 +81,12 @@ std::unique_ptr<Scene> buildScene(const std::filesystem::path& mesh, const std::
   in.description.markers.exclude = std::move(exclude);
   in.accept_pose_mismatch = accept_pose_mismatch;
   in.check_deformer = false;
-  auto scene = std::make_unique<Scene>(Scene{rigbuild::buildRig(in), drivers::C3DClip::load(drive_clip), {}});
+  auto scene = std::make_unique<Scene>(Scene{rigbuild::buildRig(in), drivers::C3DClip::load(drive_clip), {}, nullptr});
   scene->labels = pointLabels(scene->clip);
+  if (with_coarse) {
+    in.tet_vertices = 300;
+    scene->coarse = std::make_unique<Rig>(rigbuild::buildRig(in));
+  }
   return scene;
 }
 
@@ -95,7 +100,7 @@ drivers::C3DPlaybackOptions playbackOptions() {
 class ClipRun {
  public:
   ClipRun(const Scene& scene, const LiveRigOptions& options = {})
-      : live_(scene.rig, options), playback_(scene.clip, playbackOptions()) {
+      : live_(scene.rig, options, scene.coarse.get()), playback_(scene.clip, playbackOptions()) {
     binding_ = live_.bindLabels(scene.labels);
     const std::size_t n = static_cast<std::size_t>(live_.fineVertexCount()) * 3;
     x_.assign(live_.restPositions().begin(), live_.restPositions().end());
@@ -337,12 +342,25 @@ TEST(LiveRigReal, Hdm05OccludedMarkersAgainstTheUnoccludedRun) {
   EXPECT_LE(kept_error[2], 0.7 * error[2]);
 }
 
-TEST(LiveRigReal, Hdm05NoAllocationPerFrame) {
+const Scene* smplHdm05WithCoarseLevel() {
+  return &cachedScene("hdm05+coarse", [] {
+    return buildScene(test::dataPath(kMan), test::dataPath(kHdm05), 0, 0.15, {}, test::dataPath(kHdm05), false, true);
+  });
+}
+
+// Every path of the frame (prediction, blends, held poses), with and without the coarse level
+// (and the temporal prediction with it).
+class LiveRigRealAllocations : public ::testing::TestWithParam<bool> {};
+
+TEST_P(LiveRigRealAllocations, Hdm05NoAllocationPerFrame) {
   TETRIG_REQUIRE_DATA(man, kMan);
   TETRIG_REQUIRE_DATA(clip, kHdm05);
-  const Scene& scene = *smplHdm05();
+  const bool coarse = GetParam();
+  const Scene& scene = coarse ? *smplHdm05WithCoarseLevel() : *smplHdm05();
+  ASSERT_EQ(scene.coarse != nullptr, coarse);
   LiveRigOptions options;
   options.normals = true;
+  if (coarse) options.rotation_extrapolation = 1.0;
   ClipRun run(scene, options);
   const int lwra = scene.clip.findPoint("LWRA");
   const auto occlude = [&](std::size_t f) {
@@ -366,6 +384,8 @@ TEST(LiveRigReal, Hdm05NoAllocationPerFrame) {
   EXPECT_TRUE(flags & kLivePoseHeld);
   EXPECT_TRUE(run.allFinite());
 }
+INSTANTIATE_TEST_SUITE_P(CoarseLevel, LiveRigRealAllocations, ::testing::Bool(),
+                         [](const ::testing::TestParamInfo<bool>& i) { return i.param ? "WithCoarseLevel" : "Plain"; });
 
 // ---------------------------------------------------------------------------------------------
 // Real gaps. Edges: the frames from a marker's dropout or return until its blend is over (+2).

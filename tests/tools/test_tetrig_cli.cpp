@@ -139,6 +139,12 @@ TEST(TetrigCli, RunPlaysAClipAndRefusesBadInput) {
     EXPECT_CONTAINS(r.err, needle);
   };
   one_line_error(run("run --rig /nonexistent/x.rig --source synthetic", dir), "/nonexistent/x.rig");
+  // The coarse level (here the rig as its own coarse level): announced, and a missing file refused.
+  const CliRun coarse = run("run --rig '" + rig + "' --coarse-rig '" + rig + "' --source 'c3d:" + clip.string() + "' --publish " + name, dir);
+  ASSERT_EQ(coarse.status, 0) << coarse.err;
+  EXPECT_CONTAINS(coarse.out, "coarse level: ");
+  EXPECT_CONTAINS(coarse.out, " tets, 5 iterations per frame");
+  one_line_error(run("run --rig '" + rig + "' --coarse-rig /nonexistent/c.rig --source synthetic", dir), "/nonexistent/c.rig");
   one_line_error(run("run --rig '" + rig + "' --source 'c3d:/nonexistent/clip.c3d'", dir), "/nonexistent/clip.c3d");
   one_line_error(run("run --rig '" + rig + "' --source 'tcp:1234'", dir), "tcp");
   // A clip of another marker set: no label in common.

@@ -81,6 +81,8 @@ struct DeformerOptions {
   double rotation_relaxation = 1.0;  // omega in [1, 2): each iteration's rotation update is carried on by
                                      // omega times itself (rotation_kernel.hpp, over-relaxation); 1: plain
   double rotation_extrapolation_max_deg = 5.0;  // a tet's predicted rotation per frame is capped at this angle
+  bool frame_guide = false;  // accept a per-frame rotation increment per tet from outside (setFrameGuide;
+                             // the coarse level, tetrig/coarse_level.hpp); 16 bytes per tet more state
 };
 
 struct DeformerSetup {
@@ -154,6 +156,13 @@ class Deformer {
   // Not for the frame path: allocation-free but O(#T).
   void setRotations(std::span<const Eigen::Quaterniond> rotations);
 
+  // Frame guide (DeformerOptions::frame_guide): a rotation increment G per tet (4 floats w x y z per
+  // tet, mesh tet order, unit quaternions) composed onto every tet's rotation at the start of the
+  // next step() that begins a frame, before its first solve: R' = G R, with the temporal prediction
+  // taken beyond the guide (tetrig/rotation_prediction.hpp). Used once, then cleared. Returns false
+  // (and keeps nothing) without the option or with the wrong size. No allocation, lock or exception.
+  bool setFrameGuide(std::span<const float> wxyz_per_tet) noexcept;
+
   // Back to the rest state: rotations I, positions at rest, handle targets at rest.
   void reset();
 
@@ -222,6 +231,10 @@ class Deformer {
   // the previous frame, laid out like the blocks' rotations ([block][component][lane]).
   AlignedVector<float> previous_rotation_;
   float extrapolation_max_sin_half_ = 1.0f;  // sin(cap / 2)
+  // Frame guide (options_.frame_guide): this frame's increment per slot, same layout; identity in
+  // padding lanes.
+  AlignedVector<float> guide_;
+  bool guide_pending_ = false;
 
   // Rigid groups: CSR over tet slots.
   std::vector<std::int32_t> group_start_, group_slot_;

@@ -45,6 +45,7 @@
 // thread): processFrame() allocates nothing, takes no lock, throws nothing and does no I/O.
 #pragma once
 
+#include "tetrig/coarse_level.hpp"
 #include "tetrig/deformer.hpp"
 #include "tetrig/marker_frame.hpp"
 #include "tetrig/marker_prediction.hpp"
@@ -81,6 +82,7 @@ struct LiveRigOptions {
   double rotation_extrapolation = 0.0;          // DeformerOptions::rotation_extrapolation
   double rotation_extrapolation_max_deg = 5.0;  // DeformerOptions::rotation_extrapolation_max_deg
   double rotation_relaxation = 1.8;             // DeformerOptions::rotation_relaxation (docs/fidelity.md: 1.8 measured best on HDM05)
+  int coarse_iterations = 5;   // with a coarse rig: its iterations per frame (CoarseLevelOptions::iterations)
 };
 
 enum LiveFrameFlags : std::uint32_t {
@@ -96,6 +98,7 @@ enum LiveFrameFlags : std::uint32_t {
 struct LiveFrameStats {
   StepStats step;                    // the deformer's own stats (iterations, energy, flags, phase times); zero when held
   std::int64_t pose_transfer_ns = 0; // x_fine = B x_tet (+ normals), or the copy of the last pose when held
+  std::int64_t coarse_ns = 0;        // the coarse level's step (with a coarse rig), also counted in step.total_ns
   std::uint16_t measured_markers = 0;   // rig markers measured in this frame (blending back ones included)
   std::uint16_t occluded_markers = 0;   // rig markers driven by their prediction (unbound ones included)
   std::uint16_t blending_markers = 0;   // rig markers in a dropout fade or a return blend
@@ -125,7 +128,13 @@ class LiveRig {
   // the prediction anchors, the rest normals and every per-frame buffer. Throws what the Deformer
   // and MarkerPredictor throw, and std::invalid_argument for a rig that fails validateRig or for
   // negative options.
-  explicit LiveRig(const Rig& rig, const LiveRigOptions& options = {});
+  // coarse_rig (optional): a coarser rig of the same mesh and markers (tetrig build-rig with fewer
+  // --tet-vertices) solved every frame before the fine iterations; its rotation change starts the
+  // fine tets (tetrig/coarse_level.hpp). Its markers are matched to the rig's by label (every one
+  // must be in the rig), its region handles take the rig's region targets (same count required),
+  // its other handles stay at rest. Throws std::invalid_argument when it does not fit the rig. The
+  // live rig keeps no reference to it.
+  explicit LiveRig(const Rig& rig, const LiveRigOptions& options = {}, const Rig* coarse_rig = nullptr);
 
   // Load time (allocates): binds the source's label table (labels_by_id[id] labels every Marker
   // with that id; only ids < 65536 can occur) to the rig's markers. A label matches a rig marker
@@ -150,6 +159,7 @@ class LiveRig {
   std::span<const float> restNormals() const noexcept { return rest_normals_; }       // #fine*3 (empty unless normals)
   const Rig& rig() const noexcept { return *rig_; }
   const Deformer& deformer() const noexcept { return deformer_; }
+  const CoarseLevel* coarseLevel() const noexcept { return coarse_.get(); }  // nullptr without a coarse rig
   const LiveRigOptions& options() const noexcept { return options_; }
 
   // Region handles' targets (x = R x_rest + t, rig units), passed to every step: identity (rest)
@@ -183,6 +193,7 @@ class LiveRig {
     std::int64_t return_ns = 0;                        // t1 (internal clock)
   };
 
+  void buildCoarseLevel(const Rig& coarse);                  // load time
   double blendWeight(std::int64_t since_ns) const noexcept;  // s((now - event) / T)
   double dropoutWeight(const Track& track) const noexcept;   // 1 - s((now - t0) / T)
   void refreshPredictions() noexcept;                         // prediction_ from the deformer's pose
@@ -193,6 +204,12 @@ class LiveRig {
   Deformer deformer_;
   MarkerPredictor predictor_;
   std::unique_ptr<PoseTransferSplit> split_;  // when options.split_pose_transfer
+  // Coarse level (with a coarse rig): its handle targets, and per coarse marker its vertex handle
+  // and the rig marker that drives it.
+  std::unique_ptr<CoarseLevel> coarse_;
+  std::vector<Eigen::Vector3d> coarse_vertex_targets_, coarse_point_targets_;
+  std::vector<RigidTransform> coarse_region_targets_;
+  std::vector<std::pair<std::int32_t, std::int32_t>> coarse_marker_handles_;  // (coarse vertex handle, rig marker)
   std::int64_t blend_ns_ = 0;
   std::int64_t untimed_ns_ = 0;
   double max_abs_coordinate_ = 0.0;

@@ -13,9 +13,15 @@
 // pose, median 41 -> 6 mm). alpha < 1 damps the prediction. D's angle is capped at `max_angle`
 // (given as sin(max_angle / 2)): a tet whose rotation jumped (e.g. through an inverted state) is
 // not carried on by the jump.
-// Per tet, in float, on the blocks' quaternions; `previous` holds R_{n-1} in the blocks' layout
-// ([block][component][lane], 4 * kTetBlockWidth floats per block) and receives R_n.
-// No allocation, lock or exception; one thread.
+// With a frame guide G (a per-tet rotation increment for this frame from outside, e.g. the coarse
+// level's rotation change, tetrig/coarse_level.hpp), the velocity is taken beyond the guide the last
+// frame had and the guide is composed in:
+//     W  = (R_n P^-1)^alpha (capped as D above),   R' = W G R_n,   P <- G R_n,
+// where P is what `previous` holds: G_{n-1} R_{n-1} (R_{n-1} when the last frame had no guide).
+// Without a guide, G = I and this is the prediction above; alpha = 0 leaves R' = G R_n.
+// Per tet, in float, on the blocks' quaternions; `previous` holds P in the blocks' layout
+// ([block][component][lane], 4 * kTetBlockWidth floats per block) and receives the new P; `guide`
+// (nullptr: none) holds G in the same layout. No allocation, lock or exception; one thread.
 #pragma once
 
 #include "tetrig/rotation_kernel.hpp"
@@ -24,6 +30,7 @@
 
 namespace tetrig {
 
-void predictFrameRotations(TetBlock* blocks, std::int32_t block_count, float* previous, float alpha, float max_sin_half);
+void predictFrameRotations(TetBlock* blocks, std::int32_t block_count, float* previous, const float* guide, float alpha,
+                           float max_sin_half);
 
 }  // namespace tetrig

@@ -1,0 +1,86 @@
+// The coarse level (coarse_level.hpp has the method).
+#include "tetrig/coarse_level.hpp"
+
+#include <Eigen/Geometry>
+
+#include <limits>
+#include <stdexcept>
+
+namespace tetrig {
+
+namespace {
+
+std::vector<Eigen::Vector3d> restCentroids(const TetMesh& mesh) {
+  std::vector<Eigen::Vector3d> c(static_cast<std::size_t>(mesh.tetCount()));
+  for (std::int32_t t = 0; t < mesh.tetCount(); ++t) {
+    Eigen::Vector3d s = Eigen::Vector3d::Zero();
+    for (int k = 0; k < 4; ++k) s += mesh.vertices.row(mesh.tets(t, k)).transpose();
+    c[static_cast<std::size_t>(t)] = 0.25 * s;
+  }
+  return c;
+}
+
+void storeQuaternion(const Eigen::Quaterniond& q, float* out) {
+  out[0] = static_cast<float>(q.w());
+  out[1] = static_cast<float>(q.x());
+  out[2] = static_cast<float>(q.y());
+  out[3] = static_cast<float>(q.z());
+}
+
+}  // namespace
+
+CoarseLevel::CoarseLevel(const TetMesh& fine_mesh, const TetMesh& coarse_mesh, const DeformerSetup& coarse_setup,
+                         const CoarseLevelOptions& options)
+    : options_(options), coarse_(coarse_mesh, coarse_setup) {
+  if (options_.iterations < 1) throw std::invalid_argument("coarse level: iterations must be at least 1");
+  if (coarse_mesh.tetCount() == 0 || fine_mesh.tetCount() == 0) throw std::invalid_argument("coarse level: empty tet mesh");
+  // Nearest rest centroid, brute force: load time, O(#fine tets x #coarse tets) (8164 x 1639 tets:
+  // about 15 ms).
+  const std::vector<Eigen::Vector3d> fine_c = restCentroids(fine_mesh);
+  const std::vector<Eigen::Vector3d> coarse_c = restCentroids(coarse_mesh);
+  coarse_of_fine_.assign(fine_c.size(), 0);
+  for (std::size_t f = 0; f < fine_c.size(); ++f) {
+    double best = std::numeric_limits<double>::infinity();
+    for (std::size_t c = 0; c < coarse_c.size(); ++c) {
+      const double d = (fine_c[f] - coarse_c[c]).squaredNorm();
+      if (d < best) {
+        best = d;
+        coarse_of_fine_[f] = static_cast<std::int32_t>(c);
+      }
+    }
+  }
+  previous_.assign(4 * coarse_c.size(), 0.0f);
+  change_.assign(4 * coarse_c.size(), 0.0f);
+  guide_.assign(4 * fine_c.size(), 0.0f);
+  reset();
+}
+
+void CoarseLevel::reset() noexcept {
+  coarse_.reset();
+  for (std::size_t c = 0; c < previous_.size(); c += 4) {
+    previous_[c] = 1.0f;
+    previous_[c + 1] = previous_[c + 2] = previous_[c + 3] = 0.0f;
+  }
+}
+
+StepStats CoarseLevel::guide(const HandleTargets& coarse_targets, Deformer& fine) noexcept {
+  const StepStats stats = coarse_.step(coarse_targets, StepBudget{options_.iterations});
+  // Q_c = R_c,n R_c,n-1^-1 per coarse tet; R_c,n-1 <- R_c,n.
+  for (std::int32_t c = 0; c < coarse_.tetCount(); ++c) {
+    float* p = &previous_[4 * static_cast<std::size_t>(c)];
+    const Eigen::Quaterniond now = coarse_.rotation(c);
+    const Eigen::Quaterniond before(p[0], p[1], p[2], p[3]);
+    Eigen::Quaterniond q = now * before.conjugate();
+    if (q.w() < 0.0) q.coeffs() = -q.coeffs();
+    storeQuaternion(q.normalized(), &change_[4 * static_cast<std::size_t>(c)]);
+    storeQuaternion(now, p);
+  }
+  for (std::size_t f = 0; f < coarse_of_fine_.size(); ++f) {
+    const float* q = &change_[4 * static_cast<std::size_t>(coarse_of_fine_[f])];
+    for (std::size_t k = 0; k < 4; ++k) guide_[4 * f + k] = q[k];
+  }
+  fine.setFrameGuide(guide_);
+  return stats;
+}
+
+}  // namespace tetrig

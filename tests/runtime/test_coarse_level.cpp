@@ -1,0 +1,177 @@
+// The coarse level (tetrig/coarse_level.hpp) and the deformer's frame guide it sets.
+#include "deformer_test_util.hpp"
+#include "tetrig/coarse_level.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <vector>
+
+namespace tetrig {
+namespace {
+
+HandleTargets vertexTargetsOf(const std::vector<Eigen::Vector3d>& positions) {
+  HandleTargets t;
+  t.vertex_positions = positions;
+  return t;
+}
+
+std::vector<Eigen::Quaterniond> rotationsOf(const Deformer& d) {
+  std::vector<Eigen::Quaterniond> r(static_cast<std::size_t>(d.tetCount()));
+  for (std::int32_t t = 0; t < d.tetCount(); ++t) r[static_cast<std::size_t>(t)] = d.rotation(t);
+  return r;
+}
+
+// Converged pose of `targets` from `start` rotations: max vertex distance of `d` from it.
+double distanceToConverged(const scenes::BarScene& bar, const Deformer& d, const std::vector<Eigen::Vector3d>& targets) {
+  Deformer converged(bar.mesh, test::endVertexHandles(bar));
+  converged.setRotations(rotationsOf(d));
+  converged.step(vertexTargetsOf(targets), StepBudget{4000});
+  return (test::deformedVertices(d) - test::deformedVertices(converged)).rowwise().norm().maxCoeff();
+}
+
+// The same bar, coarser: half the cubes along each axis, each twice the size.
+struct BarPair {
+  scenes::BarScene fine = scenes::makeBarScene(4, 4, 32);
+  scenes::BarScene coarse = [] {
+    scenes::BarScene c = scenes::makeBarScene(2, 2, 16);
+    c.mesh.vertices *= 2.0;
+    c.axis_point *= 2.0;
+    c.length *= 2.0;
+    return c;
+  }();
+};
+
+// Targets of both bars' end vertices for the fine bar's bend by `angle`.
+std::vector<Eigen::Vector3d> bendTargets(const BarPair& bars, const scenes::BarScene& which, double angle) {
+  const Eigen::Isometry3d far = scenes::barBendTransform(bars.fine, angle);
+  auto targets = scenes::transformedPositions(which.mesh, which.near_vertices, Eigen::Isometry3d::Identity());
+  const auto far_targets = scenes::transformedPositions(which.mesh, which.far_vertices, far);
+  targets.insert(targets.end(), far_targets.begin(), far_targets.end());
+  return targets;
+}
+
+TEST(FrameGuide, RefusedWithoutTheOptionOrWithTheWrongSize) {
+  const auto bar = scenes::makeBarScene(2, 2, 6);
+  Deformer plain(bar.mesh, test::endVertexHandles(bar));
+  const std::vector<float> identity = [&] {
+    std::vector<float> q(4 * static_cast<std::size_t>(bar.mesh.tetCount()), 0.0f);
+    for (std::size_t t = 0; t < q.size(); t += 4) q[t] = 1.0f;
+    return q;
+  }();
+  EXPECT_FALSE(plain.setFrameGuide(identity));
+  DeformerSetup setup = test::endVertexHandles(bar);
+  setup.options.frame_guide = true;
+  Deformer guided(bar.mesh, setup);
+  EXPECT_FALSE(guided.setFrameGuide(std::span<const float>(identity).first(identity.size() - 4)));
+  EXPECT_TRUE(guided.setFrameGuide(identity));
+}
+
+// Given the converged rotations' change as the guide, one solve lands on the converged pose of the
+// new targets (one solve is exact given the right rotations), where the unguided step does not.
+TEST(FrameGuide, TheExactRotationChangeLandsOnTheConvergedPoseInOneSolve) {
+  const auto bar = scenes::makeBarScene(4, 4, 33);
+  const auto a = test::endTargets(bar, scenes::barBendTransform(bar, 0.25 * M_PI));
+  const auto b = test::endTargets(bar, scenes::barBendTransform(bar, 0.5 * M_PI));
+  Deformer reference(bar.mesh, test::endVertexHandles(bar));
+  reference.step(vertexTargetsOf(a), StepBudget{4000});
+  const auto ra = rotationsOf(reference);
+  reference.step(vertexTargetsOf(b), StepBudget{4000});
+  const auto rb = rotationsOf(reference);
+  std::vector<float> guide(4 * ra.size());
+  for (std::size_t t = 0; t < ra.size(); ++t) {
+    const Eigen::Quaterniond g = rb[t] * ra[t].conjugate();
+    guide[4 * t] = static_cast<float>(g.w());
+    guide[4 * t + 1] = static_cast<float>(g.x());
+    guide[4 * t + 2] = static_cast<float>(g.y());
+    guide[4 * t + 3] = static_cast<float>(g.z());
+  }
+  DeformerSetup setup = test::endVertexHandles(bar);
+  setup.options.frame_guide = true;
+  Deformer guided(bar.mesh, setup), unguided(bar.mesh, setup);
+  guided.setRotations(ra);
+  unguided.setRotations(ra);
+  ASSERT_TRUE(guided.setFrameGuide(guide));
+  guided.step(vertexTargetsOf(b), StepBudget{1});
+  unguided.step(vertexTargetsOf(b), StepBudget{1});
+  const double with = (test::deformedVertices(guided) - test::deformedVertices(reference)).rowwise().norm().maxCoeff();
+  const double without = (test::deformedVertices(unguided) - test::deformedVertices(reference)).rowwise().norm().maxCoeff();
+  std::printf("45 -> 90 degree bend, 1 iteration: %.2e guided by the exact rotation change, %.3f unguided (bar length %.0f)\n",
+              with, without, bar.length);
+  EXPECT_LT(with, 1e-3);  // float rotations
+  EXPECT_GT(without, 1.0);
+  // The guide is used once: the next step starts from where this one ended.
+  guided.step(vertexTargetsOf(b), StepBudget{1});
+  EXPECT_LT((test::deformedVertices(guided) - test::deformedVertices(reference)).rowwise().norm().maxCoeff(), 1e-3);
+}
+
+struct SwingResult {
+  double plain = 0.0, coarse = 0.0;  // max vertex distance to converged after the budget
+};
+
+// From rest, the far end swung through `angle` in one frame, 3 fine iterations.
+SwingResult swing(const BarPair& bars, double angle, int coarse_iterations) {
+  const auto fine_targets = bendTargets(bars, bars.fine, angle);
+  const auto coarse_targets = bendTargets(bars, bars.coarse, angle);
+  DeformerSetup setup = test::endVertexHandles(bars.fine);
+  setup.options.frame_guide = true;
+  Deformer plain(bars.fine.mesh, setup), guided(bars.fine.mesh, setup);
+  CoarseLevelOptions options;
+  options.iterations = coarse_iterations;
+  CoarseLevel coarse(bars.fine.mesh, bars.coarse.mesh, test::endVertexHandles(bars.coarse), options);
+  plain.step(vertexTargetsOf(fine_targets), StepBudget{3});
+  coarse.guide(vertexTargetsOf(coarse_targets), guided);
+  guided.step(vertexTargetsOf(fine_targets), StepBudget{3});
+  return {distanceToConverged(bars.fine, plain, fine_targets), distanceToConverged(bars.fine, guided, fine_targets)};
+}
+
+// The test: a limb swung through 90 degrees in one frame reaches a stated error in 3
+// iterations with the coarse level and does not without.
+TEST(CoarseLevel, ALimbSwungNinetyDegreesInOneFrameLandsNearConvergedIn3Iterations) {
+  const BarPair bars;
+  ASSERT_EQ(bars.fine.near_vertices.size(), 50u);
+  ASSERT_EQ(bars.coarse.near_vertices.size(), 9u);
+  const SwingResult r = swing(bars, 0.5 * M_PI, 30);
+  std::printf("90 degree swing in one frame, 3 fine iterations (%d fine / %d coarse tets, 30 coarse iterations): %.3f plain, "
+              "%.3f with the coarse level (bar length %.0f)\n",
+              bars.fine.mesh.tetCount(), bars.coarse.mesh.tetCount(), r.plain, r.coarse, bars.fine.length);
+  EXPECT_LT(r.coarse, 0.05 * bars.fine.length);
+  EXPECT_GT(r.plain, 0.1 * bars.fine.length);
+  EXPECT_LT(r.coarse, 0.3 * r.plain);
+}
+
+// A steady bend at 1.5 degrees per frame, 3 fine iterations per frame: the coarse level's rotation
+// change carries the slow mode along, the plain chain lags.
+TEST(CoarseLevel, FollowsASteadyBendCloser) {
+  const BarPair bars;
+  DeformerSetup setup = test::endVertexHandles(bars.fine);
+  setup.options.frame_guide = true;
+  Deformer plain(bars.fine.mesh, setup), guided(bars.fine.mesh, setup);
+  CoarseLevel coarse(bars.fine.mesh, bars.coarse.mesh, test::endVertexHandles(bars.coarse));
+  std::vector<Eigen::Vector3d> fine_targets;
+  for (int f = 1; f <= 60; ++f) {
+    const double angle = 0.5 * M_PI * f / 60.0;
+    fine_targets = bendTargets(bars, bars.fine, angle);
+    const auto coarse_targets = bendTargets(bars, bars.coarse, angle);
+    plain.step(vertexTargetsOf(fine_targets), StepBudget{3});
+    coarse.guide(vertexTargetsOf(coarse_targets), guided);
+    guided.step(vertexTargetsOf(fine_targets), StepBudget{3});
+  }
+  const double lag_plain = distanceToConverged(bars.fine, plain, fine_targets);
+  const double lag_guided = distanceToConverged(bars.fine, guided, fine_targets);
+  std::printf("bend 1.5 deg/frame, 3 fine iterations/frame: lag to converged %.4f plain, %.4f with the coarse level (5 "
+              "coarse iterations)\n",
+              lag_plain, lag_guided);
+  EXPECT_LT(lag_guided, 0.25 * lag_plain);
+}
+
+TEST(CoarseLevel, RefusesBadOptions) {
+  const BarPair bars;
+  CoarseLevelOptions options;
+  options.iterations = 0;
+  EXPECT_THROW(CoarseLevel(bars.fine.mesh, bars.coarse.mesh, test::endVertexHandles(bars.coarse), options), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace tetrig
