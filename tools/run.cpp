@@ -85,6 +85,8 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
   live_options.normals = options.normals;
   const int pose_threads = options.pose_threads > 0 ? options.pose_threads : 1;
   live_options.split_pose_transfer = pose_threads >= 2;
+  live_options.use_coarse_level = !options.no_coarse;
+  if (options.predict) live_options.rotation_extrapolation = 1.0;
   std::optional<Rig> coarse;
   if (!options.coarse_rig_path.empty()) coarse = loadRigFile(options.coarse_rig_path);
   LiveRig live(rig, live_options, coarse ? &*coarse : nullptr);
@@ -135,6 +137,7 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
     if (live.coarseLevel() != nullptr)
       std::printf("  coarse level: %d tets, %d iterations per frame\n", live.coarseLevel()->deformer().tetCount(),
                   live.coarseLevel()->options().iterations);
+    if (options.predict) std::printf("  temporal prediction of each frame's start: on\n");
     if (!binding.missing.empty())
       std::printf("  note: %zu rig markers the source never names are treated as occluded: %s\n", binding.missing.size(),
                   joinLabels(binding.missing).c_str());

@@ -21,6 +21,8 @@ struct RunOptions {
   std::string rig_path;                 // rig file (ignored when `rig` is set)
   std::string coarse_rig_path;          // optional coarse level: the same mesh and markers with fewer tet vertices
                                         // (docs/fidelity.md, "Coarse level")
+  bool no_coarse = false;               // ignore the rig's own coarse level (Rig::coarse)
+  bool predict = false;                 // temporal prediction of the warm start (LiveRigOptions::rotation_extrapolation = 1)
   std::optional<tetrig::Rig> rig;       // an already built rig (tetrig demo)
   std::string source = "synthetic";     // c3d:PATH, replay:PATH, synthetic[:N], hid:VID:PID, usb:VID:PID, hydra[:SERIAL]
   std::string publish = "tetrig";       // shared-memory segment name (without the leading '/')

@@ -31,6 +31,7 @@ using namespace tetrig::rigbuild;
 struct BuildArgs {
   std::string mesh, out, rig_json, markers;
   std::int32_t tet_vertices = 0;
+  std::int32_t coarse_tet_vertices = 0;  // > 0: also build the coarse level
   std::string frame;                 // "" (the description's, default 0), a 0-based frame, or "auto"
   double max_marker_distance = 0;
   double min_fit_scale = 0, max_fit_scale = 0;
@@ -55,6 +56,7 @@ int buildRigCommand(const BuildArgs& a) {
   in.description = desc;
   if (!a.markers.empty()) in.clip = a.markers;
   if (a.tet_vertices > 0) in.tet_vertices = a.tet_vertices;
+  if (a.coarse_tet_vertices > 0) in.coarse_tet_vertices = a.coarse_tet_vertices;
   if (a.frame == "auto") {
     in.frame_auto = true;
   } else if (!a.frame.empty()) {
@@ -102,6 +104,10 @@ int main(int argc, char** argv) {
   build_cmd->add_flag("--keep-zero-markers", build.keep_zero_markers,
                       "C3D samples at x = y = z = 0 with residual 0 are valid points (default: gaps)");
   build_cmd->add_option("--tet-vertices", build.tet_vertices, "Tet-vertex budget: surface vertices the decimation keeps plus TetGen's interior points (default 2500)")
+      ->check(CLI::Range(4, 10000000));
+  build_cmd->add_option("--coarse-tet-vertices", build.coarse_tet_vertices,
+                        "Also build a coarse level with this tet-vertex budget (e.g. 150) into the rig: tetrig run solves it first every "
+                        "frame (docs/fidelity.md, \"Coarse level\")")
       ->check(CLI::Range(4, 10000000));
   build_cmd->add_option("--frame", build.frame,
                         "Rest frame of the clip, 0-based (default 0: the first), or auto: the frame that best fits the mesh's rest pose")
@@ -170,6 +176,10 @@ int main(int argc, char** argv) {
   tetrig::tools::RunOptions run;
   CLI::App* run_cmd = app.add_subcommand("run", "Run the live path: a marker source -> the rig, frame after frame -> shared memory");
   run_cmd->add_option("--rig", run.rig_path, "Rig file (tetrig build-rig)")->required();
+  run_cmd->add_flag("--predict", run.predict,
+                    "Temporal prediction of each frame's start (docs/fidelity.md): nearer the converged pose, larger steps at "
+                    "occlusion edges");
+  run_cmd->add_flag("--no-coarse", run.no_coarse, "Do not use the rig's own coarse level (built with --coarse-tet-vertices)");
   run_cmd->add_option("--coarse-rig", run.coarse_rig_path,
                       "Coarse level: the same mesh and markers built with fewer --tet-vertices (e.g. 300), solved first every "
                       "frame; lands nearer the converged pose (docs/fidelity.md)");

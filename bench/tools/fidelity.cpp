@@ -335,12 +335,15 @@ int main(int argc, char** argv) {
   app.add_option("--coarse-rig", coarse_path,
                  "Coarse level: a rig of the same mesh and markers with fewer tet vertices, solved every frame first")
       ->check(CLI::ExistingFile);
+  bool no_coarse = false;
+  app.add_flag("--no-coarse", no_coarse, "Do not use the rig's own coarse level (built with --coarse-tet-vertices)");
   app.add_option("--coarse-iterations", cfg.live.coarse_iterations, "Coarse level: its iterations per frame (default 5)")
       ->check(CLI::PositiveNumber);
   app.add_option("--relax", cfg.live.rotation_relaxation,
                  "Over-relaxation of each iteration's rotation update, omega (default 1.8, the live rig's; 1: off)")
       ->check(CLI::Range(1.0, 1.999));
   CLI11_PARSE(app, argc, argv);
+  cfg.live.use_coarse_level = !no_coarse;
   try {
     const std::vector<int> ks = parseIterations(iterations);
     const Rig rig = tetrig::loadRigFile(cfg.rig_path);
@@ -358,6 +361,11 @@ int main(int argc, char** argv) {
                           {"relax", cfg.live.rotation_relaxation},
                           {"extrapolate", cfg.live.rotation_extrapolation},
                           {"runs", nlohmann::json::array()}};
+    if (cfg.coarse == nullptr && rig.coarse && cfg.live.use_coarse_level) {
+      out["coarse_rig"] = "(the rig's own)";
+      out["coarse_tets"] = rig.coarse->tet_mesh.tetCount();
+      out["coarse_iterations"] = cfg.live.coarse_iterations;
+    }
     if (cfg.coarse != nullptr) {
       out["coarse_rig"] = coarse_path;
       out["coarse_tets"] = cfg.coarse->tet_mesh.tetCount();

@@ -34,6 +34,12 @@ DeformerSetup liveSetup(const Rig& rig, const LiveRigOptions& options, bool fram
   return setup;
 }
 
+// The coarse level to use: the one given, else the rig's own (when asked for), else none.
+const Rig* coarseRigOf(const Rig& rig, const LiveRigOptions& options, const Rig* given) {
+  if (given != nullptr) return given;
+  return options.use_coarse_level ? rig.coarse.get() : nullptr;
+}
+
 std::vector<std::int32_t> markerVertices(const Rig& rig) {
   std::vector<std::int32_t> v;
   for (const RigMarker& m : rig.markers) v.push_back(m.tet_vertex);
@@ -89,7 +95,7 @@ void vertexNormals(const float* x, std::span<const std::int32_t> triangles, std:
 LiveRig::LiveRig(const Rig& rig, const LiveRigOptions& options, const Rig* coarse_rig)
     : rig_(&validated(rig)),
       options_(options),
-      deformer_(rig.tet_mesh, liveSetup(rig, options, coarse_rig != nullptr)),
+      deformer_(rig.tet_mesh, liveSetup(rig, options, coarseRigOf(rig, options, coarse_rig) != nullptr)),
       predictor_(rig.tet_mesh, rig.body_vertex_count, rig.body_tet_count, markerVertices(rig), predictionOptions(options)) {
   if (!(options.occlusion_blend_s >= 0.0) || !std::isfinite(options.occlusion_blend_s)) {
     throw std::invalid_argument("live rig: occlusion_blend_s must be finite and >= 0");
@@ -121,7 +127,7 @@ LiveRig::LiveRig(const Rig& rig, const LiveRigOptions& options, const Rig* coars
   measured_.assign(markers, 0);
   skip_prediction_.assign(markers, 0);
   if (options.split_pose_transfer) split_ = std::make_unique<PoseTransferSplit>(rig.pose_transfer.view());
-  if (coarse_rig != nullptr) buildCoarseLevel(validated(*coarse_rig));
+  if (const Rig* coarse = coarseRigOf(rig, options, coarse_rig)) buildCoarseLevel(validated(*coarse));
   prediction_.resize(markers);
   for (std::size_t k = 0; k < markers; ++k) {
     // The deformer starts at rest, where every prediction is the marker's rest position.

@@ -47,6 +47,7 @@ constexpr std::uint32_t kTagOptions = tag("OPTS");
 // Optional sections: written only when non-empty; absent means empty (files written before they
 // existed stay loadable, and older readers skip them as unknown tags).
 constexpr std::uint32_t kTagPoseSensors = tag("PSNS");
+constexpr std::uint32_t kTagCoarse = tag("CRSE");  // the coarse level: a whole rig file (its own header and checksum)
 constexpr std::size_t kPoseSensorMinBytes = 4 + 4 + 1 + 1 + 8;  // empty label, region, mode, buttons, scale
 
 constexpr std::array<std::uint32_t, 13> kRequiredTags = {
@@ -388,6 +389,25 @@ std::string validateRig(const Rig& rig) {
       !std::isfinite(o.max_abs_coordinate)) {
     return "deformer options hold a non-positive or non-finite weight";
   }
+  if (rig.coarse) {
+    const Rig& c = *rig.coarse;
+    if (c.coarse) return "the coarse level has a coarse level of its own";
+    if (std::string e = validateRig(c); !e.empty()) return "the coarse level: " + e;
+    if (c.setup.region_handles.size() != s.region_handles.size()) {
+      return "the coarse level has " + num(c.setup.region_handles.size()) + " region handles, the rig " + num(s.region_handles.size());
+    }
+    for (const RigMarker& m : c.markers) {
+      if (std::none_of(rig.markers.begin(), rig.markers.end(), [&m](const RigMarker& r) { return r.label == m.label; })) {
+        return "the coarse level's marker '" + printableText(m.label, 64) + "' is not a marker of the rig";
+      }
+    }
+    // The same rig space: the coarse level is driven with the rig's own marker targets.
+    const double tolerance = 1e-9 * (a.linear.norm() + a.translation.norm() + 1.0);
+    if ((c.alignment.linear - a.linear).norm() > tolerance || (c.alignment.translation - a.translation).norm() > tolerance ||
+        c.alignment.rig_units_per_mm != a.rig_units_per_mm) {
+      return "the coarse level's alignment (device -> rig) differs from the rig's: build both from the same mesh and clip frame";
+    }
+  }
   return {};
 }
 
@@ -396,7 +416,7 @@ std::vector<std::uint8_t> serializeRig(const Rig& rig) {
   std::vector<std::array<std::uint64_t, 3>> table;
   Writer out;
   // Header and table placeholders; filled at the end.
-  const std::size_t section_count = kRequiredTags.size() + (rig.pose_sensors.empty() ? 0 : 1);
+  const std::size_t section_count = kRequiredTags.size() + (rig.pose_sensors.empty() ? 0 : 1) + (rig.coarse ? 1 : 0);
   out.bytes().resize(kHeaderBytes + section_count * kTableEntryBytes, 0);
   {
     Writer w;
@@ -542,6 +562,7 @@ std::vector<std::uint8_t> serializeRig(const Rig& rig) {
     }
     writeSection(out, table, kTagPoseSensors, w.bytes());
   }
+  if (rig.coarse) writeSection(out, table, kTagCoarse, serializeRig(*rig.coarse));
   // No padding after the last section: the file ends where it does.
   std::vector<std::uint8_t>& bytes = out.bytes();
   // Section table.
@@ -849,6 +870,13 @@ Rig parseRig(std::span<const std::uint8_t> bytes, std::string_view source_name, 
     }
     c.end();
   }
+  if (has_section(kTagCoarse)) {
+    for (const Entry& e : entries) {
+      if (e.tag != kTagCoarse) continue;
+      Rig coarse = parseRig(bytes.subspan(e.offset, e.size), name + ": section CRSE (the coarse level)", options);
+      rig.coarse = std::make_shared<const Rig>(std::move(coarse));
+    }
+  }
   if (std::string e = validateRig(rig); !e.empty()) fail(e);
   return rig;
 }
@@ -871,6 +899,7 @@ std::int64_t rigMemoryBytes(const Rig& rig) {
                                      rig.pose_sensors.size() * sizeof(RigPoseSensor));
   for (const RegionHandle& r : rig.setup.region_handles) bytes += static_cast<std::int64_t>(r.tets.size() * 4);
   for (const RigidGroup& g : rig.setup.rigid_groups) bytes += static_cast<std::int64_t>(g.tets.size() * 4);
+  if (rig.coarse) bytes += rigMemoryBytes(*rig.coarse);
   return bytes;
 }
 

@@ -48,13 +48,17 @@ class FidelityTool : public ::testing::Test {
     rig_ = new std::filesystem::path(dir_->writeBytes("smpl.rig", bytes));
     in.tet_vertices = 300;  // the coarse level
     coarse_ = new std::filesystem::path(dir_->writeBytes("smpl_coarse.rig", serializeRig(rigbuild::buildRig(in))));
+    in.tet_vertices = 800;  // the same rig with its coarse level inside (build-rig --coarse-tet-vertices 300)
+    in.coarse_tet_vertices = 300;
+    embedded_ = new std::filesystem::path(dir_->writeBytes("smpl_embedded.rig", serializeRig(rigbuild::buildRig(in))));
   }
   static void TearDownTestSuite() {
     delete rig_;
     delete clip_;
     delete coarse_;
+    delete embedded_;
     delete dir_;
-    rig_ = clip_ = coarse_ = nullptr;
+    rig_ = clip_ = coarse_ = embedded_ = nullptr;
     dir_ = nullptr;
   }
   void SetUp() override {
@@ -69,6 +73,7 @@ class FidelityTool : public ::testing::Test {
   static inline std::filesystem::path* rig_ = nullptr;
   static inline std::filesystem::path* clip_ = nullptr;
   static inline std::filesystem::path* coarse_ = nullptr;
+  static inline std::filesystem::path* embedded_ = nullptr;
 };
 
 nlohmann::json readJson(const std::filesystem::path& p) {
@@ -136,6 +141,18 @@ TEST_F(FidelityTool, TheCoarseLevelLandsNearerThanTheLiveDefault) {
               "default), %.2f mm with the coarse level, %.2f mm with the coarse level and the temporal prediction\n", p, c, b);
   EXPECT_LT(c, 0.6 * p);
   EXPECT_LT(b, c);
+  // The same coarse level built into the rig (build-rig --coarse-tet-vertices) is used without
+  // --coarse-rig, with the same result; --no-coarse turns it off.
+  const auto embedded = dir.path() / "embedded.json", off = dir.path() / "off.json";
+  const std::string rig_embedded = "--rig '" + embedded_->string() + "' --c3d '" + clip_->string() + "' --frames 240 --reference-every 20 -q ";
+  ASSERT_EQ(fidelity(rig_embedded + "--iterations 3 --json '" + embedded.string() + "'", dir).status, 0);
+  ASSERT_EQ(fidelity(rig_embedded + "--no-coarse --iterations 3 --json '" + off.string() + "'", dir).status, 0);
+  const nlohmann::json je = readJson(embedded);
+  EXPECT_EQ(je["coarse_rig"], "(the rig's own)");
+  EXPECT_EQ(je["coarse_tets"], jc["coarse_tets"]);
+  EXPECT_EQ(median(je), c);
+  EXPECT_FALSE(readJson(off).contains("coarse_rig"));
+  EXPECT_EQ(median(readJson(off)), p);
   // A coarse rig that is not there is refused.
   const ToolRun bad = fidelity(common() + "--coarse-rig '" + rig_->string() + "x' --iterations 3", dir);
   EXPECT_NE(bad.status, 0);

@@ -392,6 +392,100 @@ TEST_F(SmallRig, PoseSensorSectionTruncatedAtEveryLengthIsRefused) {
   }
 }
 
+// The coarse level (CRSE): a whole rig file inside the rig file. Here the small rig is its own
+// coarse level (the section's format does not depend on what it holds).
+Rig withCoarse(const Rig& rig) {
+  Rig r = rig;
+  Rig c = rig;
+  c.coarse.reset();
+  r.coarse = std::make_shared<const Rig>(std::move(c));
+  return r;
+}
+
+TEST_F(SmallRig, CoarseLevelRoundTripsAsAWholeRigFileOfItsOwn) {
+  const Rig with = withCoarse(*rig_);
+  const std::vector<std::uint8_t> bytes = serializeRig(with);
+  EXPECT_EQ(bytes[12], 15u);
+  const auto [offset, size] = findSection(bytes, "CRSE");
+  ASSERT_GT(size, 0u);
+  EXPECT_EQ(offset + size, bytes.size());  // the last section
+  // Its content is the coarse rig's own file, byte for byte.
+  const std::vector<std::uint8_t> inner = serializeRig(*with.coarse);
+  ASSERT_EQ(size, inner.size());
+  EXPECT_TRUE(std::equal(inner.begin(), inner.end(), bytes.begin() + static_cast<std::ptrdiff_t>(offset)));
+  const Rig back = parseRig(bytes, "with-coarse.rig");
+  ASSERT_NE(back.coarse, nullptr);
+  EXPECT_EQ(back.coarse->coarse, nullptr);
+  EXPECT_EQ(serializeRig(back), bytes);
+  // Without a coarse level, no CRSE section: the file is the one written before it existed.
+  EXPECT_EQ(findSection(*bytes_, "CRSE").second, 0u);
+  EXPECT_EQ(parseRig(*bytes_, "plain.rig").coarse, nullptr);
+}
+
+TEST_F(SmallRig, CoarseSectionTruncatedOrCorruptIsRefusedNamingIt) {
+  const std::vector<std::uint8_t> full = serializeRig(withCoarse(*rig_));
+  const auto [offset, size] = findSection(full, "CRSE");
+  std::size_t entry = 0;
+  for (std::size_t i = 0; i < 15; ++i) {
+    if (std::memcmp(full.data() + 32 + 24 * i, "CRSE", 4) == 0) entry = 32 + 24 * i;
+  }
+  ASSERT_NE(entry, 0u);
+  // Cut at lengths across the inner file (every 97th, and the edges), the outer file kept consistent.
+  for (std::size_t cut = 0; cut < size; cut += (cut < 64 || cut + 64 > size) ? 1 : 97) {
+    std::vector<std::uint8_t> b(full.begin(), full.begin() + static_cast<std::ptrdiff_t>(offset + cut));
+    putU64(b, entry + 16, cut);
+    putU64(b, 16, b.size());
+    fixChecksum(b);
+    const std::string e = parseError(b);
+    EXPECT_CONTAINS(e, "section CRSE (the coarse level)");
+  }
+  // A bit flip inside the inner file: its own checksum refuses it.
+  std::vector<std::uint8_t> b = full;
+  b[offset + size / 2] ^= 0x10;
+  fixChecksum(b);
+  const std::string e = parseError(b);
+  EXPECT_CONTAINS(e, "section CRSE (the coarse level)");
+  EXPECT_CONTAINS(e, "checksum mismatch");
+}
+
+TEST_F(SmallRig, CoarseLevelsThatDoNotFitAreNotWritten) {
+  const auto refused = [](const Rig& r) {
+    try {
+      (void)serializeRig(r);
+    } catch (const RigFileError& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  // A coarse level of its own.
+  Rig nested = withCoarse(*rig_);
+  Rig inner = *nested.coarse;
+  inner.coarse = std::make_shared<const Rig>(*rig_);
+  nested.coarse = std::make_shared<const Rig>(inner);
+  EXPECT_CONTAINS(refused(nested), "coarse level has a coarse level of its own");
+  // A marker the rig does not have.
+  ASSERT_FALSE(rig_->markers.empty());
+  Rig foreign = withCoarse(*rig_);
+  Rig c = *foreign.coarse;
+  c.markers[0].label = "ZZZZ";
+  foreign.coarse = std::make_shared<const Rig>(c);
+  EXPECT_CONTAINS(refused(foreign), "marker 'ZZZZ' is not a marker of the rig");
+  // Another rig space.
+  Rig moved = withCoarse(*rig_);
+  c = *moved.coarse;
+  c.alignment.translation.x() += 0.01;
+  moved.coarse = std::make_shared<const Rig>(c);
+  EXPECT_CONTAINS(refused(moved), "alignment");
+  // Another number of region handles.
+  Rig regions = withCoarse(*rig_);
+  c = *regions.coarse;
+  c.setup.region_handles.clear();
+  c.region_handle_names.clear();
+  c.pose_sensors.clear();
+  regions.coarse = std::make_shared<const Rig>(c);
+  EXPECT_CONTAINS(refused(regions), "region handles");
+}
+
 TEST_F(SmallRig, PoseSensorSectionFaultsHaveClearMessages) {
   const auto [offset, size] = findSection(*bytes_, "PSNS");
   ASSERT_GT(size, 0u);

@@ -115,6 +115,15 @@ TEST(TetrigCli, RunPlaysAClipAndRefusesBadInput) {
                 dir)
                 .status,
             0);
+  // A ready tet mesh cannot be made coarser: --coarse-tet-vertices is refused in one line, no file.
+  const std::string coarse_out = (dir.path() / "coarse.rig").string();
+  const CliRun no_coarse = run("build-rig --mesh '" + node.string() + "' --rig '" + json.string() + "' --markers '" + clip.string() +
+                                   "' --coarse-tet-vertices 10 --out '" + coarse_out + "' --quiet",
+                               dir);
+  EXPECT_NE(no_coarse.status, 0);
+  EXPECT_EQ(no_coarse.err.rfind("tetrig build-rig: error: ", 0), 0u) << no_coarse.err;
+  EXPECT_CONTAINS(no_coarse.err, "needs a surface mesh");
+  EXPECT_FALSE(std::filesystem::exists(coarse_out));
   const std::string name = "tetrig-cli-" + std::to_string(getpid());
   const std::string stats = (dir.path() / "stats.json").string();
   const CliRun ok = run("run --rig '" + rig + "' --source 'c3d:" + clip.string() + "' --publish " + name + " --stats-json '" + stats + "'", dir);
@@ -140,9 +149,13 @@ TEST(TetrigCli, RunPlaysAClipAndRefusesBadInput) {
   };
   one_line_error(run("run --rig /nonexistent/x.rig --source synthetic", dir), "/nonexistent/x.rig");
   // The coarse level (here the rig as its own coarse level): announced, and a missing file refused.
-  const CliRun coarse = run("run --rig '" + rig + "' --coarse-rig '" + rig + "' --source 'c3d:" + clip.string() + "' --publish " + name, dir);
+  const CliRun coarse =
+      run("run --rig '" + rig + "' --coarse-rig '" + rig + "' --predict --source 'c3d:" + clip.string() + "' --publish " + name, dir);
   ASSERT_EQ(coarse.status, 0) << coarse.err;
   EXPECT_CONTAINS(coarse.out, "coarse level: ");
+  EXPECT_CONTAINS(coarse.out, "temporal prediction of each frame's start: on");
+  EXPECT_EQ(ok.out.find("temporal prediction"), std::string::npos);
+  EXPECT_EQ(ok.out.find("coarse level"), std::string::npos);
   EXPECT_CONTAINS(coarse.out, " tets, 5 iterations per frame");
   one_line_error(run("run --rig '" + rig + "' --coarse-rig /nonexistent/c.rig --source synthetic", dir), "/nonexistent/c.rig");
   one_line_error(run("run --rig '" + rig + "' --source 'c3d:/nonexistent/clip.c3d'", dir), "/nonexistent/clip.c3d");

@@ -318,6 +318,17 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
   const MarkerOptions& mopt = desc.markers;
   const std::int32_t target = inputs.tet_vertices.value_or(desc.tet_vertices);
   if (target < 4) throw RigBuildError("--tet-vertices must be at least 4");
+  if (inputs.coarse_tet_vertices) {  // checked before any heavy work
+    const std::int32_t n = *inputs.coarse_tet_vertices;
+    if (n < 4 || n >= target) {
+      throw RigBuildError("--coarse-tet-vertices " + std::to_string(n) + " must be at least 4 and below the rig's --tet-vertices (" +
+                          std::to_string(target) + ")");
+    }
+    if (isTetMeshPath(inputs.mesh)) {
+      throw RigBuildError("--coarse-tet-vertices needs a surface mesh: a ready tet mesh (" + inputs.mesh.filename().string() +
+                          ") is used as it is and cannot be made coarser");
+    }
+  }
 
   Rig rig;
   rig.builder = "tetrig build-rig 0.1.0";
@@ -797,6 +808,24 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
     }
     report.check_seconds = since(t0);
     prog.end("factorized in " + fmt("%.3f", report.factorize_seconds) + " s");
+  }
+  if (inputs.coarse_tet_vertices) {
+    // The coarse level: the same inputs and rest frame (so the same alignment: one rig space) with a
+    // smaller tet-vertex budget.
+    const std::int32_t n = *inputs.coarse_tet_vertices;
+    auto t0 = Clock::now();
+    prog.begin("building the coarse level (" + std::to_string(n) + " tet vertices)");
+    BuildRigInputs coarse_inputs = inputs;
+    coarse_inputs.tet_vertices = n;
+    coarse_inputs.coarse_tet_vertices.reset();
+    coarse_inputs.frame_auto = false;
+    if (report.rest_frame >= 0) coarse_inputs.frame = report.rest_frame;
+    Rig coarse = buildRig(coarse_inputs);
+    rig.coarse = std::make_shared<const Rig>(std::move(coarse));
+    if (std::string e = validateRig(rig); !e.empty()) throw RigBuildError("the coarse level does not fit the rig: " + e);
+    report.coarse_seconds = since(t0);
+    prog.end(std::to_string(rig.coarse->tet_mesh.vertexCount()) + " tet vertices, " + std::to_string(rig.coarse->tet_mesh.tetCount()) +
+             " tets");
   }
   if (report_out) *report_out = std::move(report);
   return rig;

@@ -116,6 +116,10 @@ std::string describeRig(const Rig& rig, std::int64_t file_bytes, bool list_marke
     }
   }
   line("deformer:      rotation_steps %d, point_handle_weight %.4g", s.options.rotation_steps, s.options.point_handle_weight);
+  if (rig.coarse) {
+    line("coarse level:  %d tet vertices (%d body + %zu marker), %d tets", rig.coarse->tet_mesh.vertexCount(), rig.coarse->body_vertex_count,
+         rig.coarse->markers.size(), rig.coarse->tet_mesh.tetCount());
+  }
   line("memory:        %.2f MB of rig arrays%s", static_cast<double>(rigMemoryBytes(rig)) / 1e6,
        file_bytes > 0 ? (", file " + std::to_string(file_bytes) + " bytes").c_str() : "");
   return o.str();

@@ -83,6 +83,8 @@ struct LiveRigOptions {
   double rotation_extrapolation_max_deg = 5.0;  // DeformerOptions::rotation_extrapolation_max_deg
   double rotation_relaxation = 1.8;             // DeformerOptions::rotation_relaxation (docs/fidelity.md: 1.8 measured best on HDM05)
   int coarse_iterations = 5;   // with a coarse rig: its iterations per frame (CoarseLevelOptions::iterations)
+  bool use_coarse_level = true;  // use the rig's own coarse level (Rig::coarse, built with build-rig
+                                 // --coarse-tet-vertices) when it has one and no coarse rig is given
 };
 
 enum LiveFrameFlags : std::uint32_t {
@@ -130,7 +132,8 @@ class LiveRig {
   // negative options.
   // coarse_rig (optional): a coarser rig of the same mesh and markers (tetrig build-rig with fewer
   // --tet-vertices) solved every frame before the fine iterations; its rotation change starts the
-  // fine tets (tetrig/coarse_level.hpp). Its markers are matched to the rig's by label (every one
+  // fine tets (tetrig/coarse_level.hpp). Without one, the rig's own coarse level (Rig::coarse) is
+  // used if it has one and options.use_coarse_level. Its markers are matched to the rig's by label (every one
   // must be in the rig), its region handles take the rig's region targets (same count required),
   // its other handles stay at rest. Throws std::invalid_argument when it does not fit the rig. The
   // live rig keeps no reference to it.

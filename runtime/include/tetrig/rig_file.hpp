@@ -11,8 +11,9 @@
 //
 // File = 32-byte header (magic "TETRIGRF", format version, section count, file size, CRC-32C of
 // every byte after the header) + a section table (tag, offset, size per section) + sections.
-// Thirteen sections are required; optional ones (PSNS: pose sensors) are written only when the
-// rig has something to put in them, and a file without them loads as before.
+// Thirteen sections are required; optional ones (PSNS: pose sensors; CRSE: the coarse level, a
+// whole rig file of its own) are written only when the rig has something to put in them, and a
+// file without them loads as before.
 // The loader checks magic, version, file size, checksum, the layout (every section on an 8-byte
 // boundary, no overlap, only zero padding between sections, nothing after the last, reserved
 // words 0), every section's bounds and exact size, every count against the bytes present (before
@@ -35,6 +36,7 @@
 #include <array>
 #include <cstdint>
 #include <filesystem>
+#include <memory>
 #include <span>
 #include <stdexcept>
 #include <string>
@@ -112,6 +114,11 @@ struct Rig {
   std::vector<RigMarker> markers;
   RigAlignment alignment;
   std::vector<RigPoseSensor> pose_sensors;       // optional (empty: the file has no PSNS section)
+  // Optional coarse level (tetrig/coarse_level.hpp; the file's CRSE section, absent when null): the
+  // same mesh and markers built with fewer tet vertices, in the same rig space. It has no coarse
+  // level of its own, every marker of it is a marker of this rig (by label), and it has as many
+  // region handles.
+  std::shared_ptr<const Rig> coarse;
 };
 
 // Serialises a rig into the file format (header, section table, sections, checksum). Validates the

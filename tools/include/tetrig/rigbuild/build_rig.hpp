@@ -52,6 +52,8 @@ struct BuildRigInputs {
   bool accept_pose_mismatch = false;              // ... although the pose checks fail (the scale is still checked)
   std::optional<double> min_fit_scale, max_fit_scale;  // override description.markers.checks
   bool check_deformer = true;                     // build a Deformer from the result (factorizes once)
+  std::optional<std::int32_t> coarse_tet_vertices;  // also build the coarse level (Rig::coarse): the same inputs
+                                                    // and rest frame with this tet-vertex budget (< tet_vertices)
 };
 
 struct BuildRigReport {
@@ -69,6 +71,7 @@ struct BuildRigReport {
   double import_seconds = 0, tetrahedralize_seconds = 0, pose_seconds = 0, align_seconds = 0, bind_seconds = 0,
          check_seconds = 0, factorize_seconds = 0;
   std::vector<std::string> notes;                 // repairs and choices worth telling the user
+  double coarse_seconds = 0;                      // building the coarse level (0: none)
 };
 
 // Throws RigBuildError before any heavy work when the rig would have no handle (no markers, no
