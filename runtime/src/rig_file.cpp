@@ -586,7 +586,18 @@ std::vector<std::uint8_t> serializeRig(const Rig& rig) {
   return bytes;
 }
 
+namespace {
+Rig parseRigAt(std::span<const std::uint8_t> bytes, std::string_view source_name, const RigParseOptions& options, bool nested);
+}  // namespace
+
 Rig parseRig(std::span<const std::uint8_t> bytes, std::string_view source_name, const RigParseOptions& options) {
+  return parseRigAt(bytes, source_name, options, false);
+}
+
+namespace {
+// nested: parsing a CRSE section, which may not hold one of its own (checked before parsing it, so
+// a crafted file cannot nest levels to any depth).
+Rig parseRigAt(std::span<const std::uint8_t> bytes, std::string_view source_name, const RigParseOptions& options, bool nested) {
   const std::string name(source_name);
   auto fail = [&name](const std::string& what) -> void { throw RigFileError(name + ": " + what); };
   if (bytes.size() < kHeaderBytes) {
@@ -871,15 +882,17 @@ Rig parseRig(std::span<const std::uint8_t> bytes, std::string_view source_name, 
     c.end();
   }
   if (has_section(kTagCoarse)) {
+    if (nested) fail("the coarse level has a coarse level of its own (section CRSE)");
     for (const Entry& e : entries) {
       if (e.tag != kTagCoarse) continue;
-      Rig coarse = parseRig(bytes.subspan(e.offset, e.size), name + ": section CRSE (the coarse level)", options);
+      Rig coarse = parseRigAt(bytes.subspan(e.offset, e.size), name + ": section CRSE (the coarse level)", options, true);
       rig.coarse = std::make_shared<const Rig>(std::move(coarse));
     }
   }
   if (std::string e = validateRig(rig); !e.empty()) fail(e);
   return rig;
 }
+}  // namespace
 
 Rig loadRigFile(const std::filesystem::path& path) {
   std::ifstream in(path, std::ios::binary);

@@ -439,6 +439,18 @@ TEST_F(SmallRig, CoarseSectionTruncatedOrCorruptIsRefusedNamingIt) {
     const std::string e = parseError(b);
     EXPECT_CONTAINS(e, "section CRSE (the coarse level)");
   }
+  // An inner file that holds a coarse level of its own (crafted: the writer never makes one) is
+  // refused before that level is parsed, so levels cannot nest to any depth.
+  {
+    const std::vector<std::uint8_t> inner = serializeRig(withCoarse(*rig_));
+    std::vector<std::uint8_t> b(full.begin(), full.begin() + static_cast<std::ptrdiff_t>(offset));
+    b.insert(b.end(), inner.begin(), inner.end());
+    putU64(b, entry + 16, inner.size());
+    putU64(b, 16, b.size());
+    fixChecksum(b);
+    const std::string e = parseError(b);
+    EXPECT_CONTAINS(e, "section CRSE (the coarse level): the coarse level has a coarse level of its own");
+  }
   // A bit flip inside the inner file: its own checksum refuses it.
   std::vector<std::uint8_t> b = full;
   b[offset + size / 2] ^= 0x10;
