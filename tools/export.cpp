@@ -330,6 +330,10 @@ ExportReport exportClip(const ExportOptions& o) {
   // 2. The live rig and the binding, exactly as `tetrig run` binds a c3d: source.
   LiveRigOptions live_options;
   live_options.occlusion_blend_s = o.occlusion_blend_ms * 1e-3;
+  // The rig's coarse level (docs/fidelity.md) only sets where a frame starts: with --iterations N
+  // (one call per frame) it is used as in `tetrig run`; iterating to convergence calls processFrame
+  // again on the same frame, where it would start the frame again, so it is off.
+  live_options.use_coarse_level = o.iterations > 0;
   LiveRig live(rig, live_options);
   std::vector<std::string> labels;
   {

@@ -298,6 +298,30 @@ TEST(Export, ConvergenceGetsCloseToAVeryLongSolve) {
   EXPECT_EQ(rt.capped_frames, 0u);
 }
 
+// A rig with a coarse level (here the small rig as its own): --iterations N uses it, as tetrig run
+// does (the frames differ from the plain rig's), and iterating to convergence does not (the same
+// bytes as the plain rig's export).
+TEST(Export, TheCoarseLevelIsUsedWithIterationsAndNotWhenConverging) {
+  const TempDir out;
+  Rig with = scene().rig;
+  with.coarse = std::make_shared<const Rig>(scene().rig);
+  const std::filesystem::path coarse_rig = out.writeBytes("coarse.rig", serializeRig(with));
+  auto fixed = options(out.path() / "fixed.pc2", 3);
+  fixed.rig_path = coarse_rig;
+  auto converge = options(out.path() / "converge.pc2", 0);
+  converge.rig_path = coarse_rig;
+  (void)tools::exportClip(fixed);
+  (void)tools::exportClip(converge);
+  (void)tools::exportClip(options(out.path() / "plain_fixed.pc2", 3));
+  (void)tools::exportClip(options(out.path() / "plain_converge.pc2", 0));
+  EXPECT_EQ(slurp(out.path() / "converge.pc2"), slurp(out.path() / "plain_converge.pc2"));
+  const auto guided = readPc2(out.path() / "fixed.pc2").frames, plain = readPc2(out.path() / "plain_fixed.pc2").frames;
+  ASSERT_EQ(guided.size(), plain.size());
+  double differ = 0;
+  for (std::size_t f = 0; f < guided.size(); ++f) differ = std::max(differ, maxDifference(guided[f], plain[f]));
+  EXPECT_GT(differ, 1e-6);
+}
+
 // Samples at exactly (0, 0, 0) with residual 0 are gaps (predicted), as in `tetrig run`, unless
 // keep_zero_markers (then measured there).
 TEST(Export, ZeroSamplesAreGapsUnlessKept) {
