@@ -5,7 +5,8 @@
 // serialise, or does not read back to the same bytes (the writer's layout is the only one the
 // loader accepts for the sections it knows). Seeds (runtime/fuzz/corpus/rig_file): serializeRig
 // of a one-tet rig and of a two-tet rig with one of every section (marker, region, pose sensor,
-// point handle, rigid group, stiffness), each with the checksum on and off.
+// point handle, rigid group, stiffness), and of that rig with itself as its coarse level (CRSE: a
+// rig file inside the rig file), each with the checksum on and off.
 // Build: cmake --preset fuzz && cmake --build --preset fuzz --target fuzz_rig_file;
 // run: build/fuzz/runtime/fuzz_rig_file -max_total_time=60 runtime/fuzz/corpus/rig_file.
 #include "tetrig/printable_text.hpp"
