@@ -63,4 +63,20 @@ inline DeformerSetup endVertexHandles(const scenes::BarScene& bar) {
   return setup;
 }
 
+// The exact ARAP energy of the deformer's pose: sum_j vol_j ||F_j - R_j||^2 with R_j the closest
+// rotation (double, polar.hpp), not the kernel's float rotations.
+inline double exactEnergy(const TetMesh& mesh, const Deformer& deformer) {
+  double e = 0.0;
+  for (std::int32_t t = 0; t < mesh.tetCount(); ++t) {
+    Eigen::Matrix3d rest, now;
+    for (int k = 0; k < 3; ++k) {
+      rest.col(k) = (mesh.vertices.row(mesh.tets(t, k)) - mesh.vertices.row(mesh.tets(t, 3))).transpose();
+      now.col(k) = deformer.position(mesh.tets(t, k)) - deformer.position(mesh.tets(t, 3));
+    }
+    const Eigen::Matrix3d f = now * rest.inverse();
+    e += std::abs(rest.determinant()) / 6.0 * (f - closestRotation(f).toRotationMatrix()).squaredNorm();
+  }
+  return e;
+}
+
 }  // namespace tetrig::test

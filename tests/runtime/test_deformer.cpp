@@ -123,21 +123,6 @@ TEST(Deformer, EnergyNeverIncreasesWithoutInterpolationOrRigidGroups) {
   EXPECT_TRUE(saw_exact) << "the jump was meant to invert some tets and exercise the exact fallback";
 }
 
-// The exact ARAP energy of the deformer's pose: sum_j vol_j ||F_j - R_j||^2 with R_j the closest rotation (double).
-double exactEnergy(const TetMesh& mesh, const Deformer& deformer) {
-  double e = 0.0;
-  for (std::int32_t t = 0; t < mesh.tetCount(); ++t) {
-    Eigen::Matrix3d rest, now;
-    for (int k = 0; k < 3; ++k) {
-      rest.col(k) = (mesh.vertices.row(mesh.tets(t, k)) - mesh.vertices.row(mesh.tets(t, 3))).transpose();
-      now.col(k) = deformer.position(mesh.tets(t, k)) - deformer.position(mesh.tets(t, 3));
-    }
-    const Eigen::Matrix3d f = now * rest.inverse();
-    e += std::abs(rest.determinant()) / 6.0 * (f - closestRotation(f).toRotationMatrix()).squaredNorm();
-  }
-  return e;
-}
-
 // Over-relaxation gives up the per-iteration energy decrease of the plain iteration; after the jump
 // above (which inverts tets) it still ends every budget of iterations at no higher exact energy than
 // the plain iteration with the same budget.
@@ -151,7 +136,7 @@ TEST(Deformer, OverRelaxationEndsNoHigherThanThePlainIterationAfterAJump) {
     Deformer plain(bar.mesh, test::endVertexHandles(bar)), relaxed(bar.mesh, relaxed_setup);
     plain.step(vertexTargets(targets), StepBudget{k});
     relaxed.step(vertexTargets(targets), StepBudget{k});
-    const double ep = exactEnergy(bar.mesh, plain), er = exactEnergy(bar.mesh, relaxed);
+    const double ep = test::exactEnergy(bar.mesh, plain), er = test::exactEnergy(bar.mesh, relaxed);
     std::printf("jump, %3d iterations: exact energy plain %.6g, relaxed %.6g\n", k, ep, er);
     EXPECT_LE(er, ep * (1.0 + 1e-9)) << k << " iterations";
   }
