@@ -34,8 +34,8 @@ CoarseLevel::CoarseLevel(const TetMesh& fine_mesh, const TetMesh& coarse_mesh, c
     : options_(options), coarse_(coarse_mesh, coarse_setup) {
   if (options_.iterations < 1) throw std::invalid_argument("coarse level: iterations must be at least 1");
   if (coarse_mesh.tetCount() == 0 || fine_mesh.tetCount() == 0) throw std::invalid_argument("coarse level: empty tet mesh");
-  // Nearest rest centroid, brute force: load time, O(#fine tets x #coarse tets) (8164 x 1639 tets:
-  // about 15 ms).
+  // Nearest rest centroid, brute force: load time, O(#fine tets x #coarse tets) (the SMPL rig and a
+  // 150-vertex coarse level: 8164 x 388, 3.2 M distances).
   const std::vector<Eigen::Vector3d> fine_c = restCentroids(fine_mesh);
   const std::vector<Eigen::Vector3d> coarse_c = restCentroids(coarse_mesh);
   coarse_of_fine_.assign(fine_c.size(), 0);
