@@ -5,7 +5,6 @@
 
 #include "tetrig/clock.hpp"
 #include "tetrig/pose_transfer.hpp"
-#include "tetrig/printable_text.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -127,7 +126,7 @@ LiveRig::LiveRig(const Rig& rig, const LiveRigOptions& options, const Rig* coars
   measured_.assign(markers, 0);
   skip_prediction_.assign(markers, 0);
   if (options.split_pose_transfer) split_ = std::make_unique<PoseTransferSplit>(rig.pose_transfer.view());
-  if (const Rig* coarse = coarseRigOf(rig, options, coarse_rig)) buildCoarseLevel(validated(*coarse));
+  if (const Rig* coarse = coarseRigOf(rig, options, coarse_rig)) buildCoarseLevel(*coarse);
   prediction_.resize(markers);
   for (std::size_t k = 0; k < markers; ++k) {
     // The deformer starts at rest, where every prediction is the marker's rest position.
@@ -161,20 +160,13 @@ LiveRig::LiveRig(const Rig& rig, const LiveRigOptions& options, const Rig* coars
 }
 
 void LiveRig::buildCoarseLevel(const Rig& coarse) {
-  const DeformerSetup& cs = coarse.setup;
-  if (cs.region_handles.size() != rig_->setup.region_handles.size()) {
-    throw std::invalid_argument("live rig: the coarse rig has " + std::to_string(cs.region_handles.size()) +
-                                " region handles and the rig " + std::to_string(rig_->setup.region_handles.size()) +
-                                ": build both from the same rig description");
+  if (std::string e = coarseLevelMismatch(*rig_, coarse); !e.empty()) {
+    throw std::invalid_argument("live rig: " + e + " (build both from the same mesh, rig description and marker clip)");
   }
+  const DeformerSetup& cs = coarse.setup;
   for (const RigMarker& m : coarse.markers) {
-    std::int32_t match = -1;
-    for (std::size_t k = 0; k < rig_->markers.size(); ++k)
-      if (rig_->markers[k].label == m.label) match = static_cast<std::int32_t>(k);
-    if (match < 0) {
-      throw std::invalid_argument("live rig: the coarse rig's marker '" + printableText(m.label) +
-                                  "' is not in the rig: build both from the same marker clip");
-    }
+    std::int32_t match = 0;  // found: coarseLevelMismatch checked every label
+    while (rig_->markers[static_cast<std::size_t>(match)].label != m.label) ++match;
     coarse_marker_handles_.emplace_back(m.vertex_handle, match);
   }
   for (const std::int32_t v : cs.vertex_handles) coarse_vertex_targets_.push_back(coarse.tet_mesh.vertices.row(v).transpose());
