@@ -361,14 +361,11 @@ int main(int argc, char** argv) {
                           {"relax", cfg.live.rotation_relaxation},
                           {"extrapolate", cfg.live.rotation_extrapolation},
                           {"runs", nlohmann::json::array()}};
-    if (cfg.coarse == nullptr && rig.coarse && cfg.live.use_coarse_level) {
-      out["coarse_rig"] = "(the rig's own)";
-      out["coarse_tets"] = rig.coarse->tet_mesh.tetCount();
-      out["coarse_iterations"] = cfg.live.coarse_iterations;
-    }
-    if (cfg.coarse != nullptr) {
-      out["coarse_rig"] = coarse_path;
-      out["coarse_tets"] = cfg.coarse->tet_mesh.tetCount();
+    // The coarse level the live rig will use: --coarse-rig, else the rig's own unless --no-coarse.
+    const Rig* coarse = cfg.coarse != nullptr ? cfg.coarse : cfg.live.use_coarse_level ? rig.coarse.get() : nullptr;
+    if (coarse != nullptr) {
+      out["coarse_rig"] = cfg.coarse != nullptr ? coarse_path : std::string("(the rig's own)");
+      out["coarse_tets"] = coarse->tet_mesh.tetCount();
       out["coarse_iterations"] = cfg.live.coarse_iterations;
     }
     for (const std::string& clip_path : cfg.clips) {

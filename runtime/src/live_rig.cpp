@@ -5,7 +5,6 @@
 
 #include "tetrig/clock.hpp"
 #include "tetrig/pose_transfer.hpp"
-#include "tetrig/printable_text.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -32,6 +31,19 @@ DeformerSetup liveSetup(const Rig& rig, const LiveRigOptions& options, bool fram
   setup.options.rotation_extrapolation_max_deg = options.rotation_extrapolation_max_deg;
   setup.options.rotation_relaxation = options.rotation_relaxation;
   return setup;
+}
+
+// Rest positions of a setup's vertex handles and point handles: the targets of handles nothing drives.
+void restHandleTargets(const TetMesh& mesh, const DeformerSetup& setup, std::vector<Eigen::Vector3d>& vertex,
+                       std::vector<Eigen::Vector3d>& point) {
+  vertex.clear();
+  for (const std::int32_t v : setup.vertex_handles) vertex.push_back(mesh.vertices.row(v).transpose());
+  point.clear();
+  for (const PointHandle& p : setup.point_handles) {
+    Eigen::Vector3d rest = Eigen::Vector3d::Zero();
+    for (int c = 0; c < 4; ++c) rest += p.barycentric[c] * mesh.vertices.row(mesh.tets(p.tet, c)).transpose();
+    point.push_back(rest);
+  }
 }
 
 // The coarse level to use: the one given, else the rig's own (when asked for), else none.
@@ -108,18 +120,13 @@ LiveRig::LiveRig(const Rig& rig, const LiveRigOptions& options, const Rig* coars
   max_abs_coordinate_ = rig.setup.options.max_abs_coordinate;
 
   const DeformerSetup& setup = rig.setup;
-  for (const std::int32_t v : setup.vertex_handles) vertex_targets_.push_back(rig.tet_mesh.vertices.row(v).transpose());
+  restHandleTargets(rig.tet_mesh, setup, vertex_targets_, point_targets_);
   region_targets_.assign(setup.region_handles.size(), RigidTransform{});
   for (const RigPoseSensor& sensor : rig.pose_sensors) {
     const auto& region = setup.region_handles.at(static_cast<std::size_t>(sensor.region_handle));
     sensors_.emplace_back(sensor, rig.alignment, regionRestCentroid(rig.tet_mesh, region));
   }
   sensor_sample_.assign(sensors_.size(), nullptr);
-  for (const PointHandle& p : setup.point_handles) {
-    Eigen::Vector3d rest = Eigen::Vector3d::Zero();
-    for (int c = 0; c < 4; ++c) rest += p.barycentric[c] * rig.tet_mesh.vertices.row(rig.tet_mesh.tets(p.tet, c)).transpose();
-    point_targets_.push_back(rest);
-  }
 
   const std::size_t markers = rig.markers.size();
   tracks_.assign(markers, Track{});
@@ -127,7 +134,7 @@ LiveRig::LiveRig(const Rig& rig, const LiveRigOptions& options, const Rig* coars
   measured_.assign(markers, 0);
   skip_prediction_.assign(markers, 0);
   if (options.split_pose_transfer) split_ = std::make_unique<PoseTransferSplit>(rig.pose_transfer.view());
-  if (const Rig* coarse = coarseRigOf(rig, options, coarse_rig)) buildCoarseLevel(validated(*coarse));
+  if (const Rig* coarse = coarseRigOf(rig, options, coarse_rig)) buildCoarseLevel(*coarse);
   prediction_.resize(markers);
   for (std::size_t k = 0; k < markers; ++k) {
     // The deformer starts at rest, where every prediction is the marker's rest position.
@@ -161,28 +168,16 @@ LiveRig::LiveRig(const Rig& rig, const LiveRigOptions& options, const Rig* coars
 }
 
 void LiveRig::buildCoarseLevel(const Rig& coarse) {
-  const DeformerSetup& cs = coarse.setup;
-  if (cs.region_handles.size() != rig_->setup.region_handles.size()) {
-    throw std::invalid_argument("live rig: the coarse rig has " + std::to_string(cs.region_handles.size()) +
-                                " region handles and the rig " + std::to_string(rig_->setup.region_handles.size()) +
-                                ": build both from the same rig description");
+  if (std::string e = coarseLevelMismatch(*rig_, coarse); !e.empty()) {
+    throw std::invalid_argument("live rig: " + e + " (build both from the same mesh, rig description and marker clip)");
   }
+  const DeformerSetup& cs = coarse.setup;
   for (const RigMarker& m : coarse.markers) {
-    std::int32_t match = -1;
-    for (std::size_t k = 0; k < rig_->markers.size(); ++k)
-      if (rig_->markers[k].label == m.label) match = static_cast<std::int32_t>(k);
-    if (match < 0) {
-      throw std::invalid_argument("live rig: the coarse rig's marker '" + printableText(m.label) +
-                                  "' is not in the rig: build both from the same marker clip");
-    }
+    std::int32_t match = 0;  // found: coarseLevelMismatch checked every label
+    while (rig_->markers[static_cast<std::size_t>(match)].label != m.label) ++match;
     coarse_marker_handles_.emplace_back(m.vertex_handle, match);
   }
-  for (const std::int32_t v : cs.vertex_handles) coarse_vertex_targets_.push_back(coarse.tet_mesh.vertices.row(v).transpose());
-  for (const PointHandle& p : cs.point_handles) {
-    Eigen::Vector3d rest = Eigen::Vector3d::Zero();
-    for (int c = 0; c < 4; ++c) rest += p.barycentric[c] * coarse.tet_mesh.vertices.row(coarse.tet_mesh.tets(p.tet, c)).transpose();
-    coarse_point_targets_.push_back(rest);
-  }
+  restHandleTargets(coarse.tet_mesh, cs, coarse_vertex_targets_, coarse_point_targets_);
   coarse_region_targets_.assign(cs.region_handles.size(), RigidTransform{});
   DeformerSetup setup = cs;
   setup.options.padded_positions = false;

@@ -389,24 +389,29 @@ std::string validateRig(const Rig& rig) {
       !std::isfinite(o.max_abs_coordinate)) {
     return "deformer options hold a non-positive or non-finite weight";
   }
-  if (rig.coarse) {
-    const Rig& c = *rig.coarse;
-    if (c.coarse) return "the coarse level has a coarse level of its own";
-    if (std::string e = validateRig(c); !e.empty()) return "the coarse level: " + e;
-    if (c.setup.region_handles.size() != s.region_handles.size()) {
-      return "the coarse level has " + num(c.setup.region_handles.size()) + " region handles, the rig " + num(s.region_handles.size());
+  if (rig.coarse) return coarseLevelMismatch(rig, *rig.coarse);
+  return {};
+}
+
+std::string coarseLevelMismatch(const Rig& rig, const Rig& coarse) {
+  auto num = [](auto v) { return std::to_string(v); };
+  if (coarse.coarse) return "the coarse level has a coarse level of its own";
+  if (std::string e = validateRig(coarse); !e.empty()) return "the coarse level: " + e;
+  if (coarse.setup.region_handles.size() != rig.setup.region_handles.size()) {
+    return "the coarse level has " + num(coarse.setup.region_handles.size()) + " region handles, the rig " +
+           num(rig.setup.region_handles.size());
+  }
+  for (const RigMarker& m : coarse.markers) {
+    if (std::none_of(rig.markers.begin(), rig.markers.end(), [&m](const RigMarker& r) { return r.label == m.label; })) {
+      return "the coarse level's marker '" + printableText(m.label, 64) + "' is not a marker of the rig";
     }
-    for (const RigMarker& m : c.markers) {
-      if (std::none_of(rig.markers.begin(), rig.markers.end(), [&m](const RigMarker& r) { return r.label == m.label; })) {
-        return "the coarse level's marker '" + printableText(m.label, 64) + "' is not a marker of the rig";
-      }
-    }
-    // The same rig space: the coarse level is driven with the rig's own marker targets.
-    const double tolerance = 1e-9 * (a.linear.norm() + a.translation.norm() + 1.0);
-    if ((c.alignment.linear - a.linear).norm() > tolerance || (c.alignment.translation - a.translation).norm() > tolerance ||
-        c.alignment.rig_units_per_mm != a.rig_units_per_mm) {
-      return "the coarse level's alignment (device -> rig) differs from the rig's: build both from the same mesh and clip frame";
-    }
+  }
+  // The same rig space: the coarse level is driven with the rig's own marker targets.
+  const RigAlignment& a = rig.alignment;
+  const double tolerance = 1e-9 * (a.linear.norm() + a.translation.norm() + 1.0);
+  if ((coarse.alignment.linear - a.linear).norm() > tolerance || (coarse.alignment.translation - a.translation).norm() > tolerance ||
+      coarse.alignment.rig_units_per_mm != a.rig_units_per_mm) {
+    return "the coarse level's alignment (device -> rig) differs from the rig's: build both from the same mesh and clip frame";
   }
   return {};
 }

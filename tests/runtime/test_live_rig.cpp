@@ -791,6 +791,14 @@ TEST(LiveRigCoarse, RefusesACoarseRigThatDoesNotFit) {
   const Rig with_region = makeBarRig(false, true);
   EXPECT_THROW(LiveRig(rig, {}, &with_region), std::invalid_argument);
   EXPECT_THROW(LiveRig(with_region, {}, &rig), std::invalid_argument);
+  // Another rig space (the targets would land elsewhere), and a coarse level of its own: the same
+  // checks as a coarse level inside the rig file (coarseLevelMismatch).
+  Rig moved = rig;
+  moved.alignment.translation.x() += 0.01;
+  EXPECT_THROW(LiveRig(rig, {}, &moved), std::invalid_argument);
+  Rig nested = rig;
+  nested.coarse = std::make_shared<const Rig>(rig);
+  EXPECT_THROW(LiveRig(rig, {}, &nested), std::invalid_argument);
   LiveRigOptions bad;
   bad.coarse_iterations = 0;
   EXPECT_THROW(LiveRig(rig, bad, &rig), std::invalid_argument);

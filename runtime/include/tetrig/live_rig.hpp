@@ -135,7 +135,8 @@ class LiveRig {
   // fine tets (tetrig/coarse_level.hpp). Without one, the rig's own coarse level (Rig::coarse) is
   // used if it has one and options.use_coarse_level. Its markers are matched to the rig's by label (every one
   // must be in the rig), its region handles take the rig's region targets (same count required),
-  // its other handles stay at rest. Throws std::invalid_argument when it does not fit the rig. The
+  // its other handles stay at rest. Throws std::invalid_argument when it does not fit the rig
+  // (coarseLevelMismatch in tetrig/rig_file.hpp: the same checks as a coarse level inside a rig file). The
   // live rig keeps no reference to it.
   explicit LiveRig(const Rig& rig, const LiveRigOptions& options = {}, const Rig* coarse_rig = nullptr);
 

@@ -145,9 +145,16 @@ std::vector<std::array<float, 3>> markerRestPositionsMm(const Rig& rig);
 // tets of three body corners and one marker, bound-face counts = invisible tets, marker labels
 // non-empty and distinct, positive alignment scales, every string well-formed UTF-8, pose sensors:
 // label non-empty, region in range and oriented, one sensor per region, clutch buttons non-zero in
-// clutch mode, finite positive translation scale). Returns "" when valid, else a one-line
-// description of the first fault (file text in it escaped with printableText).
+// clutch mode, finite positive translation scale, and a coarse level as coarseLevelMismatch says).
+// Returns "" when valid, else a one-line description of the first fault (file text in it escaped
+// with printableText).
 std::string validateRig(const Rig& rig);
+
+// Why `coarse` cannot be the coarse level of `rig` (Rig::coarse, or a second file given to the live
+// rig), "" when it can: it must be a valid rig without a coarse level of its own, every marker of it
+// a marker of `rig` (by label), as many region handles, and the same alignment (one rig space,
+// within 1e-9 relative).
+std::string coarseLevelMismatch(const Rig& rig, const Rig& coarse);
 
 // Bytes the rig's arrays occupy in memory (positions, tets, B, handles; excluding the Deformer).
 std::int64_t rigMemoryBytes(const Rig& rig);
