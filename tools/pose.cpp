@@ -36,6 +36,7 @@ int runPose(const PoseOptions& options) {
   rigbuild::PoseOptions pose;
   pose.iterations = options.iterations;
   pose.max_iterations = options.max_iterations;
+  pose.volume_weight = options.volume_weight;
   const rigbuild::PoseResult r = rigbuild::poseRig(rig, regions, pose);
   if (!r.converged) {
     char what[320];

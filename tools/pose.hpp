@@ -17,6 +17,7 @@ struct PoseOptions {
   std::string out;                    // OBJ file to write
   int iterations = 0;                 // > 0: exactly this many; 0: to convergence
   int max_iterations = 20000;         // bound when running to convergence
+  double volume_weight = 0.0;         // the volume term's share of each tet's energy (DeformerOptions::volume_weight)
   bool quiet = false;
 };
 

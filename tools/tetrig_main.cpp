@@ -283,6 +283,11 @@ int main(int argc, char** argv) {
   pose_cmd->add_option("--max-iterations", pose.max_iterations, "Convergence: fail after this many iterations")
       ->capture_default_str()
       ->check(CLI::Range(1, 10000000));
+  pose_cmd->add_option("--volume-weight", pose.volume_weight,
+                       "Volume term: its share w of each tet's energy, (1 - w) ||F - R||^2 + w ||F - T||^2 with T the tet's "
+                       "nearest unit-volume shape (docs/deformation.md); 0 = as rigid as possible")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 0.99));
   pose_cmd->add_flag("-q,--quiet", pose.quiet, "No summary");
 
   std::string character_out;

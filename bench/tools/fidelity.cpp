@@ -14,7 +14,9 @@
 //   error        distance of every body tet vertex, budgeted to converged, in mm: RMS and worst;
 //   energy       E(x) = sum_j a_j ||F_j(x) - R_j||_F^2 with R_j = closestRotation(F_j) (exact, in
 //                double: Horn's method, det R = +1) and a_j = stiffness_j |vol_j|, over all tets
-//                (body and invisible); excess = (E(x_budget) - E(x_conv)) / E(x_conv), left out
+//                (body and invisible); with --volume-weight w, that of the volume term's deformer:
+//                sum_j a_j [(1 - w) ||F_j - R_j||^2 + w ||F_j - T_j||^2] (unitVolumeShift, polar.hpp),
+//                and the reference solves with it too; excess = (E(x_budget) - E(x_conv)) / E(x_conv), left out
 //                (and counted) for frames whose converged energy is below 1e-6 of the clip's median;
 //   inverted     body tets with det F_j <= 0, budgeted (every frame) and converged;
 //   volume       the fine mesh's enclosed volume (B x) against its rest volume, budgeted (every frame)
@@ -82,9 +84,14 @@ struct PoseMeasure {
 
 class Measurer {
  public:
-  explicit Measurer(const Rig& rig)
+  // volume_weight: the energy is that of the volume term's deformer (DeformerOptions::volume_weight),
+  // a_j [(1 - w) ||F_j - R_j||^2 + w ||F_j - T_j||^2], rigid-group tets plain.
+  Measurer(const Rig& rig, double volume_weight)
       : rig_(rig), frames_(tetrig::computeRestFrames(rig.tet_mesh)),
-        weights_(tetrig::tetWeights(frames_, rig.setup.stiffness)) {
+        weights_(tetrig::tetWeights(frames_, rig.setup.stiffness)),
+        volume_weight_(static_cast<std::size_t>(rig.tet_mesh.tetCount()), volume_weight) {
+    for (const auto& group : rig.setup.rigid_groups)
+      for (const std::int32_t t : group.tets) volume_weight_[static_cast<std::size_t>(t)] = 0.0;
     fine_rest_volume_ = fineVolume(rig.fine_vertices.data());
   }
 
@@ -106,7 +113,9 @@ class Measurer {
       if (t < rig_.body_tet_count && f.determinant() <= 0.0) ++m.inverted_body_tets;
       if (energy) {
         const Eigen::Matrix3d r = tetrig::closestRotation(f).toRotationMatrix();
-        m.energy += weights_[static_cast<std::size_t>(t)] * (f - r).squaredNorm();
+        const double w = f.determinant() > 1e-6 ? volume_weight_[static_cast<std::size_t>(t)] : 0.0;  // as the kernel
+        const double s = w > 0.0 ? tetrig::unitVolumeShift(f, r) : 0.0;
+        m.energy += weights_[static_cast<std::size_t>(t)] * ((1.0 - w) * (f - r).squaredNorm() + 3.0 * w * s * s);
       }
     }
     return m;
@@ -132,6 +141,7 @@ class Measurer {
   const Rig& rig_;
   tetrig::TetRestFrames frames_;
   std::vector<double> weights_;
+  std::vector<double> volume_weight_;  // per tet
   double fine_rest_volume_ = 0.0;
 };
 
@@ -162,7 +172,9 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
 
   // The reference solver: the rig's own setup, plain (the converged pose does not depend on how
   // a frame step gets there).
-  tetrig::Deformer reference(rig.tet_mesh, rig.setup);
+  tetrig::DeformerSetup reference_setup = rig.setup;
+  reference_setup.options.volume_weight = cfg.live.volume_weight;  // the same energy as the live rig's
+  tetrig::Deformer reference(rig.tet_mesh, reference_setup);
   std::vector<Eigen::Quaterniond> rotations(static_cast<std::size_t>(rig.tet_mesh.tetCount()));
 
   const double to_mm = 1.0 / rig.alignment.rig_units_per_mm;
@@ -342,6 +354,9 @@ int main(int argc, char** argv) {
   app.add_option("--relax", cfg.live.rotation_relaxation,
                  "Over-relaxation of each iteration's rotation update, omega (default 1.8, the live rig's; 1: off)")
       ->check(CLI::Range(1.0, 1.999));
+  app.add_option("--volume-weight", cfg.live.volume_weight,
+                 "Volume term's share w of each tet's energy, live rig and reference alike (docs/deformation.md; default 0)")
+      ->check(CLI::Range(0.0, 0.99));
   CLI11_PARSE(app, argc, argv);
   cfg.live.use_coarse_level = !no_coarse;
   try {
@@ -352,13 +367,14 @@ int main(int argc, char** argv) {
       coarse_rig = tetrig::loadRigFile(coarse_path);
       cfg.coarse = &coarse_rig;
     }
-    const Measurer measurer(rig);
+    const Measurer measurer(rig, cfg.live.volume_weight);
     nlohmann::json out = {{"rig", cfg.rig_path},
                           {"tet_vertices", rig.tet_mesh.vertexCount()},
                           {"tets", rig.tet_mesh.tetCount()},
                           {"body_tets", rig.body_tet_count},
                           {"reference_every", cfg.reference_every},
                           {"relax", cfg.live.rotation_relaxation},
+                          {"volume_weight", cfg.live.volume_weight},
                           {"extrapolate", cfg.live.rotation_extrapolation},
                           {"runs", nlohmann::json::array()}};
     // The coarse level the live rig will use: --coarse-rig, else the rig's own unless --no-coarse.

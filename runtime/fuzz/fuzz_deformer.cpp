@@ -76,6 +76,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   const std::uint8_t flags = in.byte();
   setup.options.update_rotations = (flags & 1u) == 0;
   setup.options.interpolate_rotations = (flags & 2u) == 0;
+  static constexpr double kVolumeWeight[4] = {0.0, 0.0, 0.5, 0.95};  // the volume term on half the inputs
+  setup.options.volume_weight = kVolumeWeight[(flags >> 2) & 3u];
   setup.options.rotation_steps = static_cast<int>(in.byte() % 6);
   // Handles: each vertex free, a vertex handle, or (rarely) claimed twice.
   for (std::int32_t v = 0; v < vertex_count; ++v) {

@@ -43,6 +43,7 @@ Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(s
   if (!(options_.rotation_extrapolation >= 0.0 && options_.rotation_extrapolation <= 1.0)) {
     fail("rotation_extrapolation must be in [0, 1]");
   }
+  if (!(options_.volume_weight >= 0.0 && options_.volume_weight < 1.0)) fail("volume_weight must be in [0, 1)");
   if (!(options_.rotation_relaxation >= 1.0 && options_.rotation_relaxation < 2.0)) {
     fail("rotation_relaxation must be in [1, 2)");
   }
@@ -291,6 +292,12 @@ Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(s
     }
     group_start_.push_back(static_cast<std::int32_t>(group_slot_.size()));
   }
+  if (options_.volume_weight > 0.0 && options_.update_rotations) {
+    volume_weight_.assign(static_cast<size_t>(block_count) * kTetBlockWidth, 0.0f);
+    for (std::int32_t t = 0; t < tet_count_; ++t)
+      if (!grouped[static_cast<size_t>(t)])
+        volume_weight_[static_cast<size_t>(slotOfTet(t))] = static_cast<float>(options_.volume_weight);
+  }
 
   vertex_targets_.resize(static_cast<size_t>(vertex_handle_count_));
   region_targets_.resize(setup.region_handles.size());
@@ -445,7 +452,7 @@ void Deformer::interpolateRotations() {
 
 void Deformer::rebuildDelta() {
   std::fill(delta_.begin(), delta_.end(), 0.0f);
-  differentialPass(blocks_.data(), static_cast<std::int32_t>(blocks_.size()), delta_.data());
+  differentialPass(blocks_.data(), static_cast<std::int32_t>(blocks_.size()), delta_.data(), u_.data(), volumeWeights());
 }
 
 void Deformer::writePositions() {
@@ -501,7 +508,8 @@ StepStats Deformer::step(const HandleTargets& targets, const StepBudget& budget)
       std::fill(delta_.begin(), delta_.end(), 0.0f);
       const RotationPassStats pass =
           rotationPass(blocks_.data(), block_count, u_.data(), has_groups ? nullptr : delta_.data(),
-                       options_.rotation_steps, exact_lanes_.data(), static_cast<float>(options_.rotation_relaxation - 1.0));
+                       options_.rotation_steps, exact_lanes_.data(), static_cast<float>(options_.rotation_relaxation - 1.0),
+                       volumeWeights());
       stats.energy = pass.energy;
       stats.exact_rotations += pass.exact_fallbacks;
       std::int64_t rigid_ns = 0;
@@ -509,7 +517,7 @@ StepStats Deformer::step(const HandleTargets& targets, const StepBudget& budget)
         const auto t2 = Clock::now();
         applyRigidGroups(group_start_, group_slot_, blocks_.data());
         rigid_ns = nanosecondsBetween(t2, Clock::now());
-        differentialPass(blocks_.data(), block_count, delta_.data());
+        differentialPass(blocks_.data(), block_count, delta_.data(), u_.data(), volumeWeights());
       }
       stats.rigid_ns += rigid_ns;
       stats.rotation_ns += nanosecondsBetween(t1, Clock::now()) - rigid_ns;

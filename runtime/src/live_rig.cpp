@@ -30,6 +30,7 @@ DeformerSetup liveSetup(const Rig& rig, const LiveRigOptions& options, bool fram
   setup.options.rotation_extrapolation = options.rotation_extrapolation;
   setup.options.rotation_extrapolation_max_deg = options.rotation_extrapolation_max_deg;
   setup.options.rotation_relaxation = options.rotation_relaxation;
+  setup.options.volume_weight = options.volume_weight;
   return setup;
 }
 
@@ -183,6 +184,7 @@ void LiveRig::buildCoarseLevel(const Rig& coarse) {
   setup.options.padded_positions = false;
   setup.options.rotation_extrapolation = 0.0;  // measured: no gain on the coarse chain (docs/fidelity.md)
   setup.options.rotation_relaxation = options_.rotation_relaxation;
+  setup.options.volume_weight = options_.volume_weight;
   setup.options.frame_guide = false;
   CoarseLevelOptions co;
   co.iterations = options_.coarse_iterations;

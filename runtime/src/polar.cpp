@@ -4,6 +4,7 @@
 #include "tetrig/polar.hpp"
 
 #include <Eigen/Eigenvalues>
+#include <algorithm>
 
 #include <cmath>
 
@@ -60,6 +61,27 @@ double refineRotation(const Eigen::Matrix3d& f, Eigen::Quaterniond& q, int max_s
     last_angle = angle;
   }
   return last_angle;
+}
+
+double unitVolumeShift(const Eigen::Matrix3d& f, const Eigen::Matrix3d& r) {
+  if (!(f.determinant() > 1e-6)) return 0.0;
+  // det(A + s I) = s^3 + tr(A) s^2 + c2(A) s + det(A), A = R^T F, c2 = the sum of principal 2x2 minors.
+  const Eigen::Matrix3d a = r.transpose() * f;
+  const double t = a.trace();
+  const double c = a(0, 0) * a(1, 1) - a(0, 1) * a(1, 0) + a(0, 0) * a(2, 2) - a(0, 2) * a(2, 0) + a(1, 1) * a(2, 2) -
+                   a(1, 2) * a(2, 1);
+  const double d = a.determinant();
+  double s = 0.0;
+  for (int it = 0; it < 100; ++it) {
+    const double value = ((s + t) * s + c) * s + d - 1.0;
+    const double slope = (3.0 * s + 2.0 * t) * s + c;
+    if (!(slope != 0.0)) return 0.0;
+    const double step = value / slope;
+    s -= step;
+    if (!std::isfinite(s)) return 0.0;
+    if (std::abs(step) < 1e-15) break;
+  }
+  return std::clamp(s, -0.5, 0.5);
 }
 
 }  // namespace tetrig

@@ -197,6 +197,83 @@ TETRIG_INLINE void scatterBlocks(const TetBlock* blocks, const Matrix<N>& rm, fl
   }
 }
 
+// H = E'_u E^-1 of N consecutive blocks (eq. 2.6): the edges u_ck - u_c3 (k = 0..2) in double per
+// half block (corner displacements x, y, z, pad: one 4-wide load each, transposed into lanes), then
+// H(row, col) = sum_k edge_k[row] Einv(k, col) in float.
+template <int N>
+TETRIG_INLINE void displacementGradient(const TetBlock* blocks, const double* u, Pack<N> (&h)[9]) {
+  using V = Pack<N>;
+  V e[9];
+  for (int n = 0; n < N; ++n) {
+    Lanes ex[2][9];
+    for (int half = 0; half < 2; ++half) {
+      Lanes px[4], py[4], pz[4];
+      for (int k = 0; k < 4; ++k) {
+        Vec4 v[kHalf];
+        for (int l = 0; l < kHalf; ++l) v[l] = load4(u + blocks[n].corner_offset[k][kHalf * half + l]);
+        transposeIn(v, px[k], py[k], pz[k]);
+      }
+      for (int k = 0; k < 3; ++k) {
+        ex[half][3 * k] = px[k] - px[3];
+        ex[half][3 * k + 1] = py[k] - py[3];
+        ex[half][3 * k + 2] = pz[k] - pz[3];
+      }
+    }
+    for (int i = 0; i < 9; ++i) e[i].v[n] = toFloat(ex[0][i], ex[1][i]);
+  }
+  V inv[9];
+  for (int i = 0; i < 9; ++i) inv[i] = loadField<N>(blocks, TETRIG_FIELD(edge_inverse, i));
+  for (int row = 0; row < 3; ++row)
+    for (int col = 0; col < 3; ++col)
+      h[3 * row + col] = e[row] * inv[col] + e[3 + row] * inv[3 + col] + e[6 + row] * inv[6 + col];
+}
+
+// The volume term (DeformerOptions::volume_weight; docs/deformation.md, "Volume term"). A tet's
+// energy becomes a [(1 - w) ||F - R||^2 + w ||F - T||^2], where T is the volume-preserving
+// target: F pushed along its own rotation until its determinant is 1,
+//   T = F + s R,   det(F + s R) = det(R^T F + s I) = 1,
+// the closest unit-determinant matrix to F when F's singular values are equal (U (Sigma + s I) V^T;
+// to first order otherwise). With D = R^T (F - R) = R^T (H - (R - I)), t = tr D, c = the sum of
+// D's principal 2x2 minors, d = det D, and g = 1 + s:
+//   det(R^T F + s I) - 1 = s (3 + 3 s + s^2) + t g^2 + c g + d       (no cancellation near rest)
+// whose root s is taken by three Newton steps from 0 (the function is increasing and convex for
+// s > -sigma_min: after the first step Newton approaches the root from above), clamped to
+// [-0.5, 0.5]; inverted and degenerate tets take none. The global step then targets M = (1 - w) R + w T, so the factor does not change:
+//   M - I = (R - I) + w (F - R + s R),   energy a [(1 - w) ||F - R||^2 + 3 w s^2].
+// `rm` holds R - I and `residual` ||F - R||^2 on entry; rm is replaced by M - I, residual by the
+// tet's energy over a. Lanes with w = 0 keep R - I exactly.
+template <int N>
+TETRIG_INLINE void volumeBlend(const Pack<N> (&h)[9], Matrix<N>& rm, Pack<N> w, Pack<N>& residual) {
+  using V = Pack<N>;
+  V e[9];  // F - R = H - (R - I)
+  for (int i = 0; i < 9; ++i) e[i] = h[i] - rm.m[i];
+  V d[9];  // D = R^T E
+  for (int row = 0; row < 3; ++row)
+    for (int col = 0; col < 3; ++col)
+      d[3 * row + col] = rm.m[row] * e[col] + rm.m[3 + row] * e[3 + col] + rm.m[6 + row] * e[6 + col] + e[3 * row + col];
+  const V t = d[0] + d[4] + d[8];
+  const V c = d[0] * d[4] - d[1] * d[3] + d[0] * d[8] - d[2] * d[6] + d[4] * d[8] - d[5] * d[7];
+  const V det = d[0] * (d[4] * d[8] - d[5] * d[7]) - d[1] * (d[3] * d[8] - d[5] * d[6]) + d[2] * (d[3] * d[7] - d[4] * d[6]);
+  // Inverted and degenerate tets (det F = 1 + t + c + d <= 1e-6; NaN too) take no volume push:
+  // the root is not near 0 there, and they take the exact rotation (fixExactRotations).
+  w = select(notAbove(1.0f + t + c + det, 1e-6f), splat<N>(0.0f), w);
+  V s = splat<N>(0.0f);
+  for (int it = 0; it < 3; ++it) {
+    const V g = 1.0f + s;
+    const V f = s * (3.0f + s * (3.0f + s)) + t * g * g + c * g + det;
+    const V slope = 3.0f * g * g + 2.0f * t * g + c;
+    s = s - f / slope;
+  }
+  // Clamp to [-0.5, 0.5]; NaN (a zero slope) becomes 0: no volume push.
+  s = select(notAbove(s, 0.5f), s, splat<N>(0.5f));
+  s = select(notBelow(s, -0.5f), s, splat<N>(-0.5f));
+  s = select(s >= splat<N>(-1.0f), s, splat<N>(0.0f));  // false on NaN
+  residual = (1.0f - w) * residual + 3.0f * w * s * s;
+  const V ws = w * s;
+  for (int i = 0; i < 9; ++i) rm.m[i] = rm.m[i] + w * e[i] + ws * rm.m[i];
+  for (int i = 0; i < 9; i += 4) rm.m[i] = rm.m[i] + ws;
+}
+
 // Lane l of a block -> bit l, by a vector AND and a tree of ORs (a per-lane loop compiles to
 // scalar code).
 TETRIG_INLINE unsigned laneBits(FMask m) {
@@ -213,42 +290,14 @@ TETRIG_INLINE unsigned laneBits(FMask m) {
 
 // The pass over N consecutive blocks. `energy` accumulates in double (two halves): a float sum
 // over thousands of tets would lose the small terms.
-template <int N, bool kRelax>
-TETRIG_INLINE void passBlocks(TetBlock* blocks, const double* u, float* delta, int steps, float relax, Lanes (&energy)[2],
-                              std::uint16_t* exact_lanes, std::int64_t& flagged) {
+template <int N, bool kRelax, bool kVolume>
+TETRIG_INLINE void passBlocks(TetBlock* blocks, const double* u, float* delta, int steps, float relax,
+                              const float* volume_weight, Lanes (&energy)[2], std::uint16_t* exact_lanes,
+                              std::int64_t& flagged) {
   using V = Pack<N>;
   using M = PackMask<N>;
-  // Edges u_ck - u_c3 (k = 0..2), in double per half block: corner displacements (x, y, z, pad:
-  // one 4-wide load each) transposed into lanes; then the lanes in float.
-  V e[9];
-  {
-    for (int n = 0; n < N; ++n) {
-      Lanes ex[2][9];
-      for (int half = 0; half < 2; ++half) {
-        Lanes px[4], py[4], pz[4];
-        for (int k = 0; k < 4; ++k) {
-          Vec4 v[kHalf];
-          for (int l = 0; l < kHalf; ++l) v[l] = load4(u + blocks[n].corner_offset[k][kHalf * half + l]);
-          transposeIn(v, px[k], py[k], pz[k]);
-        }
-        for (int k = 0; k < 3; ++k) {
-          ex[half][3 * k] = px[k] - px[3];
-          ex[half][3 * k + 1] = py[k] - py[3];
-          ex[half][3 * k + 2] = pz[k] - pz[3];
-        }
-      }
-      for (int i = 0; i < 9; ++i) e[i].v[n] = toFloat(ex[0][i], ex[1][i]);
-    }
-  }
-  // H = E'_u E^-1: H(row, col) = sum_k edge_k[row] Einv(k, col); F = I + H   (eq. 2.6)
-  V h[9];
-  {
-    V inv[9];
-    for (int i = 0; i < 9; ++i) inv[i] = loadField<N>(blocks, TETRIG_FIELD(edge_inverse, i));
-    for (int row = 0; row < 3; ++row)
-      for (int col = 0; col < 3; ++col)
-        h[3 * row + col] = e[row] * inv[col] + e[3 + row] * inv[3 + col] + e[6 + row] * inv[6 + col];
-  }
+  V h[9];  // H = E'_u E^-1; F = I + H   (eq. 2.6)
+  displacementGradient<N>(blocks, u, h);
   V f[9];
   for (int i = 0; i < 9; ++i) f[i] = (i % 4 == 0) ? h[i] + 1.0f : h[i];
   const V det = f[0] * (f[4] * f[8] - f[5] * f[7]) - f[1] * (f[3] * f[8] - f[5] * f[6]) +
@@ -370,12 +419,19 @@ TETRIG_INLINE void passBlocks(TetBlock* blocks, const double* u, float* delta, i
   // lanes add theirs in fixExactRotations.
   V residual = (h[0] - rm.m[0]) * (h[0] - rm.m[0]);
   for (int i = 1; i < 9; ++i) residual += (h[i] - rm.m[i]) * (h[i] - rm.m[i]);
+  Matrix<N> target = rm;  // M - I: R - I, or blended with the volume target
+  if constexpr (kVolume) {
+    Pack<N> w;
+    for (int n = 0; n < N; ++n) w.v[n] = loadF(volume_weight + n * W);
+    w = select(needs_exact, splat<N>(0.0f), w);  // flagged lanes: the exact rotation alone
+    volumeBlend<N>(h, target, w, residual);
+  }
   const V tet_energy = select(needs_exact, splat<N>(0.0f), loadField<N>(blocks, TETRIG_FIELD(weight, 0)) * residual);
   for (int n = 0; n < N; ++n) {
     energy[0] += lowHalf(tet_energy.v[n]);
     energy[1] += highHalf(tet_energy.v[n]);
   }
-  if (delta != nullptr) scatterBlocks<N>(blocks, rm, delta);
+  if (delta != nullptr) scatterBlocks<N>(blocks, target, delta);
 }
 
 
@@ -429,13 +485,14 @@ __attribute__((noinline, cold)) void fixExactRotations(TetBlock* blocks, std::in
   }
 }
 
-// The pass over all blocks (kRelax: with over-relaxation).
-template <bool kRelax>
+// The pass over all blocks (kRelax: with over-relaxation; kVolume: with the volume term).
+template <bool kRelax, bool kVolume>
 TETRIG_INLINE void passAll(TetBlock* blocks, std::int32_t block_count, const double* u, float* delta, int steps, float relax,
-                           std::uint16_t* exact_lanes, RotationPassStats& stats) {
+                           const float* volume_weight, std::uint16_t* exact_lanes, RotationPassStats& stats) {
   Lanes energy[2] = {};
   std::int64_t flagged = 0;
   std::int32_t b = 0;
+  auto weights = [&](std::int32_t block) { return kVolume ? volume_weight + static_cast<std::size_t>(block) * W : nullptr; };
   // Blocks beyond the L2 cache stream from memory: there, ask for the block after next now, so
   // its lines arrive while this one computes (measured 8-15 % on 27k tets with the double
   // layout; on meshes that fit in L2 the prefetches only cost, ~3 % on 2.6k tets).
@@ -444,11 +501,13 @@ TETRIG_INLINE void passAll(TetBlock* blocks, std::int32_t block_count, const dou
       const char* next = reinterpret_cast<const char*>(blocks + b + 2);
 #pragma GCC unroll 64
       for (std::size_t line = 0; line < 2 * sizeof(TetBlock); line += 64) __builtin_prefetch(next + line);
-      passBlocks<2, kRelax>(blocks + b, u, delta, steps, relax, energy, exact_lanes + b, flagged);
+      passBlocks<2, kRelax, kVolume>(blocks + b, u, delta, steps, relax, weights(b), energy, exact_lanes + b, flagged);
     }
   }
-  for (; b + 2 <= block_count; b += 2) passBlocks<2, kRelax>(blocks + b, u, delta, steps, relax, energy, exact_lanes + b, flagged);
-  for (; b < block_count; ++b) passBlocks<1, kRelax>(blocks + b, u, delta, steps, relax, energy, exact_lanes + b, flagged);
+  for (; b + 2 <= block_count; b += 2)
+    passBlocks<2, kRelax, kVolume>(blocks + b, u, delta, steps, relax, weights(b), energy, exact_lanes + b, flagged);
+  for (; b < block_count; ++b)
+    passBlocks<1, kRelax, kVolume>(blocks + b, u, delta, steps, relax, weights(b), energy, exact_lanes + b, flagged);
   double total = 0.0;
   for (int l = 0; l < kHalf; ++l) total += energy[0][l] + energy[1][l];
   stats.energy = total;
@@ -460,12 +519,15 @@ TETRIG_INLINE void passAll(TetBlock* blocks, std::int32_t block_count, const dou
 
 TETRIG_MULTIVERSION
 RotationPassStats rotationPass(TetBlock* blocks, std::int32_t block_count, const double* u, float* delta,
-                               int steps, std::uint16_t* exact_lanes, float relax) {
+                               int steps, std::uint16_t* exact_lanes, float relax, const float* volume_weight) {
   RotationPassStats stats;
-  if (relax != 0.0f) {
-    passAll<true>(blocks, block_count, u, delta, steps, relax, exact_lanes, stats);
+  const bool relaxed = relax != 0.0f;
+  if (volume_weight != nullptr) {
+    if (relaxed) passAll<true, true>(blocks, block_count, u, delta, steps, relax, volume_weight, exact_lanes, stats);
+    else passAll<false, true>(blocks, block_count, u, delta, steps, relax, volume_weight, exact_lanes, stats);
   } else {
-    passAll<false>(blocks, block_count, u, delta, steps, relax, exact_lanes, stats);
+    if (relaxed) passAll<true, false>(blocks, block_count, u, delta, steps, relax, nullptr, exact_lanes, stats);
+    else passAll<false, false>(blocks, block_count, u, delta, steps, relax, nullptr, exact_lanes, stats);
   }
   return stats;
 }
@@ -484,13 +546,22 @@ const char* rotationKernelInstructionSet() {
 }
 
 TETRIG_MULTIVERSION
-void differentialPass(const TetBlock* blocks, std::int32_t block_count, float* delta) {
+void differentialPass(const TetBlock* blocks, std::int32_t block_count, float* delta, const double* u,
+                      const float* volume_weight) {
   for (std::int32_t b = 0; b < block_count; ++b) {
     const TetBlock& block = blocks[b];
-    const Matrix<1> rm = rotationMinusIdentity<1>(loadField<1>(&block, TETRIG_FIELD(rotation, 0)),
-                                                  loadField<1>(&block, TETRIG_FIELD(rotation, 1)),
-                                                  loadField<1>(&block, TETRIG_FIELD(rotation, 2)),
-                                                  loadField<1>(&block, TETRIG_FIELD(rotation, 3)));
+    Matrix<1> rm = rotationMinusIdentity<1>(loadField<1>(&block, TETRIG_FIELD(rotation, 0)),
+                                            loadField<1>(&block, TETRIG_FIELD(rotation, 1)),
+                                            loadField<1>(&block, TETRIG_FIELD(rotation, 2)),
+                                            loadField<1>(&block, TETRIG_FIELD(rotation, 3)));
+    if (volume_weight != nullptr) {
+      Pack<1> h[9];
+      displacementGradient<1>(&block, u, h);
+      Pack<1> residual = splat<1>(0.0f);  // unused: no energy here
+      Pack<1> w;
+      w.v[0] = loadF(volume_weight + static_cast<std::size_t>(b) * W);
+      volumeBlend<1>(h, rm, w, residual);
+    }
     scatterBlocks<1>(&block, rm, delta);
   }
 }

@@ -140,6 +140,7 @@ PoseResult poseRig(const Rig& rig, const std::vector<std::pair<std::string, Rigi
 
   DeformerSetup setup = rig.setup;
   setup.options.update_rotations = options.update_rotations;
+  setup.options.volume_weight = options.volume_weight;
   std::optional<Deformer> deformer;
   try {
     deformer.emplace(rig.tet_mesh, setup);

@@ -83,6 +83,9 @@ struct DeformerOptions {
   double rotation_extrapolation_max_deg = 5.0;  // a tet's predicted rotation per frame is capped at this angle
   bool frame_guide = false;  // accept a per-frame rotation increment per tet from outside (setFrameGuide;
                              // the coarse level, tetrig/coarse_level.hpp); 16 bytes per tet more state
+  double volume_weight = 0.0;  // w in [0, 1): each tet's energy a [(1 - w) ||F - R||^2 + w ||F - T||^2] with T
+                               // its nearest unit-volume shape (rotation_kernel.hpp, volume term); the factor
+                               // is the same. Rigid-group tets take none. 0: as rigid as possible, no volume term
 };
 
 struct DeformerSetup {
@@ -125,6 +128,7 @@ struct StepStats {
   std::int32_t iterations = 0;
   std::uint32_t flags = 0;                // StepFlags
   double energy = 0.0;                    // sum_j a_j ||F_j - R_j||^2 after the last rotation update
+                                          // (with the volume term, the combined energy of rotationPass)
   std::int32_t exact_rotations = 0;       // tets that took the exact rotation, summed over iterations
   std::int64_t solve_ns = 0;              // linear solves
   std::int64_t rotation_ns = 0;           // rotation extraction + differential update
@@ -235,6 +239,11 @@ class Deformer {
   // padding lanes.
   AlignedVector<float> guide_;
   bool guide_pending_ = false;
+
+  // Volume term (options_.volume_weight > 0): w per slot, the blocks' lane layout; 0 in padding
+  // lanes and rigid groups. Empty otherwise.
+  AlignedVector<float> volume_weight_;
+  const float* volumeWeights() const { return volume_weight_.empty() ? nullptr : volume_weight_.data(); }
 
   // Rigid groups: CSR over tet slots.
   std::vector<std::int32_t> group_start_, group_slot_;

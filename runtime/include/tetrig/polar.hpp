@@ -29,4 +29,11 @@ double refineRotation(const Eigen::Matrix3d& f, Eigen::Quaterniond& q, int max_s
 // Horn's N(F): q^T N q = tr(R(q)^T F) for unit q = (w, x, y, z).
 Eigen::Matrix4d hornMatrix(const Eigen::Matrix3d& f);
 
+// The volume term's target shift (DeformerOptions::volume_weight; the frame kernel computes it in
+// float, rotation_kernel.cpp): the s with det(F + s R) = 1, so that T = F + s R is F pushed along
+// its rotation R to unit volume; in double, Newton to convergence, clamped to [-0.5, 0.5]; 0 when
+// det F <= 1e-6 (inverted and degenerate tets take no volume term: w = 0 for them). The reference
+// for tests and for the exact energy of tools (a [(1 - w) ||F - R||^2 + w ||F - T||^2], ||F - T||^2 = 3 s^2).
+double unitVolumeShift(const Eigen::Matrix3d& f, const Eigen::Matrix3d& r);
+
 }  // namespace tetrig

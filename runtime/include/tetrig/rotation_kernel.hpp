@@ -52,13 +52,21 @@ struct RotationPassStats {
 // fixed points are those of the plain iteration (D = I there); the slow, smooth modes of the
 // local/global iteration contract by 1 - omega (1 - rho) instead of rho per iteration
 // (docs/fidelity.md, "Over-relaxation"). Tets that take the exact rotation are not relaxed.
+// Volume term: with `volume_weight` (one float per slot, the blocks' lane layout: w_j in [0, 1)),
+// tet j's energy is a_j [(1 - w_j) ||F_j - R_j||^2 + w_j ||F_j - T_j||^2], T_j = F_j + s_j R_j with
+// det T_j = 1, and delta receives a_j (M_j - I) G_j with M_j = (1 - w_j) R_j + w_j T_j instead of
+// a_j (R_j - I) G_j: the factor does not change (volumeBlend in rotation_kernel.cpp). The energy
+// returned is then this combined one. nullptr: the plain as-rigid-as-possible pass.
 RotationPassStats rotationPass(TetBlock* blocks, std::int32_t block_count, const double* u, float* delta,
-                               int steps, std::uint16_t* exact_lanes, float relax = 0.0f);
+                               int steps, std::uint16_t* exact_lanes, float relax = 0.0f,
+                               const float* volume_weight = nullptr);
 
 // The instruction set the kernels run with on this machine ("avx512f", "avx2", "baseline").
 const char* rotationKernelInstructionSet();
 
-// Adds a_j (R_j - I) G_j of every tet into `delta` from the stored rotations (no extraction).
-void differentialPass(const TetBlock* blocks, std::int32_t block_count, float* delta);
+// Adds a_j (R_j - I) G_j of every tet into `delta` from the stored rotations (no extraction);
+// with `volume_weight`, a_j (M_j - I) G_j with the volume target of the displacements `u`.
+void differentialPass(const TetBlock* blocks, std::int32_t block_count, float* delta, const double* u = nullptr,
+                      const float* volume_weight = nullptr);
 
 }  // namespace tetrig

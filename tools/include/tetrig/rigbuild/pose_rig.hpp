@@ -54,6 +54,7 @@ struct PoseOptions {
   int batch = 10;                        // iterations between two convergence checks
   double step_tolerance = 2e-7;          // converged when no tet vertex moves more than this x diagonal over a batch
   bool update_rotations = true;          // false: linear Laplacian editing (R = I), for comparison
+  double volume_weight = 0.0;            // DeformerOptions::volume_weight: the volume term's share, [0, 1)
 };
 
 struct PoseResult {
