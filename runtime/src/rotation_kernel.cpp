@@ -238,10 +238,12 @@ TETRIG_INLINE void displacementGradient(const TetBlock* blocks, const double* u,
 //   det(R^T F + s I) - 1 = s (3 + 3 s + s^2) + t g^2 + c g + d       (no cancellation near rest)
 // whose root s is taken by three Newton steps from 0 (the function is increasing and convex for
 // s > -sigma_min: after the first step Newton approaches the root from above), clamped to
-// [-0.5, 0.5]; inverted and degenerate tets take none. The global step then targets M = (1 - w) R + w T, so the factor does not change:
+// [-0.5, 0.5]; inverted and degenerate tets take none. The global step then targets
+// M = (1 - w) R + w T, so the factor does not change:
 //   M - I = (R - I) + w (F - R + s R),   energy a [(1 - w) ||F - R||^2 + 3 w s^2].
 // `rm` holds R - I and `residual` ||F - R||^2 on entry; rm is replaced by M - I, residual by the
-// tet's energy over a. Lanes with w = 0 keep R - I exactly.
+// tet's energy over a. Lanes with w = 0 keep both exactly (selected, so that an F out of float
+// range in a lane bound for the exact rotation cannot reach delta as 0 * inf).
 template <int N>
 TETRIG_INLINE void volumeBlend(const Pack<N> (&h)[9], Matrix<N>& rm, Pack<N> w, Pack<N>& residual) {
   using V = Pack<N>;
@@ -268,10 +270,13 @@ TETRIG_INLINE void volumeBlend(const Pack<N> (&h)[9], Matrix<N>& rm, Pack<N> w, 
   s = select(notAbove(s, 0.5f), s, splat<N>(0.5f));
   s = select(notBelow(s, -0.5f), s, splat<N>(-0.5f));
   s = select(s >= splat<N>(-1.0f), s, splat<N>(0.0f));  // false on NaN
-  residual = (1.0f - w) * residual + 3.0f * w * s * s;
+  const PackMask<N> off = notAbove(w, 0.0f);
+  residual = select(off, residual, (1.0f - w) * residual + 3.0f * w * s * s);
   const V ws = w * s;
-  for (int i = 0; i < 9; ++i) rm.m[i] = rm.m[i] + w * e[i] + ws * rm.m[i];
-  for (int i = 0; i < 9; i += 4) rm.m[i] = rm.m[i] + ws;
+  for (int i = 0; i < 9; ++i) {
+    const V blended = rm.m[i] + w * e[i] + ws * rm.m[i] + ((i % 4 == 0) ? ws : splat<N>(0.0f));
+    rm.m[i] = select(off, rm.m[i], blended);
+  }
 }
 
 // Lane l of a block -> bit l, by a vector AND and a tree of ORs (a per-lane loop compiles to

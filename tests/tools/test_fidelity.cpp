@@ -158,6 +158,35 @@ TEST_F(FidelityTool, TheCoarseLevelLandsNearerThanTheLiveDefault) {
   EXPECT_NE(bad.status, 0);
 }
 
+// --volume-weight gives the live rig and the reference the volume term (docs/deformation.md): the
+// converged pose, and the budgeted one at a budget that nearly converges, keep more of the fine
+// mesh's volume than without it; the JSON names the weight; a weight of 1 is refused. (Frames
+// 400-459: the clip's first frames are the T-pose, where nothing loses volume.)
+TEST_F(FidelityTool, TheVolumeTermKeepsTheVolume) {
+  const TempDir dir;
+  const auto plain = dir.path() / "plain.json", kept = dir.path() / "kept.json";
+  const std::string args = "--rig '" + rig_->string() + "' --c3d '" + clip_->string() +
+                           "' --first-frame 400 --frames 60 --reference-every 30 --max-reference-iterations 20000 --iterations 30 -q ";
+  ASSERT_EQ(fidelity(args + "--json '" + plain.string() + "'", dir).status, 0);
+  const ToolRun r = fidelity(args + "--volume-weight 0.9 --json '" + kept.string() + "'", dir);
+  ASSERT_EQ(r.status, 0) << r.err;
+  const nlohmann::json jp = readJson(plain), jk = readJson(kept);
+  EXPECT_EQ(jp["volume_weight"].get<double>(), 0.0);
+  EXPECT_EQ(jk["volume_weight"].get<double>(), 0.9);
+  const auto value = [](const nlohmann::json& j, const char* key) { return j["runs"][0][key].get<double>(); };
+  const double plain_conv = value(jp, "volume_change_converged_max"), kept_conv = value(jk, "volume_change_converged_max");
+  const double plain_budget = value(jp, "volume_change_max"), kept_budget = value(jk, "volume_change_max");
+  std::printf("SMPL (800 tet vertices) + HDM05, frames 400-459, 30 iterations: fine volume change max %.2f %% budgeted, %.2f %% "
+              "converged; with the volume term (w 0.9) %.2f %% and %.2f %%\n",
+              100 * plain_budget, 100 * plain_conv, 100 * kept_budget, 100 * kept_conv);
+  ASSERT_GT(plain_conv, 0.005) << "the rig must lose volume without the term for the test to mean anything";
+  EXPECT_LT(kept_conv, 0.5 * plain_conv);
+  EXPECT_LT(kept_budget, plain_budget);
+  const ToolRun bad = fidelity(args + "--volume-weight 1", dir);
+  EXPECT_NE(bad.status, 0);
+  EXPECT_NE(bad.err.find("--volume-weight"), std::string::npos) << bad.err;
+}
+
 TEST_F(FidelityTool, BadArgumentsExitNonZeroWithOneLine) {
   const TempDir dir;
   const ToolRun r = fidelity(common() + "--iterations 0,3", dir);
