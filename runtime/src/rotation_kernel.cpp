@@ -242,13 +242,14 @@ TETRIG_INLINE void displacementGradient(const TetBlock* blocks, const double* u,
 // M = (1 - w) R + w T, so the factor does not change:
 //   M - I = (R - I) + w (F - R + s R),   energy a [(1 - w) ||F - R||^2 + 3 w s^2].
 // `rm` holds R - I and `residual` ||F - R||^2 on entry; rm is replaced by M - I, residual by the
-// tet's energy over a. Lanes with w = 0 keep both exactly (selected, so that an F out of float
-// range in a lane bound for the exact rotation cannot reach delta as 0 * inf).
+// tet's energy over a. Lanes with w = 0 keep both exactly.
 template <int N>
 TETRIG_INLINE void volumeBlend(const Pack<N> (&h)[9], Matrix<N>& rm, Pack<N> w, Pack<N>& residual) {
   using V = Pack<N>;
   V e[9];  // F - R = H - (R - I)
   for (int i = 0; i < 9; ++i) e[i] = h[i] - rm.m[i];
+  V ee = e[0] * e[0];
+  for (int i = 1; i < 9; ++i) ee += e[i] * e[i];
   V d[9];  // D = R^T E
   for (int row = 0; row < 3; ++row)
     for (int col = 0; col < 3; ++col)
@@ -256,9 +257,13 @@ TETRIG_INLINE void volumeBlend(const Pack<N> (&h)[9], Matrix<N>& rm, Pack<N> w, 
   const V t = d[0] + d[4] + d[8];
   const V c = d[0] * d[4] - d[1] * d[3] + d[0] * d[8] - d[2] * d[6] + d[4] * d[8] - d[5] * d[7];
   const V det = d[0] * (d[4] * d[8] - d[5] * d[7]) - d[1] * (d[3] * d[8] - d[5] * d[6]) + d[2] * (d[3] * d[7] - d[4] * d[6]);
-  // Inverted and degenerate tets (det F = 1 + t + c + d <= 1e-6; NaN too) take no volume push:
-  // the root is not near 0 there, and they take the exact rotation (fixExactRotations).
-  w = select(notAbove(1.0f + t + c + det, 1e-6f), splat<N>(0.0f), w);
+  // No volume term (w = 0) for inverted and degenerate tets (det F = 1 + t + c + d <= 1e-6: the
+  // root is not near 0 there, and they take the exact rotation, fixExactRotations) and for F out of
+  // float range (||F - R||^2 >= 1e12, inf or NaN). Those lanes, and lanes given w = 0, keep R - I
+  // and the energy exactly: e is zeroed there, so a non-finite F cannot reach delta as 0 * inf.
+  const PackMask<N> off = notAbove(w, 0.0f) | notBelow(ee, 1e12f) | notAbove(1.0f + t + c + det, 1e-6f);
+  w = select(off, splat<N>(0.0f), w);
+  for (int i = 0; i < 9; ++i) e[i] = select(off, splat<N>(0.0f), e[i]);
   V s = splat<N>(0.0f);
   for (int it = 0; it < 3; ++it) {
     const V g = 1.0f + s;
@@ -270,13 +275,10 @@ TETRIG_INLINE void volumeBlend(const Pack<N> (&h)[9], Matrix<N>& rm, Pack<N> w, 
   s = select(notAbove(s, 0.5f), s, splat<N>(0.5f));
   s = select(notBelow(s, -0.5f), s, splat<N>(-0.5f));
   s = select(s >= splat<N>(-1.0f), s, splat<N>(0.0f));  // false on NaN
-  const PackMask<N> off = notAbove(w, 0.0f);
-  residual = select(off, residual, (1.0f - w) * residual + 3.0f * w * s * s);
+  residual = (1.0f - w) * residual + 3.0f * w * s * s;
   const V ws = w * s;
-  for (int i = 0; i < 9; ++i) {
-    const V blended = rm.m[i] + w * e[i] + ws * rm.m[i] + ((i % 4 == 0) ? ws : splat<N>(0.0f));
-    rm.m[i] = select(off, rm.m[i], blended);
-  }
+  for (int i = 0; i < 9; ++i) rm.m[i] = rm.m[i] + w * e[i] + ws * rm.m[i];
+  for (int i = 0; i < 9; i += 4) rm.m[i] = rm.m[i] + ws;  // the diagonal: s R = s (R - I) + s I
 }
 
 // Lane l of a block -> bit l, by a vector AND and a tree of ORs (a per-lane loop compiles to
