@@ -333,6 +333,24 @@ TEST(RotationKernel, VolumeTermMatchesTheDoubleReference) {
   for (size_t i = 0; i < again.size(); ++i) EXPECT_NEAR(again[i], delta[i], 2e-6) << "entry " << i;
 }
 
+// A vertex thrown out of float range (a displacement of 1e30: F beyond float for its tets) leaves
+// delta finite with the volume term, in the rotation pass and in differentialPass: those tets take
+// the exact rotation and no volume term, never 0 * inf.
+TEST(RotationKernel, VolumeTermKeepsDeltaFiniteForAnFOutOfFloatRange) {
+  KernelScene s = makeScene(13, 0.01);
+  s.xyz[kVectorStride * 5 + 1] = 1e30;
+  const std::vector<float> weight(s.blocks.size() * kTetBlockWidth, 0.9f);
+  std::vector<float> delta(s.xyz.size(), 0.0f);
+  runPass(s, nullptr, 2);  // fills s.u
+  const RotationPassStats stats = rotationPass(s.blocks.data(), static_cast<std::int32_t>(s.blocks.size()), s.u.data(),
+                                               delta.data(), 2, s.exact_lanes.data(), 0.0f, weight.data());
+  EXPECT_GT(stats.exact_fallbacks, 0) << "the far vertex must send its tets to the exact rotation";
+  for (size_t i = 0; i < delta.size(); ++i) ASSERT_TRUE(std::isfinite(delta[i])) << "rotation pass, entry " << i;
+  std::vector<float> again(s.xyz.size(), 0.0f);
+  differentialPass(s.blocks.data(), static_cast<std::int32_t>(s.blocks.size()), again.data(), s.u.data(), weight.data());
+  for (size_t i = 0; i < again.size(); ++i) ASSERT_TRUE(std::isfinite(again[i])) << "differentialPass, entry " << i;
+}
+
 // At rest the volume term adds nothing: u = 0 gives R = I, s = 0 and a zero delta, exactly.
 TEST(RotationKernel, VolumeTermKeepsRestExactly) {
   KernelScene s = makeScene(5, 0.0);
