@@ -170,8 +170,8 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
   const tetrig::MarkerBindingReport binding = live.bindLabels(labels);
   if (binding.matched == 0) throw std::runtime_error("no rig marker is named in " + clip_name);
 
-  // The reference solver: the rig's own setup, plain (the converged pose does not depend on how
-  // a frame step gets there).
+  // The reference solver: the rig's own setup without the frame-step aids (the converged pose does
+  // not depend on how a frame step gets there), with the live rig's energy (its volume term).
   tetrig::DeformerSetup reference_setup = rig.setup;
   reference_setup.options.volume_weight = cfg.live.volume_weight;  // the same energy as the live rig's
   tetrig::Deformer reference(rig.tet_mesh, reference_setup);

@@ -4,8 +4,8 @@
 #include "tetrig/polar.hpp"
 
 #include <Eigen/Eigenvalues>
-#include <algorithm>
 
+#include <algorithm>
 #include <cmath>
 
 namespace tetrig {
