@@ -85,6 +85,7 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
   live_options.normals = options.normals;
   const int pose_threads = options.pose_threads > 0 ? options.pose_threads : 1;
   live_options.split_pose_transfer = pose_threads >= 2;
+  live_options.compact_pose_transfer = !options.double_pose_transfer;
   live_options.use_coarse_level = !options.no_coarse;
   if (options.predict) live_options.rotation_extrapolation = 1.0;
   std::optional<Rig> coarse;

@@ -37,6 +37,7 @@ struct RunOptions {
   bool keep_zero_markers = false;       // c3d: samples at x = y = z = 0 with residual 0 stay valid (default: gaps)
   bool normals = false;
   int pose_threads = 1;                 // pose transfer threads: 1, or 2 (the solver + one worker; docs/live.md)
+  bool double_pose_transfer = false;    // stream the rig's double B instead of its compact copy (A/B measurements)
   double occlusion_blend_ms = 150;
   double label_timeout_ms = 3000;
   std::string stats_json;               // write the run's statistics here (atomically)

@@ -206,6 +206,9 @@ int main(int argc, char** argv) {
   run_cmd->add_flag("--normals", run.normals, "Also publish per-vertex normals");
   run_cmd->add_option("--pose-threads", run.pose_threads, "Pose transfer threads: 1 (default), or 2 (the solver and one worker; docs/live.md)")
       ->check(CLI::Range(1, 2));
+  run_cmd->add_flag("--double-pose-transfer", run.double_pose_transfer,
+                    "Stream the rig's double-precision B (12 bytes per entry) instead of its compact copy (float "
+                    "weights, 16-bit columns: 6 bytes); for A/B measurements (docs/live.md)");
   run_cmd->add_option("--occlusion-blend-ms", run.occlusion_blend_ms, "Blend time when a marker drops out or returns")
       ->capture_default_str()
       ->check(CLI::Range(0.0, 10000.0));

@@ -15,7 +15,13 @@
 //   BM_LiveRigFrame/smpl_hdm05: the same frames through the live path's own per-frame call,
 //   LiveRig::processFrame (clip frame as the C3D playback source fills it -> labels bound once ->
 //   targets incl. occlusion prediction -> step(3) -> pose transfer into a float buffer, what
-//   `tetrig run` writes into the shared-memory slot); /1: the pose transfer split over two threads.
+//   `tetrig run` writes into the shared-memory slot, with the compact copy of B); /1: the pose
+//   transfer split over two threads.
+//   BM_PoseTransfer/smpl_hdm05/<layout>/<cache>: the pose transfer alone, from the padded positions of
+//   one posed frame into a float buffer; layout 0 = the rig's B (double weights, 32-bit columns, 12
+//   bytes per entry), 1 = the live rig's compact copy (float, 16-bit, 6 bytes: narrowPoseTransfer);
+//   cache 0 = back to back (B stays in the caches), 1 = a 64 MB buffer written between calls
+//   (untimed), as between two frames of a live run 8 ms apart on a shared machine.
 #include "bench_data.hpp"
 
 #include "tetrig/coarse_level.hpp"
@@ -30,6 +36,7 @@
 #include <benchmark/benchmark.h>
 
 #include <chrono>
+#include <cstring>
 #include <memory>
 #include <stdexcept>
 #include <string>
@@ -206,5 +213,60 @@ void BM_LiveRigFrame(benchmark::State& state) {
 }
 // Argument: 0 = pose transfer on the calling thread, 1 = split with one worker (PoseTransferSplit).
 BENCHMARK(BM_LiveRigFrame)->Name("BM_LiveRigFrame/smpl_hdm05")->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
+
+void BM_PoseTransfer(benchmark::State& state) {
+  std::string error;
+  const RigScene* scene = rigScene(error);
+  if (scene == nullptr) {
+    state.SkipWithError(error.c_str());
+    return;
+  }
+  const tetrig::Rig& rig = scene->rig;
+  const bool compact = state.range(0) != 0, cold = state.range(1) != 0;
+  // The input: the clip's frame 600 after 10 iterations from rest.
+  constexpr std::size_t kFrame = 600;
+  tetrig::DeformerSetup setup = rig.setup;
+  setup.options.padded_positions = true;
+  tetrig::Deformer deformer(rig.tet_mesh, setup);
+  std::vector<Eigen::Vector3d> targets;
+  for (const std::int32_t v : rig.setup.vertex_handles) targets.push_back(rig.tet_mesh.vertices.row(v).transpose());
+  const float* p = scene->clip.positions(kFrame);
+  const double to_mm = scene->clip.unitsToMm();
+  for (std::size_t m = 0; m < rig.markers.size(); ++m) {
+    const int point = scene->clip_point[m];
+    if (!scene->clip.isValid(kFrame, point)) continue;
+    const Eigen::Vector3d mm(to_mm * p[3 * point], to_mm * p[3 * point + 1], to_mm * p[3 * point + 2]);
+    targets[static_cast<std::size_t>(rig.markers[m].vertex_handle)] = rig.alignment.apply(mm);
+  }
+  tetrig::HandleTargets handle_targets;
+  handle_targets.vertex_positions = targets;
+  deformer.step(handle_targets, tetrig::StepBudget{10});
+  const tetrig::CompactPoseTransfer narrow = tetrig::narrowPoseTransfer(rig.pose_transfer);
+  std::vector<float> fine(static_cast<std::size_t>(rig.pose_transfer.rows) * 3);
+  std::vector<unsigned char> evict(cold ? std::size_t{64} << 20 : 0);
+  const double* x4 = deformer.paddedPositions().data();
+  unsigned char fill = 0;
+  for (auto _ : state) {
+    if (cold) {
+      std::memset(evict.data(), ++fill, evict.size());
+      benchmark::ClobberMemory();
+    }
+    const auto t0 = std::chrono::steady_clock::now();
+    if (compact) {
+      tetrig::applyPoseTransferPadded(narrow.view(), x4, fine.data());
+    } else {
+      tetrig::applyPoseTransferPadded(rig.pose_transfer.view(), x4, fine.data());
+    }
+    benchmark::DoNotOptimize(fine.data());
+    benchmark::ClobberMemory();
+    state.SetIterationTime(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+  }
+  state.counters["B_bytes"] = static_cast<double>(compact ? narrow.bytes() : rig.pose_transfer.bytes());
+}
+BENCHMARK(BM_PoseTransfer)
+    ->Name("BM_PoseTransfer/smpl_hdm05")
+    ->ArgsProduct({{0, 1}, {0, 1}})
+    ->UseManualTime()
+    ->Unit(benchmark::kMicrosecond);
 
 }  // namespace

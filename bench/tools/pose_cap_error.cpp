@@ -1,7 +1,9 @@
 // The accuracy cost of capping the pose-transfer rows: two rig files that differ only in B (the
 // same mesh, clip and settings, one built with "pose_transfer": {"max_nonzeros_per_row": N}), both
 // driven through LiveRig::processFrame by every frame of a C3D clip (3 iterations per frame, no
-// deadline: both deform identically), compared fine vertex by fine vertex.
+// deadline: both deform identically), compared fine vertex by fine vertex. FULL's pose transfer
+// uses the rig's double B as stored; CAPPED's the live rig's default, B's compact copy (float
+// weights, 16-bit columns). Given the same rig twice, it measures what the compact copy alone costs.
 //   build/release/tetrig_pose_cap_error FULL.rig CAPPED.rig CLIP.c3d
 // bench/latency.sh --cap N builds both rigs and runs it.
 #include "tetrig/drivers/c3d_playback.hpp"
@@ -33,7 +35,9 @@ int main(int argc, char** argv) {
     const tetrig::drivers::C3DPlayback playback(clip, options);
     std::vector<std::string> labels(static_cast<std::size_t>(clip.pointCount()));
     for (const int p : playback.selectedPoints()) labels[static_cast<std::size_t>(p)] = clip.labels()[static_cast<std::size_t>(p)];
-    tetrig::LiveRig a(full), b(capped);
+    tetrig::LiveRigOptions reference_options;
+    reference_options.compact_pose_transfer = false;
+    tetrig::LiveRig a(full, reference_options), b(capped);
     a.bindLabels(labels);
     b.bindLabels(labels);
     const std::size_t n = static_cast<std::size_t>(a.fineVertexCount()) * 3;

@@ -134,7 +134,12 @@ LiveRig::LiveRig(const Rig& rig, const LiveRigOptions& options, const Rig* coars
   measurement_.assign(markers, Eigen::Vector3d::Zero());
   measured_.assign(markers, 0);
   skip_prediction_.assign(markers, 0);
-  if (options.split_pose_transfer) split_ = std::make_unique<PoseTransferSplit>(rig.pose_transfer.view());
+  if (options.compact_pose_transfer && fitsCompactPoseTransfer(rig.pose_transfer.cols))
+    compact_b_ = narrowPoseTransfer(rig.pose_transfer);
+  if (options.split_pose_transfer) {
+    split_ = compact_b_.rows > 0 ? std::make_unique<PoseTransferSplit>(compact_b_.view())
+                                 : std::make_unique<PoseTransferSplit>(rig.pose_transfer.view());
+  }
   if (const Rig* coarse = coarseRigOf(rig, options, coarse_rig)) buildCoarseLevel(*coarse);
   prediction_.resize(markers);
   for (std::size_t k = 0; k < markers; ++k) {
@@ -444,6 +449,8 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
   const std::size_t n = rest_positions_.size();
   if (split_) {
     split_->apply(deformer_.paddedPositions().data(), positions);
+  } else if (compact_b_.rows > 0) {
+    applyPoseTransferPadded(compact_b_.view(), deformer_.paddedPositions().data(), positions);
   } else {
     applyPoseTransferPadded(rig.pose_transfer.view(), deformer_.paddedPositions().data(), positions);
   }

@@ -3,6 +3,7 @@
 
 #include <cmath>
 #include <limits>
+#include <stdexcept>
 #include <type_traits>
 
 namespace tetrig {
@@ -22,8 +23,8 @@ PoseTransferCsr<W> makePoseTransferCsr(const Eigen::SparseMatrix<double, Eigen::
   return csr;
 }
 
-template <typename W>
-std::string validatePoseTransfer(const PoseTransferView<W>& b) {
+template <typename W, typename C>
+std::string validatePoseTransfer(const PoseTransferView<W, C>& b) {
   if (b.rows < 0 || b.cols < 0) return "negative matrix size";
   if (b.row_offsets == nullptr) return "no row offsets";
   if (b.row_offsets[0] != 0) return "row_offsets[0] is not 0";
@@ -33,10 +34,30 @@ std::string validatePoseTransfer(const PoseTransferView<W>& b) {
   const std::int32_t nnz = b.row_offsets[b.rows];
   if (nnz > 0 && (b.columns == nullptr || b.weights == nullptr)) return "no column or weight array";
   for (std::int32_t k = 0; k < nnz; ++k) {
-    if (b.columns[k] < 0 || b.columns[k] >= b.cols) return "column index out of range at entry " + std::to_string(k);
+    const auto column = static_cast<std::int64_t>(b.columns[k]);
+    if (column < 0 || column >= b.cols) return "column index out of range at entry " + std::to_string(k);
     if (!std::isfinite(static_cast<double>(b.weights[k]))) return "non-finite weight at entry " + std::to_string(k);
   }
   return {};
+}
+
+CompactPoseTransfer narrowPoseTransfer(const PoseTransferCsr<double>& b) {
+  if (!fitsCompactPoseTransfer(b.cols))
+    throw std::invalid_argument("pose transfer: " + std::to_string(b.cols) +
+                                " tet vertices do not fit 16-bit column indices (at most 65536)");
+  if (std::string fault = validatePoseTransfer(b.view()); !fault.empty())
+    throw std::invalid_argument("pose transfer: " + fault);
+  CompactPoseTransfer compact;
+  compact.rows = b.rows;
+  compact.cols = b.cols;
+  compact.row_offsets = b.row_offsets;
+  compact.columns.resize(b.columns.size());
+  compact.weights.resize(b.weights.size());
+  for (std::size_t k = 0; k < b.columns.size(); ++k) {
+    compact.columns[k] = static_cast<std::uint16_t>(b.columns[k]);
+    compact.weights[k] = static_cast<float>(b.weights[k]);
+  }
+  return compact;
 }
 
 template <typename W, typename In, typename Out>
@@ -66,12 +87,13 @@ void applyPoseTransferRows(const PoseTransferView<W>& b, const In* x_tet, Out* x
 
 #define TETRIG_POSE_TRANSFER_W(W)                                                             \
   template PoseTransferCsr<W> makePoseTransferCsr<W>(const Eigen::SparseMatrix<double, Eigen::RowMajor>&); \
-  template std::string validatePoseTransfer<W>(const PoseTransferView<W>&);
+  template std::string validatePoseTransfer<W, std::int32_t>(const PoseTransferView<W, std::int32_t>&);
 #define TETRIG_POSE_TRANSFER_APPLY(W, In, Out)                                                  \
   template void applyPoseTransferRows<W, In, Out>(const PoseTransferView<W>&, const In*, Out*, std::int32_t, \
                                                   std::int32_t) noexcept;
 TETRIG_POSE_TRANSFER_W(float)
 TETRIG_POSE_TRANSFER_W(double)
+template std::string validatePoseTransfer<float, std::uint16_t>(const CompactPoseTransfer::view_type&);
 TETRIG_POSE_TRANSFER_APPLY(float, float, float)
 TETRIG_POSE_TRANSFER_APPLY(float, double, float)
 TETRIG_POSE_TRANSFER_APPLY(float, double, double)

@@ -2,7 +2,9 @@
 // vertex is (x, y, z, pad), so an entry of B costs one vector load and one 4-wide FMA,
 //   (x, y, z, pad)_fine_i = sum_k B(i, c_k) (x, y, z, pad)_tet_c_k,
 // instead of three scalar loads and three FMAs chained on one running sum per coordinate (the
-// stride-3 kernel in pose_transfer.cpp). Two partial sums per row (even and odd entries).
+// stride-3 kernel in pose_transfer.cpp). Two partial sums per row (even and odd entries), in double
+// whatever the weights' type. The live rig streams B's compact copy (float weights, 16-bit columns:
+// narrowPoseTransfer), half the bytes of the rig's double B.
 #include "tetrig/pose_transfer.hpp"
 
 #include "multiversion.hpp"
@@ -10,13 +12,13 @@
 
 namespace tetrig {
 
-template <typename W, typename Out>
-TETRIG_MULTIVERSION void applyPoseTransferPaddedRows(const PoseTransferView<W>& b, const double* x_tet4, Out* x_fine,
+template <typename W, typename C, typename Out>
+TETRIG_MULTIVERSION void applyPoseTransferPaddedRows(const PoseTransferView<W, C>& b, const double* x_tet4, Out* x_fine,
                                                      std::int32_t row_begin, std::int32_t row_end) noexcept {
   using lanes::load4;
   using lanes::Vec4;
   const std::int32_t* offsets = b.row_offsets;
-  const std::int32_t* cols = b.columns;
+  const C* cols = b.columns;
   const W* w = b.weights;
   for (std::int32_t i = row_begin; i < row_end; ++i) {
     Vec4 s0{}, s1{};
@@ -35,13 +37,15 @@ TETRIG_MULTIVERSION void applyPoseTransferPaddedRows(const PoseTransferView<W>& 
   }
 }
 
-template void applyPoseTransferPaddedRows<float, float>(const PoseTransferView<float>&, const double*, float*,
-                                                        std::int32_t, std::int32_t) noexcept;
-template void applyPoseTransferPaddedRows<float, double>(const PoseTransferView<float>&, const double*, double*,
-                                                         std::int32_t, std::int32_t) noexcept;
-template void applyPoseTransferPaddedRows<double, float>(const PoseTransferView<double>&, const double*, float*,
-                                                         std::int32_t, std::int32_t) noexcept;
-template void applyPoseTransferPaddedRows<double, double>(const PoseTransferView<double>&, const double*, double*,
-                                                          std::int32_t, std::int32_t) noexcept;
+#define TETRIG_POSE_TRANSFER_PADDED(W, C, Out)                                                                 \
+  template void applyPoseTransferPaddedRows<W, C, Out>(const PoseTransferView<W, C>&, const double*, Out*, std::int32_t, \
+                                                       std::int32_t) noexcept;
+TETRIG_POSE_TRANSFER_PADDED(float, std::int32_t, float)
+TETRIG_POSE_TRANSFER_PADDED(float, std::int32_t, double)
+TETRIG_POSE_TRANSFER_PADDED(double, std::int32_t, float)
+TETRIG_POSE_TRANSFER_PADDED(double, std::int32_t, double)
+TETRIG_POSE_TRANSFER_PADDED(float, std::uint16_t, float)
+TETRIG_POSE_TRANSFER_PADDED(float, std::uint16_t, double)
+#undef TETRIG_POSE_TRANSFER_PADDED
 
 }  // namespace tetrig

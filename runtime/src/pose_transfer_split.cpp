@@ -17,8 +17,17 @@
 namespace tetrig {
 
 PoseTransferSplit::PoseTransferSplit(const PoseTransferView<double>& b, std::int32_t chunk_rows)
-    : b_(b), chunk_rows_(std::max<std::int32_t>(1, chunk_rows)) {
-  chunks_ = (b_.rows + chunk_rows_ - 1) / chunk_rows_;
+    : b_(b), rows_(b.rows), chunk_rows_(std::max<std::int32_t>(1, chunk_rows)) {
+  start();
+}
+
+PoseTransferSplit::PoseTransferSplit(const CompactPoseTransfer::view_type& b, std::int32_t chunk_rows)
+    : compact_(b), rows_(b.rows), chunk_rows_(std::max<std::int32_t>(1, chunk_rows)) {
+  start();
+}
+
+void PoseTransferSplit::start() {
+  chunks_ = (rows_ + chunk_rows_ - 1) / chunk_rows_;
   next_chunk_.store(static_cast<std::uint32_t>(chunks_), std::memory_order_relaxed);  // nothing to take yet
   worker_ = std::thread([this] { work(); });
 }
@@ -35,8 +44,14 @@ void PoseTransferSplit::runChunks(bool worker) noexcept {
   for (std::uint32_t c = next_chunk_.fetch_add(1, std::memory_order_acq_rel); c < chunks;
        c = next_chunk_.fetch_add(1, std::memory_order_acq_rel)) {
     const std::int32_t begin = static_cast<std::int32_t>(c) * chunk_rows_;
-    const std::int32_t end = std::min(b_.rows, begin + chunk_rows_);
-    applyPoseTransferPaddedRows(b_, x_.load(std::memory_order_acquire), out_.load(std::memory_order_acquire), begin, end);
+    const std::int32_t end = std::min(rows_, begin + chunk_rows_);
+    const double* x = x_.load(std::memory_order_acquire);
+    float* out = out_.load(std::memory_order_acquire);
+    if (compact_.rows > 0) {
+      applyPoseTransferPaddedRows(compact_, x, out, begin, end);
+    } else {
+      applyPoseTransferPaddedRows(b_, x, out, begin, end);
+    }
     if (worker) worker_chunks_.fetch_add(1, std::memory_order_relaxed);
   }
 }

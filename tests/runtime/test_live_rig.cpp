@@ -620,6 +620,50 @@ TEST(LiveRig, SameFramesGiveBitIdenticalOutputs) {
   }
 }
 
+// The compact copy of B (float weights, 16-bit columns; the default) streams about half the bytes
+// and publishes the pose the double B gives, to within the weights' rounding (2^-24 of
+// sum_j |B_ij| |x_j|) and the float output's (2^-24 of |x_i|), frame after frame.
+TEST(LiveRig, TheCompactPoseTransferMatchesTheDoubleBToItsRounding) {
+  const Rig rig = makeBarRig();
+  LiveRigOptions compact_options, double_options;
+  double_options.compact_pose_transfer = false;
+  ASSERT_TRUE(compact_options.compact_pose_transfer);  // the default
+  LiveRig compact(rig, compact_options), wide(rig, double_options);
+  compact.bindLabels(labelTable());
+  wide.bindLabels(labelTable());
+  EXPECT_EQ(wide.poseTransferBytes(), rig.pose_transfer.bytes());
+  const auto row_bytes = static_cast<std::int64_t>(rig.pose_transfer.row_offsets.size() * sizeof(std::int32_t));
+  EXPECT_EQ(compact.poseTransferBytes() - row_bytes, (wide.poseTransferBytes() - row_bytes) / 2);
+  double row_sum = 0.0;  // the largest sum_j |B_ij|
+  for (std::int32_t i = 0; i < rig.pose_transfer.rows; ++i) {
+    double sum = 0.0;
+    for (std::int32_t k = rig.pose_transfer.row_offsets[i]; k < rig.pose_transfer.row_offsets[i + 1]; ++k)
+      sum += std::abs(rig.pose_transfer.weights[static_cast<std::size_t>(k)]);
+    row_sum = std::max(row_sum, sum);
+  }
+  const std::size_t n = static_cast<std::size_t>(compact.fineVertexCount()) * 3;
+  std::vector<float> xc(n), xw(n);
+  double largest = 0.0, largest_ratio = 0.0;
+  for (int f = 0; f < 60; ++f) {
+    const MarkerFrame frame = makeFrame(rig, movedMarkers(rig, 0.02 * f, -0.01 * f, Eigen::Vector3d(0, 0.005 * f, 0)),
+                                        std::vector<bool>(kMarkers, true), static_cast<std::uint64_t>(f));
+    compact.processFrame(frame, StepBudget{3}, xc.data(), nullptr);
+    wide.processFrame(frame, StepBudget{3}, xw.data(), nullptr);
+    // The step is the same in both: only the product differs.
+    double x_tet = 0.0;
+    for (const double v : compact.deformer().paddedPositions()) x_tet = std::max(x_tet, std::abs(v));
+    for (std::size_t i = 0; i < n; ++i) {
+      const double difference = std::abs(static_cast<double>(xc[i]) - static_cast<double>(xw[i]));
+      const double bound = 0x1p-24 * row_sum * x_tet + 0x1p-23 * std::abs(static_cast<double>(xw[i]));
+      ASSERT_LE(difference, bound) << "frame " << f << " value " << i;
+      largest = std::max(largest, difference);
+      largest_ratio = std::max(largest_ratio, difference / bound);
+    }
+  }
+  RecordProperty("largest_difference", ::testing::PrintToString(largest));
+  RecordProperty("largest_fraction_of_bound", ::testing::PrintToString(largest_ratio));
+}
+
 // With and without the coarse level (the rig as its own coarse level) and the temporal prediction.
 class LiveRigAllocations : public ::testing::TestWithParam<bool> {};
 

@@ -9,7 +9,10 @@
 #include <atomic>
 #include <cstring>
 #include <memory>
+#include <cmath>
 #include <cstdlib>
+#include <stdexcept>
+#include <string>
 #include <new>
 #include <random>
 #include <vector>
@@ -128,6 +131,7 @@ TEST(PoseTransfer, PaddedInputMatchesEigenProduct) {
 TEST(PoseTransfer, ApplyDoesNotAllocate) {
   const auto b = randomB(300, 50, 11);
   const PoseTransferCsr<float> bf = makePoseTransferCsr<float>(b);
+  const CompactPoseTransfer compact = narrowPoseTransfer(makePoseTransferCsr<double>(b));
   std::vector<double> x(150, 1.0);
   std::vector<float> out(900);
   const auto view = bf.view();
@@ -136,6 +140,7 @@ TEST(PoseTransfer, ApplyDoesNotAllocate) {
   for (int frame = 0; frame < 10; ++frame) {
     applyPoseTransfer(view, x.data(), out.data());
     applyPoseTransferPadded(view, x4.data(), out.data());
+    applyPoseTransferPadded(compact.view(), x4.data(), out.data());
   }
   EXPECT_EQ(::tetrig::test::allocationCount(), before);
 }
@@ -161,6 +166,59 @@ TEST(PoseTransfer, ValidateFindsBrokenStructure) {
   }
 }
 
+// The live rig's compact copy (float weights, 16-bit columns): the same columns, and each fine
+// vertex within the weights' rounding of the double product, |dx_i| <= 2^-24 sum_j |B_ij| |x_j|
+// (+ the double sums' own rounding), with column indices above 32767 and up to 65535 (a signed
+// or truncated index would gather the wrong vertex and miss the bound by orders of magnitude).
+TEST(PoseTransfer, CompactCopyIsWithinTheWeightsRoundingOfTheDoubleProduct) {
+  const int rows = 400;
+  const int cols = 65536;
+  const auto [b, x, expected] = randomProduct(rows, cols, 17);
+  const PoseTransferCsr<double> bd = makePoseTransferCsr<double>(b);
+  int high_columns = 0;
+  for (const std::int32_t c : bd.columns) high_columns += c >= 32768;
+  ASSERT_GT(high_columns, 100);
+  const CompactPoseTransfer compact = narrowPoseTransfer(bd);
+  EXPECT_EQ(validatePoseTransfer(compact.view()), "");
+  ASSERT_EQ(compact.columns.size(), bd.columns.size());
+  for (std::size_t k = 0; k < bd.columns.size(); ++k) ASSERT_EQ(static_cast<std::int32_t>(compact.columns[k]), bd.columns[k]);
+  EXPECT_EQ(compact.row_offsets, bd.row_offsets);
+  EXPECT_EQ(compact.bytes() - static_cast<std::int64_t>(compact.row_offsets.size() * 4), 6 * compact.nonzeros());
+
+  std::vector<double> x4(static_cast<size_t>(cols) * 4, 0.0);
+  for (int v = 0; v < cols; ++v)
+    for (int c = 0; c < 3; ++c) x4[4 * static_cast<size_t>(v) + static_cast<size_t>(c)] = 1000.0 * x(v, c);
+  Positions out(rows, 3);
+  applyPoseTransferPadded(compact.view(), x4.data(), out.data());
+  int rounded_rows = 0;
+  for (int i = 0; i < rows; ++i) {
+    for (int c = 0; c < 3; ++c) {
+      double bound = 0.0;
+      for (Eigen::SparseMatrix<double, Eigen::RowMajor>::InnerIterator it(b, i); it; ++it)
+        bound += std::abs(it.value()) * std::abs(1000.0 * x(it.col(), c));
+      const double error = std::abs(out(i, c) - 1000.0 * expected(i, c));
+      EXPECT_LE(error, bound * (0x1p-24 + 1e-14)) << "row " << i << " coordinate " << c;
+      rounded_rows += error > bound * 1e-14;
+    }
+  }
+  EXPECT_GT(rounded_rows, 100);  // the float weights do round: the bound is not vacuous
+}
+
+TEST(PoseTransfer, CompactCopyRefusesTooManyColumnsAndBrokenMatrices) {
+  PoseTransferCsr<double> wide = makePoseTransferCsr<double>(randomB(10, 65537, 3));
+  EXPECT_FALSE(fitsCompactPoseTransfer(wide.cols));
+  EXPECT_TRUE(fitsCompactPoseTransfer(65536));
+  try {
+    (void)narrowPoseTransfer(wide);
+    ADD_FAILURE() << "65537 columns accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("65537 tet vertices"), std::string::npos) << e.what();
+  }
+  PoseTransferCsr<double> broken = makePoseTransferCsr<double>(randomB(20, 5, 5));
+  ASSERT_GT(broken.nonzeros(), 2);
+  broken.columns[1] = 5;
+  EXPECT_THROW((void)narrowPoseTransfer(broken), std::invalid_argument);
+}
 
 // The two-core split gives the single-thread result bit for bit, whoever computes which chunk;
 // the worker takes part (its chunks are counted); apply() allocates nothing.
@@ -187,6 +245,29 @@ TEST(PoseTransferSplit, BitIdenticalToOneThreadAndTheWorkerTakesChunks) {
     mismatches += std::memcmp(single.data(), split.data(), single.size() * sizeof(float)) != 0;
   }
   EXPECT_EQ(test::allocationCount(), before);
+  EXPECT_EQ(mismatches, 0);
+  EXPECT_GT(worker->workerChunks(), 0u) << "the worker thread never computed a chunk";
+}
+
+// The same with the compact copy, as the live rig runs it.
+TEST(PoseTransferSplit, CompactCopyBitIdenticalToOneThread) {
+  const int rows = 3001;
+  const int cols = 200;
+  const auto [b, x, expected] = randomProduct(rows, cols, 23);
+  const CompactPoseTransfer compact = narrowPoseTransfer(makePoseTransferCsr<double>(b));
+  std::vector<double> x4(static_cast<size_t>(cols) * 4, 0.0);
+  std::vector<float> single(static_cast<size_t>(rows) * 3), split(static_cast<size_t>(rows) * 3);
+  auto worker = std::make_unique<PoseTransferSplit>(compact.view(), 64);
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<double> u(-2.0, 2.0);
+  int mismatches = 0;
+  for (int call = 0; call < 300 || (worker->workerChunks() == 0 && call < 20000); ++call) {
+    for (double& v : x4) v = u(rng);
+    applyPoseTransferPadded(compact.view(), x4.data(), single.data());
+    std::fill(split.begin(), split.end(), -7.0f);
+    worker->apply(x4.data(), split.data());
+    mismatches += std::memcmp(single.data(), split.data(), single.size() * sizeof(float)) != 0;
+  }
   EXPECT_EQ(mismatches, 0);
   EXPECT_GT(worker->workerChunks(), 0u) << "the worker thread never computed a chunk";
 }

@@ -69,6 +69,12 @@ struct LiveRigOptions {
   int prediction_rings = 3;          // anchor rings of the occlusion prediction (MarkerPredictionOptions::rings)
   double untimed_frame_period_s = 1.0 / 120.0;  // clock advance of a frame with neither timestamp
   bool fade_dropout_offset = true;   // false: keep the dropout offset (in the anchor's frame) for the whole occlusion
+  bool compact_pose_transfer = true;  // stream a copy of B with float weights and 16-bit columns (6 bytes
+                                     // per entry, narrowPoseTransfer) instead of the rig's double B (12):
+                                     // 0.74-0.78x the pose transfer's time with B out of the caches, a
+                                     // fine vertex within 2^-24 of |B| |x_tet| of the double product
+                                     // (docs/live.md, "Latency"); rigs of more than 65536 tet vertices use
+                                     // the double B
   bool split_pose_transfer = false; // run the pose transfer on this thread and one worker thread made at
                                      // load (PoseTransferSplit; bit-identical results); for machines with 2+ cores
   bool predict_all_markers = false;  // false: predict only the markers that need it (not measured, or
@@ -166,6 +172,10 @@ class LiveRig {
   const Deformer& deformer() const noexcept { return deformer_; }
   const CoarseLevel* coarseLevel() const noexcept { return coarse_.get(); }  // nullptr without a coarse rig
   const LiveRigOptions& options() const noexcept { return options_; }
+  // Bytes of B each frame's pose transfer streams: the compact copy's, or the rig's double B's.
+  std::int64_t poseTransferBytes() const noexcept {
+    return compact_b_.rows > 0 ? compact_b_.bytes() : rig_->pose_transfer.bytes();
+  }
 
   // Region handles' targets (x = R x_rest + t, rig units), passed to every step: identity (rest)
   // unless something drives them, e.g. pose sensors, on the solver thread before processFrame.
@@ -208,6 +218,7 @@ class LiveRig {
   LiveRigOptions options_;
   Deformer deformer_;
   MarkerPredictor predictor_;
+  CompactPoseTransfer compact_b_;             // when options.compact_pose_transfer and the rig fits (else empty)
   std::unique_ptr<PoseTransferSplit> split_;  // when options.split_pose_transfer
   // Coarse level (with a coarse rig): its handle targets, and per coarse marker its vertex handle
   // and the rig marker that drives it.

@@ -28,8 +28,9 @@ namespace tetrig {
 
 class PoseTransferSplit {
  public:
-  // `b` must outlive this object. chunk_rows: rows per chunk (>= 1).
+  // `b` (the rig's B, or its compact copy) must outlive this object. chunk_rows: rows per chunk (>= 1).
   explicit PoseTransferSplit(const PoseTransferView<double>& b, std::int32_t chunk_rows = 512);
+  explicit PoseTransferSplit(const CompactPoseTransfer::view_type& b, std::int32_t chunk_rows = 512);
   ~PoseTransferSplit();
   PoseTransferSplit(const PoseTransferSplit&) = delete;
   PoseTransferSplit& operator=(const PoseTransferSplit&) = delete;
@@ -42,10 +43,13 @@ class PoseTransferSplit {
   [[nodiscard]] std::int32_t chunkCount() const noexcept { return chunks_; }
 
  private:
+  void start();
   void work() noexcept;
   void runChunks(bool worker) noexcept;
 
-  PoseTransferView<double> b_;
+  PoseTransferView<double> b_;                 // used when compact_ is empty (rows 0)
+  CompactPoseTransfer::view_type compact_;
+  std::int32_t rows_ = 0;
   std::int32_t chunk_rows_ = 0, chunks_ = 0;
   // The job's input and output, stored before next_chunk_ is reset (atomic: a late worker may read
   // them while the caller starts the next job; it then computes that job's rows, correctly).
