@@ -760,6 +760,7 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
     prog.begin("binding markers by invisible tets");
     MarkerBindOptions bopt;
     bopt.faces_per_marker = mopt.faces_per_marker;
+    bopt.face_spread = mopt.face_spread;
     MarkerBindResult bound = bindMarkers(body, marker_rig, markers.labels, bopt);
     full = bound.mesh;
     report.invisible_tets = bound.invisible_tets;

@@ -260,7 +260,7 @@ RigDescription parseRigDescription(const std::string& json_text, const std::file
     const json& m = root["markers"];
     r.allowKeys(m, "markers", {"clip", "frame", "labels", "exclude", "device_up", "alignment", "matrix", "icp_iterations", "icp_scale",
                                "max_scale_change", "marker_offset", "fit_power", "max_distance", "max_distance_fraction", "checks",
-                               "faces_per_marker", "invisible_stiffness"});
+                               "faces_per_marker", "face_spread", "invisible_stiffness"});
     MarkerOptions& o = d.markers;
     if (m.contains("clip")) o.clip = r.path(m["clip"], "markers.clip");
     if (m.contains("frame")) {
@@ -320,6 +320,8 @@ RigDescription parseRigDescription(const std::string& json_text, const std::file
       if (!(k.max_far_fraction >= 0 && k.max_far_fraction <= 1)) r.fail("markers.checks.max_far_fraction", "must be in [0, 1]");
     }
     if (m.contains("faces_per_marker")) o.faces_per_marker = r.integer<int>(m["faces_per_marker"], "markers.faces_per_marker", 1, 16);
+    if (m.contains("face_spread")) o.face_spread = r.number(m["face_spread"], "markers.face_spread");
+    if (!(o.face_spread >= 0 && o.face_spread <= 100)) r.fail("markers.face_spread", "must be in [0, 100]");
     if (m.contains("invisible_stiffness")) o.invisible_stiffness = r.number(m["invisible_stiffness"], "markers.invisible_stiffness");
     if (!(o.invisible_stiffness > 0)) r.fail("markers.invisible_stiffness", "must be positive");
   }

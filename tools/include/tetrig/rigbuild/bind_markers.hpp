@@ -24,6 +24,13 @@ struct MarkerBindOptions {
   int faces_per_marker = 3;          // invisible tets per marker
   int search_faces = 32;             // nearest boundary faces considered
   double min_relative_height = 0.05; // marker height over the face plane / longest face edge
+  // 0: the faces_per_marker nearest qualifying faces (adjacent: a marker far from the skin hangs on
+  // needles). > 0: a tripod. The nearest qualifying face comes first. Each further face is the
+  // qualifying one whose centroid lies farthest from the faces already taken, among those whose
+  // centroid lies within face_spread * d of the marker's closest surface point (d: the marker's
+  // distance to the surface; at least the nearest face's longest edge), out of the
+  // max(search_faces, 128) nearest; when none is left there, the nearest qualifying face not taken.
+  double face_spread = 0.0;
 };
 
 struct MarkerBinding {

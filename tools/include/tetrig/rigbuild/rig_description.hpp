@@ -67,6 +67,7 @@ struct MarkerOptions {
   double max_distance_fraction = 0.06;     // ... without max_distance: this fraction of the mesh's bounding-box diagonal
   AlignmentCheckLimits checks;             // plausibility of an automatic alignment (alignment_checks.hpp)
   int faces_per_marker = 3;                // invisible tets per marker (closest qualifying boundary faces)
+  double face_spread = 0.0;                // MarkerBindOptions::face_spread (0: the nearest faces)
   double invisible_stiffness = 0.1;        // stiffness weight of invisible tets (body tets: 1)
   bool keep_zero_points = false;           // C3D samples at x = y = z = 0 with residual 0 are valid, not
                                            // gaps (drivers::C3DReadOptions; CLI --keep-zero-markers)
