@@ -761,6 +761,9 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
     MarkerBindOptions bopt;
     bopt.faces_per_marker = mopt.faces_per_marker;
     bopt.face_spread = mopt.face_spread;
+    bopt.fan_spread = mopt.fan_spread;
+    bopt.fan_spokes = mopt.fan_spokes;
+    bopt.fan_weight = mopt.fan_weight;
     MarkerBindResult bound = bindMarkers(body, marker_rig, markers.labels, bopt);
     full = bound.mesh;
     report.invisible_tets = bound.invisible_tets;
@@ -778,6 +781,9 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
       rig.markers.push_back(rm);
     }
     stiffness.resize(static_cast<std::size_t>(full.tetCount()), mopt.invisible_stiffness);
+    for (std::size_t i = 0; i < bound.invisible_scale.size(); ++i) {
+      stiffness[static_cast<std::size_t>(body.tetCount()) + i] *= bound.invisible_scale[i];
+    }
     report.bind_seconds = since(t0);
     prog.end(std::to_string(bound.invisible_tets) + " invisible tets" +
              (bound.below_skin ? ", " + std::to_string(bound.below_skin) + " markers below the skin" : std::string()));

@@ -260,7 +260,8 @@ RigDescription parseRigDescription(const std::string& json_text, const std::file
     const json& m = root["markers"];
     r.allowKeys(m, "markers", {"clip", "frame", "labels", "exclude", "device_up", "alignment", "matrix", "icp_iterations", "icp_scale",
                                "max_scale_change", "marker_offset", "fit_power", "max_distance", "max_distance_fraction", "checks",
-                               "faces_per_marker", "face_spread", "invisible_stiffness"});
+                               "faces_per_marker", "face_spread", "fan_spread", "fan_spokes", "fan_weight",
+                               "invisible_stiffness"});
     MarkerOptions& o = d.markers;
     if (m.contains("clip")) o.clip = r.path(m["clip"], "markers.clip");
     if (m.contains("frame")) {
@@ -322,6 +323,11 @@ RigDescription parseRigDescription(const std::string& json_text, const std::file
     if (m.contains("faces_per_marker")) o.faces_per_marker = r.integer<int>(m["faces_per_marker"], "markers.faces_per_marker", 1, 16);
     if (m.contains("face_spread")) o.face_spread = r.number(m["face_spread"], "markers.face_spread");
     if (!(o.face_spread >= 0 && o.face_spread <= 100)) r.fail("markers.face_spread", "must be in [0, 100]");
+    if (m.contains("fan_spread")) o.fan_spread = r.number(m["fan_spread"], "markers.fan_spread");
+    if (!(o.fan_spread >= 0 && o.fan_spread <= 100)) r.fail("markers.fan_spread", "must be in [0, 100]");
+    if (m.contains("fan_spokes")) o.fan_spokes = r.integer<int>(m["fan_spokes"], "markers.fan_spokes", 3, 32);
+    if (m.contains("fan_weight")) o.fan_weight = r.number(m["fan_weight"], "markers.fan_weight");
+    if (!(o.fan_weight >= 0 && o.fan_weight <= 1000)) r.fail("markers.fan_weight", "must be in [0, 1000]");
     if (m.contains("invisible_stiffness")) o.invisible_stiffness = r.number(m["invisible_stiffness"], "markers.invisible_stiffness");
     if (!(o.invisible_stiffness > 0)) r.fail("markers.invisible_stiffness", "must be positive");
   }
