@@ -790,6 +790,25 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
   }
   report.markers = static_cast<std::int32_t>(markers.labels.size());
   report.marker_labels = markers.labels;
+  // Regions driven by marker clusters (region_handles[i].markers), by label.
+  for (std::size_t h = 0; h < desc.region_handles.size(); ++h) {
+    const NamedSelection& n = desc.region_handles[h];
+    if (n.markers.empty()) continue;
+    RigMarkerRegion mr;
+    mr.region_handle = static_cast<std::int32_t>(h);
+    for (const std::string& label : n.markers) {
+      std::int32_t found = -1;
+      for (std::size_t m = 0; m < rig.markers.size(); ++m) {
+        if (rig.markers[m].label == label) found = static_cast<std::int32_t>(m);
+      }
+      if (found < 0) {
+        throw RigBuildError("region handle '" + n.name + "': marker '" + label + "' is not a marker of this rig" +
+                            (rig.markers.empty() ? std::string(" (the rig has no markers: give --markers CLIP.c3d)") : std::string()));
+      }
+      mr.markers.push_back(found);
+    }
+    rig.marker_regions.push_back(std::move(mr));
+  }
 
   rig.tet_mesh = full;
   rig.body_vertex_count = body.vertexCount();

@@ -160,7 +160,7 @@ class Reader {
     for (std::size_t i = 0; i < arr.size(); ++i) {
       const std::string where = std::string(key) + "[" + std::to_string(i) + "]";
       if (region) {
-        allowKeys(arr[i], where, {"name", "select", "oriented"});
+        allowKeys(arr[i], where, {"name", "select", "oriented", "markers"});
       } else if (stiffness) {
         allowKeys(arr[i], where, {"name", "select", "value"});
       } else {
@@ -171,6 +171,16 @@ class Reader {
       if (!arr[i].contains("select")) fail(where, "needs a select");
       n.select = selection(arr[i]["select"], where + ".select");
       if (region && arr[i].contains("oriented")) n.oriented = boolean(arr[i]["oriented"], where + ".oriented");
+      if (region && arr[i].contains("markers")) {
+        n.markers = strings(arr[i]["markers"], where + ".markers");
+        if (n.markers.size() < 3) fail(where + ".markers", "needs at least 3 marker labels (a rigid cluster fixes a rotation)");
+        for (std::size_t a = 0; a < n.markers.size(); ++a) {
+          for (std::size_t b = 0; b < a; ++b) {
+            if (n.markers[a] == n.markers[b]) fail(where + ".markers", "names '" + n.markers[a] + "' twice");
+          }
+        }
+        if (!n.oriented) fail(where + ".markers", "a region driven by markers takes their rotation: it must be oriented");
+      }
       if (stiffness) {
         if (!arr[i].contains("value")) fail(where, "needs a value (stiffness weight; body tets default to 1)");
         n.value = number(arr[i]["value"], where + ".value");
@@ -358,6 +368,9 @@ RigDescription parseRigDescription(const std::string& json_text, const std::file
       }
       if (!d.region_handles[static_cast<std::size_t>(p.region_index)].oriented) {
         r.fail(where + ".region", "region handle '" + p.region + "' is not oriented; a pose sensor drives its rotation (set \"oriented\": true)");
+      }
+      if (!d.region_handles[static_cast<std::size_t>(p.region_index)].markers.empty()) {
+        r.fail(where + ".region", "region handle '" + p.region + "' is already driven by its markers");
       }
       for (const PoseSensorSpec& other : d.pose_sensors) {
         if (other.region_index == p.region_index) {

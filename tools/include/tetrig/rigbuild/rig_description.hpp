@@ -41,6 +41,7 @@ struct NamedSelection {
   std::string name;
   Selection select;
   bool oriented = true;    // region handles only
+  std::vector<std::string> markers;  // region handles only: a marker cluster driving it (RigMarkerRegion); empty: none
   double value = 1.0;      // stiffness entries only
 };
 
