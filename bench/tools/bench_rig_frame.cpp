@@ -17,6 +17,10 @@
 //   targets incl. occlusion prediction -> step(3) -> pose transfer into a float buffer, what
 //   `tetrig run` writes into the shared-memory slot, with the compact copy of B); /1: the pose
 //   transfer split over two threads.
+//   BM_LiveRigFrame/smpl_hdm05_feet: the same live path (no split) on the same rig built with
+//   assets/human_man_feet.json (each foot a region driven by its TOE/HEE/MT5 markers; issue #12),
+//   against BM_LiveRigFrame/smpl_hdm05/0: what the marker fits and the rotation interpolation of
+//   two oriented regions add to a frame.
 //   BM_PoseTransfer/smpl_hdm05/<layout>/<cache>: the pose transfer alone, from the padded positions of
 //   one posed frame into a float buffer; layout 0 = the rig's B (double weights, 32-bit columns, 12
 //   bytes per entry), 1 = the live rig's compact copy (float, 16-bit, 6 bytes: narrowPoseTransfer);
@@ -32,6 +36,7 @@
 #include "tetrig/pose_transfer.hpp"
 #include "tetrig/rig_file.hpp"
 #include "tetrig/rigbuild/build_rig.hpp"
+#include "tetrig/rigbuild/rig_description.hpp"
 
 #include <benchmark/benchmark.h>
 
@@ -47,35 +52,40 @@ constexpr const char* kMan = "meshes/odedstein-meshes/human_man.obj";
 constexpr const char* kClip = "mocap/hdm05/HDM_mm_01-02_03_120.c3d";
 
 struct RigScene {
-  tetrig::Rig rig;
+  tetrig::Rig rig;  // or, for the feet variant, the same built with assets/human_man_feet.json
   tetrig::drivers::C3DClip clip;
   std::vector<int> clip_point;  // per rig marker: its point in the clip
   tetrig::Rig coarse;           // the same with 150 tet vertices (the coarse level)
 };
 
-// Built once (the rig build takes seconds); null with `error` set when the data is absent.
-const RigScene* rigScene(std::string& error) {
-  return tetrig::bench::buildOnce<RigScene>(
-      [] {
-        const auto man = tetrig::bench::requireBenchData(kMan), clip = tetrig::bench::requireBenchData(kClip);
-        tetrig::rigbuild::BuildRigInputs in;
-        in.mesh = man;
-        in.clip = clip;
-        in.tet_vertices = 1500;
-        in.max_marker_distance = 0.15;  // the subject's wider stance: see test_rig_markers_real.cpp
-        in.check_deformer = false;
-        auto s = std::make_unique<RigScene>(RigScene{tetrig::rigbuild::buildRig(in), tetrig::drivers::C3DClip::load(clip), {}, {}});
-        in.tet_vertices = 150;
-        s->coarse = tetrig::rigbuild::buildRig(in);
-        for (const tetrig::RigMarker& m : s->rig.markers) {
-          const int point = s->clip.findPoint(m.label);  // subject prefixes ("meinard:LFHD") allowed
-          if (point < 0) throw std::runtime_error("marker " + m.label + " is not in the clip");
-          s->clip_point.push_back(point);
-        }
-        return s;
-      },
-      error);
+std::unique_ptr<RigScene> makeRigScene(bool feet) {
+  const auto man = tetrig::bench::requireBenchData(kMan), clip = tetrig::bench::requireBenchData(kClip);
+  tetrig::rigbuild::BuildRigInputs in;
+  in.mesh = man;
+  in.clip = clip;
+  in.tet_vertices = 1500;
+  in.max_marker_distance = 0.15;  // the subject's wider stance: see test_rig_markers_real.cpp
+  in.check_deformer = false;
+  if (feet) in.description = tetrig::rigbuild::readRigDescription(std::string(TETRIG_SOURCE_DIR) + "/assets/human_man_feet.json");
+  auto s = std::make_unique<RigScene>(RigScene{tetrig::rigbuild::buildRig(in), tetrig::drivers::C3DClip::load(clip), {}, {}});
+  if (!feet) {
+    in.tet_vertices = 150;
+    s->coarse = tetrig::rigbuild::buildRig(in);
+  }
+  for (const tetrig::RigMarker& m : s->rig.markers) {
+    const int point = s->clip.findPoint(m.label);  // subject prefixes ("meinard:LFHD") allowed
+    if (point < 0) throw std::runtime_error("marker " + m.label + " is not in the clip");
+    s->clip_point.push_back(point);
+  }
+  return s;
 }
+
+// Built once (the rig build takes seconds); null with `error` set when the data is absent.
+const RigScene* rigScene(std::string& error) { return tetrig::bench::buildOnce<RigScene>([] { return makeRigScene(false); }, error); }
+
+// The rig with its feet driven by their markers (BM_LiveRigFrame/smpl_hdm05_feet); its own build
+// (buildOnce keeps one scene per lambda).
+const RigScene* feetRigScene(std::string& error) { return tetrig::bench::buildOnce<RigScene>([] { return makeRigScene(true); }, error); }
 
 void rigFrame(benchmark::State& state, double extrapolation, double relaxation = 1.0, bool with_coarse = false) {
   std::string error;
@@ -174,9 +184,7 @@ BENCHMARK(BM_RigFrameCoarseRelaxed)->Name("BM_RigFrame/smpl_hdm05_coarse_relaxed
 void BM_RigFrameCoarsePredictedRelaxed(benchmark::State& state) { rigFrame(state, 1.0, 1.8, true); }
 BENCHMARK(BM_RigFrameCoarsePredictedRelaxed)->Name("BM_RigFrame/smpl_hdm05_coarse_predicted_relaxed")->Unit(benchmark::kMicrosecond);
 
-void BM_LiveRigFrame(benchmark::State& state) {
-  std::string error;
-  const RigScene* scene = rigScene(error);
+void liveRigFrame(benchmark::State& state, const RigScene* scene, const std::string& error) {
   if (scene == nullptr) {
     state.SkipWithError(error.c_str());
     return;
@@ -211,6 +219,17 @@ void BM_LiveRigFrame(benchmark::State& state) {
   state.counters["pose_transfer_us"] = static_cast<double>(pose_ns) / n * 1e-3;
   state.counters["iterations"] = static_cast<double>(iterations) / n;
 }
+void BM_LiveRigFrame(benchmark::State& state) {
+  std::string error;
+  const RigScene* scene = rigScene(error);
+  liveRigFrame(state, scene, error);
+}
+void BM_LiveRigFrameFeet(benchmark::State& state) {
+  std::string error;
+  const RigScene* scene = feetRigScene(error);
+  liveRigFrame(state, scene, error);
+}
+BENCHMARK(BM_LiveRigFrameFeet)->Name("BM_LiveRigFrame/smpl_hdm05_feet")->Arg(0)->Unit(benchmark::kMicrosecond);
 // Argument: 0 = pose transfer on the calling thread, 1 = split with one worker (PoseTransferSplit).
 BENCHMARK(BM_LiveRigFrame)->Name("BM_LiveRigFrame/smpl_hdm05")->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
 

@@ -191,6 +191,23 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
 
   std::vector<double> rms, worst, e_budget, e_conv, volume_budget, volume_conv, ref_iterations;
   std::vector<std::size_t> ref_frame;
+  std::vector<std::string> ref_worst_near;
+  std::vector<double> ref_region_share;
+  // Each body vertex's region: the rig marker nearest to it at rest.
+  std::vector<std::int32_t> region(static_cast<std::size_t>(rig.body_vertex_count), -1);
+  if (!rig.markers.empty()) {
+    for (std::int32_t v = 0; v < rig.body_vertex_count; ++v) {
+      double best = std::numeric_limits<double>::infinity();
+      for (std::size_t m = 0; m < rig.markers.size(); ++m) {
+        const double d = (rig.tet_mesh.vertices.row(v) - rig.tet_mesh.vertices.row(rig.markers[m].tet_vertex)).squaredNorm();
+        if (d < best) {
+          best = d;
+          region[static_cast<std::size_t>(v)] = static_cast<std::int32_t>(m);
+        }
+      }
+    }
+  }
+  std::vector<double> region_sum2(rig.markers.size());
   int inverted_budget_max = 0, inverted_conv_max = 0;
   std::size_t held = 0, predicted = 0;
   double step_us = 0.0;
@@ -229,11 +246,24 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
     const PoseMeasure mc = measurer.measure(xc, true);
     inverted_conv_max = std::max(inverted_conv_max, mc.inverted_body_tets);
     double sum2 = 0.0, w = 0.0;
+    std::int32_t worst_v = 0;
+    std::fill(region_sum2.begin(), region_sum2.end(), 0.0);
     for (std::int32_t v = 0; v < rig.body_vertex_count; ++v) {
       const std::size_t i = 3 * static_cast<std::size_t>(v);
       const double d2 = (Eigen::Vector3d(x[i], x[i + 1], x[i + 2]) - Eigen::Vector3d(xc[i], xc[i + 1], xc[i + 2])).squaredNorm();
       sum2 += d2;
-      w = std::max(w, d2);
+      if (region[static_cast<std::size_t>(v)] >= 0) region_sum2[static_cast<std::size_t>(region[static_cast<std::size_t>(v)])] += d2;
+      if (d2 > w) {
+        w = d2;
+        worst_v = v;
+      }
+    }
+    if (!rig.markers.empty()) {
+      ref_worst_near.push_back(rig.markers[static_cast<std::size_t>(region[static_cast<std::size_t>(worst_v)])].label);
+      ref_region_share.push_back(sum2 > 0 ? region_sum2[static_cast<std::size_t>(region[static_cast<std::size_t>(worst_v)])] / sum2 : 0.0);
+    } else {
+      ref_worst_near.emplace_back();
+      ref_region_share.push_back(0.0);
     }
     rms.push_back(to_mm * std::sqrt(sum2 / rig.body_vertex_count));
     worst.push_back(to_mm * std::sqrt(w));
@@ -291,7 +321,8 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
   nlohmann::json per_frame = nlohmann::json::array();
   for (std::size_t i = 0; i < rms.size(); ++i) {
     per_frame.push_back({{"frame", ref_frame[i]}, {"rms_mm", rms[i]}, {"max_mm", worst[i]}, {"energy", e_budget[i]},
-                         {"energy_converged", e_conv[i]}});
+                         {"energy_converged", e_conv[i]}, {"reference_iterations", ref_iterations[i]},
+                         {"worst_near", ref_worst_near[i]}, {"worst_region_share", ref_region_share[i]}});
   }
   run["reference"] = std::move(per_frame);
   return run;

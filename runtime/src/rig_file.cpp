@@ -6,6 +6,8 @@
 
 #include "tetrig/printable_text.hpp"
 
+#include <Eigen/Eigenvalues>
+
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -47,7 +49,8 @@ constexpr std::uint32_t kTagOptions = tag("OPTS");
 // Optional sections: written only when non-empty; absent means empty (files written before they
 // existed stay loadable, and older readers skip them as unknown tags).
 constexpr std::uint32_t kTagPoseSensors = tag("PSNS");
-constexpr std::uint32_t kTagCoarse = tag("CRSE");  // the coarse level: a whole rig file (its own header and checksum)
+constexpr std::uint32_t kTagCoarse = tag("CRSE");
+constexpr std::uint32_t kTagMarkerRegions = tag("MKRG");  // the coarse level: a whole rig file (its own header and checksum)
 constexpr std::size_t kPoseSensorMinBytes = 4 + 4 + 1 + 1 + 8;  // empty label, region, mode, buttons, scale
 
 constexpr std::array<std::uint32_t, 13> kRequiredTags = {
@@ -362,6 +365,35 @@ std::string validateRig(const Rig& rig) {
       return who + " has a translation scale that is not a finite positive number";
     }
   }
+  for (std::size_t k = 0; k < rig.marker_regions.size(); ++k) {
+    const RigMarkerRegion& mr = rig.marker_regions[k];
+    const std::string who = "marker region " + num(k);
+    if (mr.region_handle < 0 || static_cast<std::size_t>(mr.region_handle) >= s.region_handles.size()) {
+      return who + " names region handle " + num(mr.region_handle) + " of " + num(s.region_handles.size());
+    }
+    const auto r = static_cast<std::size_t>(mr.region_handle);
+    if (!s.region_handles[r].oriented) return who + " drives region handle " + num(r) + ", which is not oriented";
+    if (driven[r]) return "region handle " + num(r) + " is driven twice (by pose sensors or marker clusters)";
+    driven[r] = 1;
+    if (mr.markers.size() < 3) return who + " has " + num(mr.markers.size()) + " markers (a rotation needs at least 3)";
+    Eigen::Vector3d c0 = Eigen::Vector3d::Zero();
+    for (std::size_t i = 0; i < mr.markers.size(); ++i) {
+      const std::int32_t m = mr.markers[i];
+      if (m < 0 || static_cast<std::size_t>(m) >= rig.markers.size()) return who + " names marker " + num(m) + " of " + num(rig.markers.size());
+      for (std::size_t j = 0; j < i; ++j) {
+        if (mr.markers[j] == m) return who + " names marker " + num(m) + " twice";
+      }
+      c0 += rig.markers[static_cast<std::size_t>(m)].rest_position / static_cast<double>(mr.markers.size());
+    }
+    // Not collinear: the rest positions must spread across their main axis.
+    Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+    for (const std::int32_t m : mr.markers) {
+      const Eigen::Vector3d d = rig.markers[static_cast<std::size_t>(m)].rest_position - c0;
+      cov += d * d.transpose();
+    }
+    const Eigen::Vector3d ev = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(cov, Eigen::EigenvaluesOnly).eigenvalues();
+    if (!(ev(1) > 1e-6 * ev(2))) return who + ": its markers lie on a line at rest (the rotation about it is not defined)";
+  }
   // Every string is UTF-8 (the format says so); printing escapes control characters (printable_text.hpp).
   auto utf8 = [](const std::string& text, const std::string& what) -> std::string {
     return isWellFormedUtf8(text) ? std::string() : what + " is not valid UTF-8 ('" + printableText(text, 64) + "')";
@@ -421,7 +453,8 @@ std::vector<std::uint8_t> serializeRig(const Rig& rig) {
   std::vector<std::array<std::uint64_t, 3>> table;
   Writer out;
   // Header and table placeholders; filled at the end.
-  const std::size_t section_count = kRequiredTags.size() + (rig.pose_sensors.empty() ? 0 : 1) + (rig.coarse ? 1 : 0);
+  const std::size_t section_count =
+      kRequiredTags.size() + (rig.pose_sensors.empty() ? 0 : 1) + (rig.marker_regions.empty() ? 0 : 1) + (rig.coarse ? 1 : 0);
   out.bytes().resize(kHeaderBytes + section_count * kTableEntryBytes, 0);
   {
     Writer w;
@@ -566,6 +599,16 @@ std::vector<std::uint8_t> serializeRig(const Rig& rig) {
       w.f64(ps.translation_scale);
     }
     writeSection(out, table, kTagPoseSensors, w.bytes());
+  }
+  if (!rig.marker_regions.empty()) {
+    Writer w;
+    w.count(rig.marker_regions.size(), "marker regions");
+    for (const RigMarkerRegion& mr : rig.marker_regions) {
+      w.i32(mr.region_handle);
+      w.count(mr.markers.size(), "markers of a marker region");
+      for (const std::int32_t m : mr.markers) w.i32(m);
+    }
+    writeSection(out, table, kTagMarkerRegions, w.bytes());
   }
   if (rig.coarse) writeSection(out, table, kTagCoarse, serializeRig(*rig.coarse));
   // No padding after the last section: the file ends where it does.
@@ -886,6 +929,18 @@ Rig parseRigAt(std::span<const std::uint8_t> bytes, std::string_view source_name
     }
     c.end();
   }
+  if (has_section(kTagMarkerRegions)) {
+    Cursor c = section(kTagMarkerRegions);
+    const std::size_t n = c.count("marker regions", 8);
+    rig.marker_regions.resize(n);
+    for (RigMarkerRegion& mr : rig.marker_regions) {
+      mr.region_handle = c.i32("marker region handle");
+      const std::size_t k = c.count("markers of a marker region", 4);
+      mr.markers.resize(k);
+      for (std::int32_t& m : mr.markers) m = c.i32("marker region marker");
+    }
+    c.end();
+  }
   if (has_section(kTagCoarse)) {
     if (nested) fail("the coarse level has a coarse level of its own (section CRSE)");
     for (const Entry& e : entries) {
@@ -915,6 +970,7 @@ std::int64_t rigMemoryBytes(const Rig& rig) {
   bytes += static_cast<std::int64_t>(rig.setup.vertex_handles.size() * 4 + rig.setup.point_handles.size() * 40 +
                                      rig.setup.stiffness.size() * 8 + rig.markers.size() * sizeof(RigMarker) +
                                      rig.pose_sensors.size() * sizeof(RigPoseSensor));
+  for (const RigMarkerRegion& mr : rig.marker_regions) bytes += static_cast<std::int64_t>(8 + mr.markers.size() * 4);
   for (const RegionHandle& r : rig.setup.region_handles) bytes += static_cast<std::int64_t>(r.tets.size() * 4);
   for (const RigidGroup& g : rig.setup.rigid_groups) bytes += static_cast<std::int64_t>(g.tets.size() * 4);
   if (rig.coarse) bytes += rigMemoryBytes(*rig.coarse);

@@ -668,7 +668,9 @@ TEST(LiveRig, TheCompactPoseTransferMatchesTheDoubleBToItsRounding) {
 class LiveRigAllocations : public ::testing::TestWithParam<bool> {};
 
 TEST_P(LiveRigAllocations, NonePerFrameAfterWarmUp) {
-  const Rig rig = makeBarRig();
+  // The far end is a region driven by its four markers (the fit runs every frame).
+  Rig rig = makeBarRig(false, /*far_region=*/true);
+  rig.marker_regions.push_back(RigMarkerRegion{0, {8, 9, 10, 11}});
   LiveRigOptions options;
   options.normals = true;
   const bool coarse = GetParam();
@@ -813,6 +815,84 @@ TEST(LiveRig, RegionTargetsDriveTheStepWhenNoMarkerIsMeasured) {
   EXPECT_EQ(checked, 9);
   // The next frame without a new region target holds again.
   EXPECT_TRUE(live.processFrame(frame(2), StepBudget{3}, x.data(), nullptr).flags & kLivePoseHeld);
+}
+
+// A region driven by a marker cluster (RigMarkerRegion): the bar's far end (z >= 7) follows the
+// best rigid fit of its four markers (z = 7.5). The markers move by a twist growing along the bar,
+// a tilt and a shift, so the four far markers move rigidly: the region lands exactly on that
+// motion from the first frame, where the same rig without the region lags by a tenth of the bar's
+// width and more after 3 iterations. With one of the four occluded, its prediction (carried by
+// the body under it) keeps the fit within 1 % of the bar's width.
+TEST(LiveRigMarkerRegion, TheRegionFollowsTheBestRigidFitOfItsMarkers) {
+  Rig rig = makeBarRig(false, /*far_region=*/true);
+  rig.marker_regions.push_back(RigMarkerRegion{0, {8, 9, 10, 11}});
+  ASSERT_EQ(validateRig(rig), "");
+  const double twist = 1.2, tilt = 0.3;
+  const Eigen::Vector3d shift(0.4, -0.2, 0.3);
+  // The far markers' rigid motion: p -> tilt * (Rz(twist * 7.5 / 8) (p - axis) + axis) + shift.
+  const auto far_motion = [&](const Eigen::Vector3d& p) {
+    const Eigen::Vector3d axis(1.0, 1.0, 0.0);
+    return Eigen::Vector3d(Eigen::AngleAxisd(tilt, Eigen::Vector3d::UnitX()) *
+                               (Eigen::AngleAxisd(twist * 7.5 / 8.0, Eigen::Vector3d::UnitZ()) * (p - axis) + axis) +
+                           shift);
+  };
+  const auto far_error = [&](const LiveRig& live) {
+    double worst = 0.0;
+    const std::span<const double> x = live.deformer().positions();
+    for (std::int32_t v = 0; v < rig.body_vertex_count; ++v) {
+      const Eigen::Vector3d p = rig.tet_mesh.vertices.row(v).transpose();
+      if (p.z() < 7.0) continue;
+      const std::size_t i = 3 * static_cast<std::size_t>(v);
+      worst = std::max(worst, (Eigen::Vector3d(x[i], x[i + 1], x[i + 2]) - far_motion(p)).norm());
+    }
+    return worst;
+  };
+  std::vector<float> x(static_cast<std::size_t>(makeBarRig().fine_vertices.rows()) * 3);
+  const std::vector<Eigen::Vector3d> targets = movedMarkers(rig, twist, tilt, shift);
+  std::vector<bool> valid(kMarkers, true);
+  LiveRig live(rig);
+  live.bindLabels(labelTable());
+  live.processFrame(makeFrame(rig, targets, valid, 0), StepBudget{3}, x.data(), nullptr);
+  EXPECT_LT(far_error(live), 1e-6);
+  const RigidTransform& t = live.regionTargets()[0];
+  const Eigen::Vector3d probe(0.3, 1.7, 7.2);
+  EXPECT_LT((t.rotation * probe + t.translation - far_motion(probe)).norm(), 1e-6);
+  // The same motion without the region: the far end lags.
+  const Rig plain = makeBarRig();
+  LiveRig without(plain);
+  without.bindLabels(labelTable());
+  without.processFrame(makeFrame(plain, targets, valid, 0), StepBudget{3}, x.data(), nullptr);
+  EXPECT_GT(far_error(without), 0.2);
+  // Marker 9 occluded on the next frame (same motion): the prediction carries it with the far end.
+  valid[9] = false;
+  const LiveFrameStats s = live.processFrame(makeFrame(rig, targets, valid, 1), StepBudget{3}, x.data(), nullptr);
+  EXPECT_TRUE(s.flags & kLiveMarkersPredicted);
+  // (Its anchor reaches 3 tet rings into the bar, past the rigid far end: 0.0085 measured.)
+  EXPECT_LT(far_error(live), 0.02);
+}
+
+TEST(LiveRigMarkerRegion, InvalidClustersAreRefused) {
+  const Rig base = makeBarRig(false, /*far_region=*/true);
+  const auto error = [&](const RigMarkerRegion& mr, bool oriented = true) {
+    Rig rig = base;
+    rig.setup.region_handles[0].oriented = oriented;
+    rig.marker_regions.push_back(mr);
+    return validateRig(rig);
+  };
+  EXPECT_EQ(error({0, {8, 9, 10}}), "");
+  EXPECT_NE(error({0, {8, 9}}).find("at least 3"), std::string::npos);
+  EXPECT_NE(error({1, {8, 9, 10}}).find("names region handle 1"), std::string::npos);
+  EXPECT_NE(error({0, {8, 9, 12}}).find("names marker 12"), std::string::npos);
+  EXPECT_NE(error({0, {8, 9, 8}}).find("twice"), std::string::npos);
+  EXPECT_NE(error({0, {0, 4, 8}}).find("on a line"), std::string::npos);  // (-0.3, 1, z) for z = 0.5, 4, 7.5
+  EXPECT_NE(error({0, {8, 9, 10}}, false).find("not oriented"), std::string::npos);
+  Rig both = base;
+  both.marker_regions.push_back({0, {8, 9, 10}});
+  RigPoseSensor sensor;
+  sensor.sensor_label = "hydra0";
+  sensor.region_handle = 0;
+  both.pose_sensors.push_back(sensor);
+  EXPECT_NE(validateRig(both).find("driven twice"), std::string::npos);
 }
 
 TEST(LiveRig, RejectsInvalidRigsAndOptions) {

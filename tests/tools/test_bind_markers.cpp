@@ -88,6 +88,55 @@ TEST(BindMarkers, FaceSpreadGivesATripodInsteadOfNeedles) {
   EXPECT_EQ(b.mesh.tets.topRows(body_tets), slab.tets);
 }
 
+// A fan (MarkerBindOptions::fan_spread): the marker 4 cells above the slab joins a ring of surface
+// vertices spread over its footprint, with every tet positive and well shaped (no needle: the
+// marker stands at least half a base edge over each base). With fan_weight 1 the fan's weight
+// (scale * volume) equals that of the three nearest faces' needles; with fan_weight 0 the fan keeps its
+// own volume (scale 1). A marker below the skin keeps the faces binding.
+TEST(BindMarkers, FanSpreadsAMarkerOverItsFootprint) {
+  const TetMesh slab = scenes::makeBar(12, 12, 2);
+  const auto body_tets = static_cast<std::int32_t>(slab.tetCount());
+  const std::vector<Eigen::Vector3d> markers{{6.2, 5.9, 6.0}, {3.3, 8.4, 1.5}};
+  const std::vector<std::string> labels{"HIGH", "INSIDE"};
+  MarkerBindOptions fan;
+  fan.fan_spread = 1.0;
+  const MarkerBindResult needles = bindMarkers(slab, markers, labels, MarkerBindOptions{});
+  const MarkerBindResult b = bindMarkers(slab, markers, labels, fan);
+  ASSERT_EQ(b.bindings.size(), 2u);
+  ASSERT_EQ(b.invisible_scale.size(), static_cast<std::size_t>(b.invisible_tets));
+  const std::int32_t high = b.bindings[0].tet_vertex;
+  const auto tets = invisibleTets(b, body_tets, high);
+  ASSERT_GE(tets.size(), 4u);
+  EXPECT_EQ(b.bindings[0].bound_faces, static_cast<std::int32_t>(tets.size()));
+  const Eigen::Vector3d foot(6.2, 5.9, 2.0);
+  double reach = 0.0, fan_weight = 0.0;
+  for (const Eigen::Vector4i& t : tets) {
+    EXPECT_GT(signedVolume(b.mesh, t), 0.5);
+    for (int c = 0; c < 3; ++c) {
+      const Eigen::Vector3d q = b.mesh.vertices.row(t[c]);
+      EXPECT_NEAR(q.z(), 2.0, 1e-12);  // on the top face, where the marker looks
+      EXPECT_LE((q - foot).norm(), 4.0 + 1e-9);
+      reach = std::max(reach, (q - foot).norm());
+    }
+  }
+  EXPECT_GT(reach, 3.0);  // spread to the footprint's edge, not the nearest cell
+  double needle_weight = 0.0;
+  for (const Eigen::Vector4i& t : invisibleTets(needles, body_tets, needles.bindings[0].tet_vertex))
+    needle_weight += signedVolume(needles.mesh, t);
+  for (Eigen::Index t = body_tets; t < b.mesh.tets.rows(); ++t)
+    if (b.mesh.tets(t, 3) == high)
+      fan_weight += b.invisible_scale[static_cast<std::size_t>(t - body_tets)] * signedVolume(b.mesh, b.mesh.tets.row(t).transpose());
+  EXPECT_NEAR(fan_weight, needle_weight, 1e-9 * needle_weight);
+  EXPECT_LT(b.invisible_scale[static_cast<std::size_t>(tets.size()) - 1], 0.5);  // the fan is far bigger than the needles
+  // The marker inside the slab: the reversed nearest faces, scale 1.
+  EXPECT_TRUE(b.bindings[1].below_skin);
+  EXPECT_EQ(b.bindings[1].bound_faces, 3);
+  for (std::size_t i = tets.size(); i < b.invisible_scale.size(); ++i) EXPECT_EQ(b.invisible_scale[i], 1.0);
+  fan.fan_weight = 0.0;
+  const MarkerBindResult own = bindMarkers(slab, markers, labels, fan);
+  for (const double s : own.invisible_scale) EXPECT_EQ(s, 1.0);
+}
+
 // The rig description's markers.face_spread: read, range-checked with its path.
 TEST(BindMarkers, TheDescriptionReadsAndChecksFaceSpread) {
   EXPECT_EQ(parseRigDescription(R"({"markers": {"face_spread": 1.5}})", "r.json").markers.face_spread, 1.5);
@@ -98,6 +147,18 @@ TEST(BindMarkers, TheDescriptionReadsAndChecksFaceSpread) {
       ADD_FAILURE() << bad << " accepted";
     } catch (const std::exception& e) {
       EXPECT_NE(std::string(e.what()).find("markers.face_spread"), std::string::npos) << e.what();
+    }
+  }
+  const RigDescription fan = parseRigDescription(R"({"markers": {"fan_spread": 1, "fan_spokes": 8, "fan_weight": 0}})", "r.json");
+  EXPECT_EQ(fan.markers.fan_spread, 1.0);
+  EXPECT_EQ(fan.markers.fan_spokes, 8);
+  EXPECT_EQ(fan.markers.fan_weight, 0.0);
+  for (const char* bad : {R"("fan_spread": -1)", R"("fan_spokes": 2)", R"("fan_weight": -1)"}) {
+    try {
+      (void)parseRigDescription(std::string(R"({"markers": {)") + bad + "}}", "r.json");
+      ADD_FAILURE() << bad << " accepted";
+    } catch (const std::exception& e) {
+      EXPECT_NE(std::string(e.what()).find("markers.fan_"), std::string::npos) << e.what();
     }
   }
 }

@@ -651,6 +651,57 @@ TEST(RigDescription, PoseSensorsNameAnOrientedRegionOfTheSameDescription) {
   EXPECT_EQ(d.pose_sensors[0].translation_scale, 2.5);
 }
 
+// A region driven by a marker cluster (region_handles[i].markers -> Rig::marker_regions, section
+// MKRG): labels resolve to rig marker indices, the section round-trips, and bad clusters stop the
+// parse or the build naming the path or the label.
+TEST(RigBuild, ARegionDrivenByMarkersIsBuiltSavedAndLoaded) {
+  TempDir dir;
+  const auto build = [&](const std::string& markers) {
+    std::string json = test::smallRigJson();
+    const std::string key = R"("oriented": true })";
+    json.replace(json.find(key), key.size(), R"("oriented": true, "markers": )" + markers + " }");
+    rigbuild::BuildRigInputs in;
+    in.mesh = test::writeBlockTetMesh(dir, "block");
+    in.description = rigbuild::parseRigDescription(json, dir.path() / "small.json");
+    in.clip = test::writeSmallClip(dir);
+    return rigbuild::buildRig(in);
+  };
+  const Rig rig = build(R"(["LEFT", "RIGHT", "FRONT"])");
+  ASSERT_EQ(rig.marker_regions.size(), 1u);
+  EXPECT_EQ(rig.marker_regions[0].region_handle, 0);
+  ASSERT_EQ(rig.marker_regions[0].markers.size(), 3u);
+  const std::vector<std::string> labels{"LEFT", "RIGHT", "FRONT"};
+  for (std::size_t i = 0; i < 3; ++i) EXPECT_EQ(rig.markers[static_cast<std::size_t>(rig.marker_regions[0].markers[i])].label, labels[i]);
+  const std::vector<std::uint8_t> bytes = serializeRig(rig);
+  EXPECT_GT(findSection(bytes, "MKRG").second, 0u);
+  const Rig back = parseRig(bytes, "mkrg.rig");
+  ASSERT_EQ(back.marker_regions.size(), 1u);
+  EXPECT_EQ(back.marker_regions[0].region_handle, 0);
+  EXPECT_EQ(back.marker_regions[0].markers, rig.marker_regions[0].markers);
+  EXPECT_EQ(serializeRig(back), bytes);
+  EXPECT_CONTAINS(rigbuild::describeRig(back, 0, false), "markers LEFT RIGHT FRONT drive region 'floor'");
+  try {
+    (void)build(R"(["LEFT", "RIGHT", "ELBOW"])");
+    ADD_FAILURE() << "an unknown marker was accepted";
+  } catch (const rigbuild::RigBuildError& e) {
+    EXPECT_CONTAINS(std::string(e.what()), "region handle 'floor': marker 'ELBOW' is not a marker of this rig");
+  }
+  const auto error = [](const std::string& json) {
+    try {
+      (void)rigbuild::parseRigDescription(json, "m.json");
+    } catch (const rigbuild::RigBuildError& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  const std::string region = R"({"region_handles": [{"name": "foot", "select": {"vertices": [0]}, )";
+  EXPECT_CONTAINS(error(region + R"("markers": ["A", "B"]}]})"), "region_handles[0].markers: needs at least 3");
+  EXPECT_CONTAINS(error(region + R"("markers": ["A", "B", "A"]}]})"), "region_handles[0].markers: names 'A' twice");
+  EXPECT_CONTAINS(error(region + R"("oriented": false, "markers": ["A", "B", "C"]}]})"), "must be oriented");
+  EXPECT_CONTAINS(error(region + R"("markers": ["A", "B", "C"]}], "pose_sensors": [{"sensor": "hydra0", "region": "foot"}]})"),
+                  "pose_sensors[0].region: region handle 'foot' is already driven by its markers");
+}
+
 TEST(RigBuild, PoseSensorsWithoutAClipTakeTheAlignmentFromTheDescription) {
   const TempDir dir;
   rigbuild::BuildRigInputs in;

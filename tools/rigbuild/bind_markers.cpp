@@ -8,12 +8,76 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdio>
 #include <limits>
 #include <utility>
 #include <vector>
 
 namespace tetrig::rigbuild {
+
+namespace {
+
+double signedVolume(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c, const Eigen::Vector3d& d) {
+  return (b - a).dot((c - a).cross(d - a)) / 6.0;
+}
+
+// The fan of a marker at p above the skin (MarkerBindOptions::fan_spread): tets (c, s_i, s_i+1, m)
+// with positive orientation, or none when fewer than 2 are well shaped.
+std::vector<std::array<std::int32_t, 4>> fanTets(const Vertices& v, const std::vector<std::int32_t>& surface_vertices,
+                                                 const std::vector<Eigen::Vector3d>& vertex_normal, const Eigen::Vector3d& p,
+                                                 std::int32_t mv, const Eigen::Vector3d& foot, std::int32_t center, double radius,
+                                                 const MarkerBindOptions& options) {
+  std::vector<std::array<std::int32_t, 4>> tets;
+  const double h = (p - foot).norm();
+  if (!(h > 0)) return tets;
+  const Eigen::Vector3d u = (p - foot) / h;
+  const Eigen::Vector3d e1 = u.unitOrthogonal(), e2 = u.cross(e1);
+  const int n = std::max(options.fan_spokes, 3);
+  std::vector<std::int32_t> spoke(static_cast<std::size_t>(n), -1);
+  std::vector<double> reach(static_cast<std::size_t>(n), 0.0);
+  const double two_pi = 2.0 * std::acos(-1.0);
+  for (const std::int32_t w : surface_vertices) {
+    if (w == center) continue;
+    const Eigen::Vector3d q = v.row(w).transpose();
+    if ((q - foot).norm() > radius) continue;
+    if (vertex_normal[static_cast<std::size_t>(w)].dot(u) <= 0.0) continue;  // faces away from the marker
+    const Eigen::Vector3d t = q - foot;
+    const double x = t.dot(e1), y = t.dot(e2), r = std::hypot(x, y);
+    double angle = std::atan2(y, x);
+    if (angle < 0) angle += two_pi;
+    const auto sector = std::min<std::size_t>(static_cast<std::size_t>(angle / two_pi * n), static_cast<std::size_t>(n - 1));
+    if (r > reach[sector]) {
+      reach[sector] = r;
+      spoke[sector] = w;
+    }
+  }
+  std::vector<std::int32_t> ring;
+  for (const std::int32_t w : spoke) {
+    if (w >= 0) ring.push_back(w);
+  }
+  if (ring.size() < 3) return tets;
+  const Eigen::Vector3d c = v.row(center).transpose();
+  for (std::size_t i = 0; i < ring.size(); ++i) {
+    const std::int32_t a = ring[i], b = ring[(i + 1) % ring.size()];
+    const Eigen::Vector3d pa = v.row(a).transpose(), pb = v.row(b).transpose();
+    const Eigen::Vector3d nb = (pa - c).cross(pb - c);
+    if (!(nb.norm() > 0)) continue;
+    // The marker's height over the base plane against the base's longest edge (as for faces).
+    const double height = std::abs(nb.normalized().dot(p - c));
+    const double edge = std::max({(pa - c).norm(), (pb - pa).norm(), (c - pb).norm()});
+    if (height < std::max(options.min_relative_height, 0.2) * edge) continue;
+    if (signedVolume(c, pa, pb, p) > 0) {
+      tets.push_back({center, a, b, mv});
+    } else {
+      tets.push_back({center, b, a, mv});
+    }
+  }
+  if (tets.size() < 2) tets.clear();
+  return tets;
+}
+
+}  // namespace
 
 MarkerBindResult bindMarkers(const TetMesh& body, const std::vector<Eigen::Vector3d>& positions,
                              const std::vector<std::string>& labels, const MarkerBindOptions& options) {
@@ -28,6 +92,25 @@ MarkerBindResult bindMarkers(const TetMesh& body, const std::vector<Eigen::Vecto
   std::vector<std::array<std::int32_t, 4>> extra;
   const Eigen::Index nb = boundary.rows();
   std::vector<std::pair<double, Eigen::Index>> order(static_cast<std::size_t>(nb));
+  // Fans: the surface vertices and their (area-weighted) outward normals.
+  std::vector<std::int32_t> surface_vertices;
+  std::vector<Eigen::Vector3d> vertex_normal;
+  if (options.fan_spread > 0) {
+    vertex_normal.assign(static_cast<std::size_t>(nv), Eigen::Vector3d::Zero());
+    std::vector<char> on_surface(static_cast<std::size_t>(nv), 0);
+    for (Eigen::Index f = 0; f < nb; ++f) {
+      const Eigen::Vector3d a = body.vertices.row(boundary(f, 0)), b = body.vertices.row(boundary(f, 1)), c = body.vertices.row(boundary(f, 2));
+      const Eigen::Vector3d n = (b - a).cross(c - a);
+      for (int k = 0; k < 3; ++k) {
+        vertex_normal[static_cast<std::size_t>(boundary(f, k))] += n;
+        on_surface[static_cast<std::size_t>(boundary(f, k))] = 1;
+      }
+    }
+    for (std::int32_t i = 0; i < nv; ++i) {
+      if (on_surface[static_cast<std::size_t>(i)]) surface_vertices.push_back(i);
+    }
+  }
+  std::vector<double> scale;  // per invisible tet
   for (std::int32_t m = 0; m < nm; ++m) {
     const Eigen::Vector3d p = positions[static_cast<std::size_t>(m)];
     const std::int32_t mv = nv + m;
@@ -41,6 +124,51 @@ MarkerBindResult bindMarkers(const TetMesh& body, const std::vector<Eigen::Vecto
     std::partial_sort(order.begin(), order.begin() + static_cast<std::ptrdiff_t>(k), order.end());
     MarkerBinding binding;
     binding.tet_vertex = mv;
+    if (options.fan_spread > 0) {
+      const Eigen::Index f0 = order[0].second;
+      const std::int32_t i0 = boundary(f0, 0), i1 = boundary(f0, 1), i2 = boundary(f0, 2);
+      const Eigen::Vector3d a0 = body.vertices.row(i0), b0 = body.vertices.row(i1), c0 = body.vertices.row(i2);
+      const Eigen::Vector3d foot = closestPointOnTriangle(p, a0, b0, c0);
+      const Eigen::Vector3d n0 = (b0 - a0).cross(c0 - a0);
+      const bool above = n0.dot(p - a0) > 0;
+      std::int32_t center = i0;
+      for (const std::int32_t i : {i1, i2}) {
+        if ((body.vertices.row(i).transpose() - foot).norm() < (body.vertices.row(center).transpose() - foot).norm()) center = i;
+      }
+      const double nearest_edge = std::max({(b0 - a0).norm(), (c0 - b0).norm(), (a0 - c0).norm()});
+      const double radius = options.fan_spread * std::max((p - foot).norm(), nearest_edge);
+      std::vector<std::array<std::int32_t, 4>> fan;
+      if (above) fan = fanTets(body.vertices, surface_vertices, vertex_normal, p, mv, foot, center, radius, options);
+      if (!fan.empty()) {
+        // The weight the needles of the nearest qualifying faces would have.
+        double needles = 0.0, fan_volume = 0.0;
+        int counted = 0;
+        for (std::size_t i = 0; i < k && counted < options.faces_per_marker; ++i) {
+          const Eigen::Index f = order[i].second;
+          const Eigen::Vector3d a = body.vertices.row(boundary(f, 0)), b = body.vertices.row(boundary(f, 1)), c = body.vertices.row(boundary(f, 2));
+          const double vol = signedVolume(a, b, c, p);
+          const double edge = std::max({(b - a).norm(), (c - b).norm(), (a - c).norm()});
+          const double area2 = (b - a).cross(c - a).norm();
+          if (area2 > 0 && 3.0 * vol * 2.0 / area2 >= options.min_relative_height * edge) {
+            needles += vol;
+            ++counted;
+          }
+        }
+        for (const auto& t : fan) {
+          fan_volume += signedVolume(body.vertices.row(t[0]).transpose(), body.vertices.row(t[1]).transpose(),
+                                     body.vertices.row(t[2]).transpose(), p);
+        }
+        const double s_fan =
+            options.fan_weight > 0 && needles > 0 && fan_volume > 0 ? std::min(1.0, options.fan_weight * needles / fan_volume) : 1.0;
+        for (const auto& t : fan) {
+          extra.push_back(t);
+          scale.push_back(s_fan);
+        }
+        binding.bound_faces = static_cast<std::int32_t>(fan.size());
+        result.bindings.push_back(binding);
+        continue;
+      }
+    }
     // The faces a pass may take, in order of distance: (face, its tet's corners).
     std::vector<std::pair<Eigen::Index, std::array<std::int32_t, 4>>> qualifying;
     for (int pass = 0; pass < 2 && binding.bound_faces == 0; ++pass) {
@@ -68,6 +196,7 @@ MarkerBindResult bindMarkers(const TetMesh& body, const std::vector<Eigen::Vecto
       if (options.face_spread <= 0) {
         for (std::size_t i = 0; i < qualifying.size() && binding.bound_faces < options.faces_per_marker; ++i) {
           extra.push_back(qualifying[i].second);
+          scale.push_back(1.0);
           ++binding.bound_faces;
         }
         continue;
@@ -88,6 +217,7 @@ MarkerBindResult bindMarkers(const TetMesh& body, const std::vector<Eigen::Vecto
       std::vector<char> used(qualifying.size(), 0);
       used[0] = 1;
       extra.push_back(qualifying[0].second);
+      scale.push_back(1.0);
       ++binding.bound_faces;
       while (binding.bound_faces < options.faces_per_marker) {
         double best = -1.0;
@@ -116,6 +246,7 @@ MarkerBindResult bindMarkers(const TetMesh& body, const std::vector<Eigen::Vecto
         used[best_i] = 1;
         taken.push_back(centroid(qualifying[best_i].first));
         extra.push_back(qualifying[best_i].second);
+        scale.push_back(1.0);
         ++binding.bound_faces;
       }
     }
@@ -133,6 +264,7 @@ MarkerBindResult bindMarkers(const TetMesh& body, const std::vector<Eigen::Vecto
     for (int c = 0; c < 4; ++c) result.mesh.tets(body.tetCount() + static_cast<Eigen::Index>(i), c) = extra[i][static_cast<std::size_t>(c)];
   }
   result.invisible_tets = static_cast<std::int32_t>(extra.size());
+  result.invisible_scale = std::move(scale);
   return result;
 }
 

@@ -761,6 +761,9 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
     MarkerBindOptions bopt;
     bopt.faces_per_marker = mopt.faces_per_marker;
     bopt.face_spread = mopt.face_spread;
+    bopt.fan_spread = mopt.fan_spread;
+    bopt.fan_spokes = mopt.fan_spokes;
+    bopt.fan_weight = mopt.fan_weight;
     MarkerBindResult bound = bindMarkers(body, marker_rig, markers.labels, bopt);
     full = bound.mesh;
     report.invisible_tets = bound.invisible_tets;
@@ -778,12 +781,34 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
       rig.markers.push_back(rm);
     }
     stiffness.resize(static_cast<std::size_t>(full.tetCount()), mopt.invisible_stiffness);
+    for (std::size_t i = 0; i < bound.invisible_scale.size(); ++i) {
+      stiffness[static_cast<std::size_t>(body.tetCount()) + i] *= bound.invisible_scale[i];
+    }
     report.bind_seconds = since(t0);
     prog.end(std::to_string(bound.invisible_tets) + " invisible tets" +
              (bound.below_skin ? ", " + std::to_string(bound.below_skin) + " markers below the skin" : std::string()));
   }
   report.markers = static_cast<std::int32_t>(markers.labels.size());
   report.marker_labels = markers.labels;
+  // Regions driven by marker clusters (region_handles[i].markers), by label.
+  for (std::size_t h = 0; h < desc.region_handles.size(); ++h) {
+    const NamedSelection& n = desc.region_handles[h];
+    if (n.markers.empty()) continue;
+    RigMarkerRegion mr;
+    mr.region_handle = static_cast<std::int32_t>(h);
+    for (const std::string& label : n.markers) {
+      std::int32_t found = -1;
+      for (std::size_t m = 0; m < rig.markers.size(); ++m) {
+        if (rig.markers[m].label == label) found = static_cast<std::int32_t>(m);
+      }
+      if (found < 0) {
+        throw RigBuildError("region handle '" + n.name + "': marker '" + label + "' is not a marker of this rig" +
+                            (rig.markers.empty() ? std::string(" (the rig has no markers: give --markers CLIP.c3d)") : std::string()));
+      }
+      mr.markers.push_back(found);
+    }
+    rig.marker_regions.push_back(std::move(mr));
+  }
 
   rig.tet_mesh = full;
   rig.body_vertex_count = body.vertexCount();

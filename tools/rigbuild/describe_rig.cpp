@@ -81,6 +81,12 @@ std::string describeRig(const Rig& rig, std::int64_t file_bytes, bool list_marke
          sensor.mode == PoseSensorMode::kClutch ? "clutch on buttons 0x" : "absolute",
          sensor.mode == PoseSensorMode::kClutch ? hex2(sensor.clutch_buttons).c_str() : "", sensor.translation_scale);
   }
+  for (const RigMarkerRegion& mr : rig.marker_regions) {
+    std::string labels;
+    for (const std::int32_t m : mr.markers) labels += (labels.empty() ? "" : " ") + shown(rig.markers[static_cast<std::size_t>(m)].label);
+    line("  markers %s drive region '%s' (best-fit rigid transform)", labels.c_str(),
+         shown(rig.region_handle_names[static_cast<std::size_t>(mr.region_handle)]).c_str());
+  }
   line("rigid groups:  %zu", s.rigid_groups.size());
   for (std::size_t g = 0; g < s.rigid_groups.size(); ++g) {
     line("  rigid group '%s': %zu tets", shown(rig.rigid_group_names[g]).c_str(), s.rigid_groups[g].tets.size());

@@ -160,7 +160,7 @@ class Reader {
     for (std::size_t i = 0; i < arr.size(); ++i) {
       const std::string where = std::string(key) + "[" + std::to_string(i) + "]";
       if (region) {
-        allowKeys(arr[i], where, {"name", "select", "oriented"});
+        allowKeys(arr[i], where, {"name", "select", "oriented", "markers"});
       } else if (stiffness) {
         allowKeys(arr[i], where, {"name", "select", "value"});
       } else {
@@ -171,6 +171,16 @@ class Reader {
       if (!arr[i].contains("select")) fail(where, "needs a select");
       n.select = selection(arr[i]["select"], where + ".select");
       if (region && arr[i].contains("oriented")) n.oriented = boolean(arr[i]["oriented"], where + ".oriented");
+      if (region && arr[i].contains("markers")) {
+        n.markers = strings(arr[i]["markers"], where + ".markers");
+        if (n.markers.size() < 3) fail(where + ".markers", "needs at least 3 marker labels (a rigid cluster fixes a rotation)");
+        for (std::size_t a = 0; a < n.markers.size(); ++a) {
+          for (std::size_t b = 0; b < a; ++b) {
+            if (n.markers[a] == n.markers[b]) fail(where + ".markers", "names '" + n.markers[a] + "' twice");
+          }
+        }
+        if (!n.oriented) fail(where + ".markers", "a region driven by markers takes their rotation: it must be oriented");
+      }
       if (stiffness) {
         if (!arr[i].contains("value")) fail(where, "needs a value (stiffness weight; body tets default to 1)");
         n.value = number(arr[i]["value"], where + ".value");
@@ -260,7 +270,8 @@ RigDescription parseRigDescription(const std::string& json_text, const std::file
     const json& m = root["markers"];
     r.allowKeys(m, "markers", {"clip", "frame", "labels", "exclude", "device_up", "alignment", "matrix", "icp_iterations", "icp_scale",
                                "max_scale_change", "marker_offset", "fit_power", "max_distance", "max_distance_fraction", "checks",
-                               "faces_per_marker", "face_spread", "invisible_stiffness"});
+                               "faces_per_marker", "face_spread", "fan_spread", "fan_spokes", "fan_weight",
+                               "invisible_stiffness"});
     MarkerOptions& o = d.markers;
     if (m.contains("clip")) o.clip = r.path(m["clip"], "markers.clip");
     if (m.contains("frame")) {
@@ -322,6 +333,11 @@ RigDescription parseRigDescription(const std::string& json_text, const std::file
     if (m.contains("faces_per_marker")) o.faces_per_marker = r.integer<int>(m["faces_per_marker"], "markers.faces_per_marker", 1, 16);
     if (m.contains("face_spread")) o.face_spread = r.number(m["face_spread"], "markers.face_spread");
     if (!(o.face_spread >= 0 && o.face_spread <= 100)) r.fail("markers.face_spread", "must be in [0, 100]");
+    if (m.contains("fan_spread")) o.fan_spread = r.number(m["fan_spread"], "markers.fan_spread");
+    if (!(o.fan_spread >= 0 && o.fan_spread <= 100)) r.fail("markers.fan_spread", "must be in [0, 100]");
+    if (m.contains("fan_spokes")) o.fan_spokes = r.integer<int>(m["fan_spokes"], "markers.fan_spokes", 3, 32);
+    if (m.contains("fan_weight")) o.fan_weight = r.number(m["fan_weight"], "markers.fan_weight");
+    if (!(o.fan_weight >= 0 && o.fan_weight <= 1000)) r.fail("markers.fan_weight", "must be in [0, 1000]");
     if (m.contains("invisible_stiffness")) o.invisible_stiffness = r.number(m["invisible_stiffness"], "markers.invisible_stiffness");
     if (!(o.invisible_stiffness > 0)) r.fail("markers.invisible_stiffness", "must be positive");
   }
@@ -352,6 +368,9 @@ RigDescription parseRigDescription(const std::string& json_text, const std::file
       }
       if (!d.region_handles[static_cast<std::size_t>(p.region_index)].oriented) {
         r.fail(where + ".region", "region handle '" + p.region + "' is not oriented; a pose sensor drives its rotation (set \"oriented\": true)");
+      }
+      if (!d.region_handles[static_cast<std::size_t>(p.region_index)].markers.empty()) {
+        r.fail(where + ".region", "region handle '" + p.region + "' is already driven by its markers");
       }
       for (const PoseSensorSpec& other : d.pose_sensors) {
         if (other.region_index == p.region_index) {

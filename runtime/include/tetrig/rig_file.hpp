@@ -93,6 +93,18 @@ struct RigPoseSensor {
   double translation_scale = 1.0;               // controller motion (rig units after alignment) -> region motion
 };
 
+// An oriented region handle driven by a rigid cluster of markers (e.g. the three markers on a
+// shoe driving the foot). Each frame its target is the best-fit rigid transform (least squares,
+// equal weights) from the markers' rest positions to the positions the live rig drives them to:
+//   c0 = mean rest_i,  c = mean x_i,  H = sum (x_i - c)(rest_i - c0)^T,
+//   R = the rotation closest to H (polar decomposition, tetrig::closestRotation),  t = c - R c0.
+// The rotation then spreads over the mesh by rotation interpolation (section 3.3 of the paper), so
+// the part turns with its markers from the first iteration. Stored in the optional MKRG section.
+struct RigMarkerRegion {
+  std::int32_t region_handle = -1;     // index into setup.region_handles (an oriented region)
+  std::vector<std::int32_t> markers;   // indices into Rig::markers, at least 3, not collinear at rest
+};
+
 struct Rig {
   std::string name;              // free text: source mesh, clip
   std::string unit = "m";        // rig unit name ("m", "mm", "cm", "mesh")
@@ -114,6 +126,7 @@ struct Rig {
   std::vector<RigMarker> markers;
   RigAlignment alignment;
   std::vector<RigPoseSensor> pose_sensors;       // optional (empty: the file has no PSNS section)
+  std::vector<RigMarkerRegion> marker_regions;   // optional (empty: the file has no MKRG section)
   // Optional coarse level (tetrig/coarse_level.hpp; the file's CRSE section, absent when null): the
   // same mesh and markers built with fewer tet vertices, in the same rig space. It has no coarse
   // level of its own, every marker of it is a marker of this rig (by label), and it has as many

@@ -31,6 +31,18 @@ struct MarkerBindOptions {
   // distance to the surface; at least the nearest face's longest edge), out of the
   // max(search_faces, 128) nearest; when none is left there, the nearest qualifying face not taken.
   double face_spread = 0.0;
+  // > 0: a fan instead of faces (for markers above the skin). The marker joins a fan of tets
+  // (c, s_i, s_i+1, m) over surface vertices: c the vertex nearest its closest surface point f,
+  // s_i the spokes, one per angular sector of the plane normal to m - f, each the farthest vertex
+  // within fan_spread * d of f (d as above) whose vertex normal faces the marker. A fan is well
+  // shaped where nearest faces make needles, and spreads its load over fan_spokes + 1 vertices.
+  // Fewer than 2 good tets: the marker is bound as with face_spread.
+  double fan_spread = 0.0;
+  int fan_spokes = 6;
+  // > 0: the fan's tets share fan_weight times the weight (stiffness * volume) that the
+  // faces_per_marker nearest faces' needles would have (MarkerBindResult::invisible_scale), but
+  // never more than the fan's own volume gives; 0: the fan's own volume.
+  double fan_weight = 1.0;
 };
 
 struct MarkerBinding {
@@ -43,6 +55,7 @@ struct MarkerBindResult {
   TetMesh mesh;                          // body vertices, then one vertex per marker; body tets, then invisible tets
   std::vector<MarkerBinding> bindings;   // one per marker
   std::int32_t invisible_tets = 0;
+  std::vector<double> invisible_scale;   // one per invisible tet: multiplies the invisible stiffness (1 but for fans)
   std::int32_t below_skin = 0;
 };
 

@@ -41,6 +41,7 @@ struct NamedSelection {
   std::string name;
   Selection select;
   bool oriented = true;    // region handles only
+  std::vector<std::string> markers;  // region handles only: a marker cluster driving it (RigMarkerRegion); empty: none
   double value = 1.0;      // stiffness entries only
 };
 
@@ -68,6 +69,9 @@ struct MarkerOptions {
   AlignmentCheckLimits checks;             // plausibility of an automatic alignment (alignment_checks.hpp)
   int faces_per_marker = 3;                // invisible tets per marker (closest qualifying boundary faces)
   double face_spread = 0.0;                // MarkerBindOptions::face_spread (0: the nearest faces)
+  double fan_spread = 0.0;                 // MarkerBindOptions::fan_spread (0: faces)
+  int fan_spokes = 6;                      // MarkerBindOptions::fan_spokes
+  double fan_weight = 1.0;                 // MarkerBindOptions::fan_weight
   double invisible_stiffness = 0.1;        // stiffness weight of invisible tets (body tets: 1)
   bool keep_zero_points = false;           // C3D samples at x = y = z = 0 with residual 0 are valid, not
                                            // gaps (drivers::C3DReadOptions; CLI --keep-zero-markers)
