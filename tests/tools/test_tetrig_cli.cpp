@@ -204,7 +204,15 @@ TEST(TetrigCli, DemoRunsTheLivePathOnDefaultAndOnRealData) {
   EXPECT_CONTAINS(d.out, "the default character's rig");
   EXPECT_CONTAINS(d.out, "41 bound by label");
   EXPECT_CONTAINS(d.out, "60 frames solved");
-  EXPECT_CONTAINS(d.out + d.err, "60 frames seen, 0 missed") << "the consumer process read every frame";
+  // The consumer process read the frames and accounted for every one. A reader never blocks the
+  // writer, so on a saturated machine it may miss one (seen in CI with two other solvers running on
+  // its 2 cores: 59 seen, 1 missed); it must still see most of them and count the rest as missed.
+  std::smatch consumer;
+  const std::string both = d.out + d.err;
+  ASSERT_TRUE(std::regex_search(both, consumer, std::regex(R"((\d+) frames seen, (\d+) missed)"))) << both;
+  const int seen = std::stoi(consumer[1].str()), missed = std::stoi(consumer[2].str());
+  EXPECT_EQ(seen + missed, 60) << both;
+  EXPECT_GE(seen, 50) << both;
   EXPECT_CONTAINS(d.out, "receive -> published");
   ASSERT_TRUE(std::filesystem::exists(obj));
   std::ifstream in(obj);
