@@ -49,8 +49,8 @@ constexpr std::uint32_t kTagOptions = tag("OPTS");
 // Optional sections: written only when non-empty; absent means empty (files written before they
 // existed stay loadable, and older readers skip them as unknown tags).
 constexpr std::uint32_t kTagPoseSensors = tag("PSNS");
-constexpr std::uint32_t kTagCoarse = tag("CRSE");
-constexpr std::uint32_t kTagMarkerRegions = tag("MKRG");  // the coarse level: a whole rig file (its own header and checksum)
+constexpr std::uint32_t kTagCoarse = tag("CRSE");  // the coarse level: a whole rig file (its own header and checksum)
+constexpr std::uint32_t kTagMarkerRegions = tag("MKRG");  // regions driven by marker clusters
 constexpr std::size_t kPoseSensorMinBytes = 4 + 4 + 1 + 1 + 8;  // empty label, region, mode, buttons, scale
 
 constexpr std::array<std::uint32_t, 13> kRequiredTags = {

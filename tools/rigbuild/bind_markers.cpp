@@ -11,6 +11,7 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <optional>
 #include <utility>
 #include <vector>
 
@@ -110,7 +111,37 @@ MarkerBindResult bindMarkers(const TetMesh& body, const std::vector<Eigen::Vecto
       if (on_surface[static_cast<std::size_t>(i)]) surface_vertices.push_back(i);
     }
   }
-  std::vector<double> scale;  // per invisible tet
+  std::vector<double> scale;  // per invisible tet (MarkerBindResult::invisible_scale)
+  const auto add_tet = [&](const std::array<std::int32_t, 4>& corners, double s) {
+    extra.push_back(corners);
+    scale.push_back(s);
+  };
+  // Face f's plane: the marker's signed height over it and the height a tet needs (a fraction of
+  // the longest edge); nullopt for a degenerate face.
+  struct FaceHeight {
+    double height = 0.0;
+    double need = 0.0;
+  };
+  const auto face_height = [&](Eigen::Index f, const Eigen::Vector3d& p) -> std::optional<FaceHeight> {
+    const Eigen::Vector3d a = body.vertices.row(boundary(f, 0)), b = body.vertices.row(boundary(f, 1)), c = body.vertices.row(boundary(f, 2));
+    const Eigen::Vector3d n = (b - a).cross(c - a);
+    if (!(n.norm() > 0)) return std::nullopt;
+    const double edge = std::max({(b - a).norm(), (c - b).norm(), (a - c).norm()});
+    return FaceHeight{n.normalized().dot(p - a), options.min_relative_height * edge};
+  };
+  // The marker's closest point on face f0 (its nearest) and the footprint radius: spread times
+  // the marker's height over it, at least the face's longest edge.
+  struct Footprint {
+    Eigen::Vector3d foot;
+    double radius = 0.0;
+  };
+  const auto footprint = [&](Eigen::Index f0, const Eigen::Vector3d& p, double spread) {
+    const Eigen::Vector3d a0 = body.vertices.row(boundary(f0, 0)), b0 = body.vertices.row(boundary(f0, 1)),
+                          c0 = body.vertices.row(boundary(f0, 2));
+    const Eigen::Vector3d foot = closestPointOnTriangle(p, a0, b0, c0);
+    const double nearest_edge = std::max({(b0 - a0).norm(), (c0 - b0).norm(), (a0 - c0).norm()});
+    return Footprint{foot, spread * std::max((p - foot).norm(), nearest_edge)};
+  };
   for (std::int32_t m = 0; m < nm; ++m) {
     const Eigen::Vector3d p = positions[static_cast<std::size_t>(m)];
     const std::int32_t mv = nv + m;
@@ -126,33 +157,25 @@ MarkerBindResult bindMarkers(const TetMesh& body, const std::vector<Eigen::Vecto
     binding.tet_vertex = mv;
     if (options.fan_spread > 0) {
       const Eigen::Index f0 = order[0].second;
-      const std::int32_t i0 = boundary(f0, 0), i1 = boundary(f0, 1), i2 = boundary(f0, 2);
-      const Eigen::Vector3d a0 = body.vertices.row(i0), b0 = body.vertices.row(i1), c0 = body.vertices.row(i2);
-      const Eigen::Vector3d foot = closestPointOnTriangle(p, a0, b0, c0);
-      const Eigen::Vector3d n0 = (b0 - a0).cross(c0 - a0);
-      const bool above = n0.dot(p - a0) > 0;
-      std::int32_t center = i0;
-      for (const std::int32_t i : {i1, i2}) {
-        if ((body.vertices.row(i).transpose() - foot).norm() < (body.vertices.row(center).transpose() - foot).norm()) center = i;
+      const Footprint fp = footprint(f0, p, options.fan_spread);
+      const std::optional<FaceHeight> h0 = face_height(f0, p);
+      std::int32_t center = boundary(f0, 0);
+      for (const std::int32_t i : {boundary(f0, 1), boundary(f0, 2)}) {
+        if ((body.vertices.row(i).transpose() - fp.foot).norm() < (body.vertices.row(center).transpose() - fp.foot).norm()) center = i;
       }
-      const double nearest_edge = std::max({(b0 - a0).norm(), (c0 - b0).norm(), (a0 - c0).norm()});
-      const double radius = options.fan_spread * std::max((p - foot).norm(), nearest_edge);
       std::vector<std::array<std::int32_t, 4>> fan;
-      if (above) fan = fanTets(body.vertices, surface_vertices, vertex_normal, p, mv, foot, center, radius, options);
+      if (h0 && h0->height > 0) fan = fanTets(body.vertices, surface_vertices, vertex_normal, p, mv, fp.foot, center, fp.radius, options);
       if (!fan.empty()) {
-        // The weight the needles of the nearest qualifying faces would have.
+        // The weight the needles of the nearest qualifying faces (those the faces binding takes) would have.
         double needles = 0.0, fan_volume = 0.0;
         int counted = 0;
         for (std::size_t i = 0; i < k && counted < options.faces_per_marker; ++i) {
           const Eigen::Index f = order[i].second;
-          const Eigen::Vector3d a = body.vertices.row(boundary(f, 0)), b = body.vertices.row(boundary(f, 1)), c = body.vertices.row(boundary(f, 2));
-          const double vol = signedVolume(a, b, c, p);
-          const double edge = std::max({(b - a).norm(), (c - b).norm(), (a - c).norm()});
-          const double area2 = (b - a).cross(c - a).norm();
-          if (area2 > 0 && 3.0 * vol * 2.0 / area2 >= options.min_relative_height * edge) {
-            needles += vol;
-            ++counted;
-          }
+          const std::optional<FaceHeight> fh = face_height(f, p);
+          if (!fh || fh->height < fh->need) continue;
+          needles += signedVolume(body.vertices.row(boundary(f, 0)).transpose(), body.vertices.row(boundary(f, 1)).transpose(),
+                                  body.vertices.row(boundary(f, 2)).transpose(), p);
+          ++counted;
         }
         for (const auto& t : fan) {
           fan_volume += signedVolume(body.vertices.row(t[0]).transpose(), body.vertices.row(t[1]).transpose(),
@@ -160,10 +183,7 @@ MarkerBindResult bindMarkers(const TetMesh& body, const std::vector<Eigen::Vecto
         }
         const double s_fan =
             options.fan_weight > 0 && needles > 0 && fan_volume > 0 ? std::min(1.0, options.fan_weight * needles / fan_volume) : 1.0;
-        for (const auto& t : fan) {
-          extra.push_back(t);
-          scale.push_back(s_fan);
-        }
+        for (const auto& t : fan) add_tet(t, s_fan);
         binding.bound_faces = static_cast<std::int32_t>(fan.size());
         result.bindings.push_back(binding);
         continue;
@@ -176,12 +196,9 @@ MarkerBindResult bindMarkers(const TetMesh& body, const std::vector<Eigen::Vecto
       for (std::size_t i = 0; i < k; ++i) {
         const Eigen::Index f = order[i].second;
         const std::int32_t ia = boundary(f, 0), ib = boundary(f, 1), ic = boundary(f, 2);
-        const Eigen::Vector3d a = body.vertices.row(ia), b = body.vertices.row(ib), c = body.vertices.row(ic);
-        const Eigen::Vector3d n = (b - a).cross(c - a);
-        if (!(n.norm() > 0)) continue;
-        const double h = n.normalized().dot(p - a);
-        const double edge = std::max({(b - a).norm(), (c - b).norm(), (a - c).norm()});
-        const double need = options.min_relative_height * edge;
+        const std::optional<FaceHeight> fh = face_height(f, p);
+        if (!fh) continue;
+        const double h = fh->height, need = fh->need;
         if (pass == 0 && h >= need) {
           qualifying.push_back({f, {ia, ib, ic, mv}});
         } else if (pass == 1 && h <= -need) {
@@ -195,8 +212,7 @@ MarkerBindResult bindMarkers(const TetMesh& body, const std::vector<Eigen::Vecto
       }
       if (options.face_spread <= 0) {
         for (std::size_t i = 0; i < qualifying.size() && binding.bound_faces < options.faces_per_marker; ++i) {
-          extra.push_back(qualifying[i].second);
-          scale.push_back(1.0);
+          add_tet(qualifying[i].second, 1.0);
           ++binding.bound_faces;
         }
         continue;
@@ -207,17 +223,11 @@ MarkerBindResult bindMarkers(const TetMesh& body, const std::vector<Eigen::Vecto
             .transpose()
             .eval();
       };
-      const Eigen::Index f0 = order[0].second;
-      const Eigen::Vector3d a0 = body.vertices.row(boundary(f0, 0)), b0 = body.vertices.row(boundary(f0, 1)),
-                            c0 = body.vertices.row(boundary(f0, 2));
-      const Eigen::Vector3d foot = closestPointOnTriangle(p, a0, b0, c0);
-      const double nearest_edge = std::max({(b0 - a0).norm(), (c0 - b0).norm(), (a0 - c0).norm()});
-      const double radius = options.face_spread * std::max((p - foot).norm(), nearest_edge);
+      const auto [foot, radius] = footprint(order[0].second, p, options.face_spread);
       std::vector<Eigen::Vector3d> taken{centroid(qualifying[0].first)};
       std::vector<char> used(qualifying.size(), 0);
       used[0] = 1;
-      extra.push_back(qualifying[0].second);
-      scale.push_back(1.0);
+      add_tet(qualifying[0].second, 1.0);
       ++binding.bound_faces;
       while (binding.bound_faces < options.faces_per_marker) {
         double best = -1.0;
@@ -245,8 +255,7 @@ MarkerBindResult bindMarkers(const TetMesh& body, const std::vector<Eigen::Vecto
         }
         used[best_i] = 1;
         taken.push_back(centroid(qualifying[best_i].first));
-        extra.push_back(qualifying[best_i].second);
-        scale.push_back(1.0);
+        add_tet(qualifying[best_i].second, 1.0);
         ++binding.bound_faces;
       }
     }
