@@ -86,12 +86,16 @@ class Measurer {
  public:
   // volume_weight: the energy is that of the volume term's deformer (DeformerOptions::volume_weight),
   // a_j [(1 - w) ||F_j - R_j||^2 + w ||F_j - T_j||^2], rigid-group tets plain.
-  Measurer(const Rig& rig, double volume_weight)
+  // guard, threshold: the inversion guard's (DeformerOptions::inversion_guard) extra a alpha ||F - R||^2
+  // on body tets squashed below the threshold.
+  Measurer(const Rig& rig, double volume_weight, double guard, double threshold)
       : rig_(rig), frames_(tetrig::computeRestFrames(rig.tet_mesh)),
         weights_(tetrig::tetWeights(frames_, rig.setup.stiffness)),
-        volume_weight_(static_cast<std::size_t>(rig.tet_mesh.tetCount()), volume_weight) {
+        volume_weight_(static_cast<std::size_t>(rig.tet_mesh.tetCount()), volume_weight),
+        guard_(static_cast<std::size_t>(rig.tet_mesh.tetCount()), 0.0), guard_threshold_(threshold) {
+    for (std::int32_t t = 0; t < rig.body_tet_count; ++t) guard_[static_cast<std::size_t>(t)] = guard;
     for (const auto& group : rig.setup.rigid_groups)
-      for (const std::int32_t t : group.tets) volume_weight_[static_cast<std::size_t>(t)] = 0.0;
+      for (const std::int32_t t : group.tets) volume_weight_[static_cast<std::size_t>(t)] = guard_[static_cast<std::size_t>(t)] = 0.0;
     fine_rest_volume_ = fineVolume(rig.fine_vertices.data());
   }
 
@@ -115,7 +119,10 @@ class Measurer {
         const Eigen::Matrix3d r = tetrig::closestRotation(f).toRotationMatrix();
         const double w = f.determinant() > 1e-6 ? volume_weight_[static_cast<std::size_t>(t)] : 0.0;  // as the kernel
         const double s = w > 0.0 ? tetrig::unitVolumeShift(f, r) : 0.0;
-        m.energy += weights_[static_cast<std::size_t>(t)] * ((1.0 - w) * (f - r).squaredNorm() + 3.0 * w * s * s);
+        const double k = guard_[static_cast<std::size_t>(t)];
+        const double alpha = std::clamp(k * (guard_threshold_ - f.determinant()) / guard_threshold_, 0.0, k);
+        m.energy += weights_[static_cast<std::size_t>(t)] *
+                    ((1.0 - w + alpha) * (f - r).squaredNorm() + 3.0 * w * s * s);
       }
     }
     return m;
@@ -142,6 +149,8 @@ class Measurer {
   tetrig::TetRestFrames frames_;
   std::vector<double> weights_;
   std::vector<double> volume_weight_;  // per tet
+  std::vector<double> guard_;          // per tet: the inversion guard's k
+  double guard_threshold_ = 0.5;
   double fine_rest_volume_ = 0.0;
 };
 
@@ -174,6 +183,9 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
   // not depend on how a frame step gets there), with the live rig's energy (its volume term).
   tetrig::DeformerSetup reference_setup = rig.setup;
   reference_setup.options.volume_weight = cfg.live.volume_weight;  // the same energy as the live rig's
+  reference_setup.options.inversion_guard = cfg.live.inversion_guard;
+  reference_setup.options.inversion_guard_threshold = cfg.live.inversion_guard_threshold;
+  reference_setup.guarded_tet_count = rig.body_tet_count;
   tetrig::Deformer reference(rig.tet_mesh, reference_setup);
   std::vector<Eigen::Quaterniond> rotations(static_cast<std::size_t>(rig.tet_mesh.tetCount()));
 
@@ -388,6 +400,13 @@ int main(int argc, char** argv) {
   app.add_option("--volume-weight", cfg.live.volume_weight,
                  "Volume term's share w of each tet's energy, live rig and reference alike (docs/deformation.md; default 0)")
       ->check(CLI::Range(0.0, 0.99));
+  app.add_option("--inversion-guard", cfg.live.inversion_guard,
+                 "Inversion guard's k: extra stiffness of squashed body tets, live rig and reference alike "
+                 "(docs/deformation.md; default 0)")
+      ->check(CLI::Range(0.0, 1.0));
+  app.add_option("--inversion-guard-threshold", cfg.live.inversion_guard_threshold,
+                 "Volume ratio below which the inversion guard acts (default 0.5)")
+      ->check(CLI::Range(0.01, 1.0));
   CLI11_PARSE(app, argc, argv);
   cfg.live.use_coarse_level = !no_coarse;
   try {
@@ -398,7 +417,7 @@ int main(int argc, char** argv) {
       coarse_rig = tetrig::loadRigFile(coarse_path);
       cfg.coarse = &coarse_rig;
     }
-    const Measurer measurer(rig, cfg.live.volume_weight);
+    const Measurer measurer(rig, cfg.live.volume_weight, cfg.live.inversion_guard, cfg.live.inversion_guard_threshold);
     nlohmann::json out = {{"rig", cfg.rig_path},
                           {"tet_vertices", rig.tet_mesh.vertexCount()},
                           {"tets", rig.tet_mesh.tetCount()},
@@ -406,6 +425,8 @@ int main(int argc, char** argv) {
                           {"reference_every", cfg.reference_every},
                           {"relax", cfg.live.rotation_relaxation},
                           {"volume_weight", cfg.live.volume_weight},
+                          {"inversion_guard", cfg.live.inversion_guard},
+                          {"inversion_guard_threshold", cfg.live.inversion_guard_threshold},
                           {"extrapolate", cfg.live.rotation_extrapolation},
                           {"runs", nlohmann::json::array()}};
     // The coarse level the live rig will use: --coarse-rig, else the rig's own unless --no-coarse.

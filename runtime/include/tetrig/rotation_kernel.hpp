@@ -59,7 +59,8 @@ struct RotationPassStats {
 // returned is then this combined one. nullptr: the plain as-rigid-as-possible pass.
 RotationPassStats rotationPass(TetBlock* blocks, std::int32_t block_count, const double* u, float* delta,
                                int steps, std::uint16_t* exact_lanes, float relax = 0.0f,
-                               const float* volume_weight = nullptr);
+                               const float* volume_weight = nullptr, const float* guard = nullptr,
+                               float guard_threshold = 0.5f);
 
 // The instruction set the kernels run with on this machine ("avx512f", "avx2", "baseline").
 const char* rotationKernelInstructionSet();
@@ -67,6 +68,7 @@ const char* rotationKernelInstructionSet();
 // Adds a_j (R_j - I) G_j of every tet into `delta` from the stored rotations (no extraction);
 // with `volume_weight`, a_j (M_j - I) G_j with the volume target of the displacements `u`.
 void differentialPass(const TetBlock* blocks, std::int32_t block_count, float* delta, const double* u = nullptr,
-                      const float* volume_weight = nullptr);
+                      const float* volume_weight = nullptr, const float* guard = nullptr,
+                      float guard_threshold = 0.5f);
 
 }  // namespace tetrig
