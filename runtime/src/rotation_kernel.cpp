@@ -298,13 +298,23 @@ TETRIG_INLINE void inversionGuard(const Pack<N> (&h)[9], const Matrix<N>& rot, M
   const PackMask<N> off = notAbove(alpha, 0.0f);  // J >= tau, k = 0; NaN too
   alpha = select(off, splat<N>(0.0f), alpha);
   alpha = select(alpha >= k, k, alpha);
+  V e[9];
   V ee = splat<N>(0.0f);
   for (int i = 0; i < 9; ++i) {
-    const V e = select(off, splat<N>(0.0f), rot.m[i] - h[i]);  // R - F (0 where off: no 0 * inf)
-    ee += e * e;
-    rm.m[i] = rm.m[i] + alpha * e;
+    e[i] = select(off, splat<N>(0.0f), rot.m[i] - h[i]);  // R - F (0 where off: no 0 * inf)
+    ee += e[i] * e[i];
   }
-  residual = residual + alpha * ee;
+  // The push alpha (R - F) is at most c = kInversionGuardPushCap (Frobenius): a tet far from any
+  // rotation (a frame's first iteration after a jump) must not be kicked. Beyond the cap the extra
+  // energy grows linearly (Huber): alpha x^2 up to x = c / alpha, then 2 c x - c^2 / alpha.
+  constexpr float c = kInversionGuardPushCap;
+  const V push2 = alpha * alpha * ee;
+  const PackMask<N> below = notAbove(push2, c * c);
+  const V x = squareRoot(ee);
+  const V extra = select(below, alpha * ee, c * (2.0f * x - c / alpha));
+  alpha = select(below, alpha, c / x);
+  for (int i = 0; i < 9; ++i) rm.m[i] = rm.m[i] + alpha * e[i];
+  residual = residual + extra;
 }
 
 // Lane l of a block -> bit l, by a vector AND and a tree of ORs (a per-lane loop compiles to
@@ -508,8 +518,12 @@ __attribute__((noinline, cold)) void fixExactRotations(TetBlock* blocks, std::in
       const Eigen::Matrix3d r_stored = stored.normalized().toRotationMatrix();
       const double a = block.weight[l];
       // The inversion guard at J <= 0: its full k (inversionGuard).
-      const double kg = guard != nullptr ? guard[static_cast<std::size_t>(b) * W + static_cast<std::size_t>(l)] : 0.0;
-      stats.energy += a * (1.0 + kg) * (f - r_stored).squaredNorm();
+      double kg = guard != nullptr ? guard[static_cast<std::size_t>(b) * W + static_cast<std::size_t>(l)] : 0.0;
+      const double x = (r_stored - f).norm();
+      const double cap = kInversionGuardPushCap;
+      const double extra = kg * x <= cap ? kg * x * x : cap * (2.0 * x - cap / kg);  // the push cap (inversionGuard)
+      if (kg * x > cap) kg = cap / x;
+      stats.energy += a * (x * x + extra);
       ++stats.exact_fallbacks;
       if (delta == nullptr) continue;
       const Eigen::Matrix3d change = r_stored - r_refined + kg * (r_stored - f);

@@ -260,8 +260,10 @@ TEST(RotationKernel, MixedInvertedTetsGetTheExactRotationInDeltaAndEnergy) {
 // The inversion guard (rotation_kernel.hpp, inversionGuard): against the double reference, on the
 // squeezed bar below (tets at 80-95 % of their volume) with one inverted tet: each guarded tet's
 // target is M = R + alpha (R - F), alpha = k min(1, (tau - det F) / tau) (0 at det F >= tau, k on
-// the inverted tet, which takes the exact rotation), delta is sum_j a_j (M_j - I) G_j and the
-// energy sum_j a_j (1 + alpha_j) ||F - R||^2. differentialPass gives the same delta.
+// the inverted tet, which takes the exact rotation), lowered so that alpha ||R - F|| is at most
+// c = kInversionGuardPushCap; delta is sum_j a_j (M_j - I) G_j and the energy
+// sum_j a_j (||F - R||^2 + alpha ||F - R||^2), or 2 c ||F - R|| - c^2 / alpha beyond the cap.
+// differentialPass gives the same delta.
 TEST(RotationKernel, InversionGuardMatchesTheDoubleReference) {
   KernelScene s = makeScene(11, 0.01);
   for (std::int32_t v = 0; v < s.mesh.vertexCount(); ++v) {
@@ -272,7 +274,7 @@ TEST(RotationKernel, InversionGuardMatchesTheDoubleReference) {
     Vertices x = positions(s);
     const auto c = s.mesh.tets.row(7);
     const Eigen::Vector3d centroid = (x.row(c[1]) + x.row(c[2]) + x.row(c[3])).transpose() / 3.0;
-    const Eigen::Vector3d moved = centroid + 0.3 * (centroid - Eigen::Vector3d(x.row(c[0]).transpose()));
+    const Eigen::Vector3d moved = centroid + 2.0 * (centroid - Eigen::Vector3d(x.row(c[0]).transpose()));  // far: capped
     for (int k = 0; k < 3; ++k) s.xyz[kVectorStride * static_cast<size_t>(c[0]) + static_cast<size_t>(k)] = moved[k];
   }
   const Vertices x = positions(s);
@@ -280,24 +282,33 @@ TEST(RotationKernel, InversionGuardMatchesTheDoubleReference) {
   constexpr float kTau = 0.9f;
   std::vector<float> guard(s.blocks.size() * kTetBlockWidth, 0.0f);
   for (std::int32_t t = 0; t < s.mesh.tetCount(); ++t) guard[static_cast<size_t>(t)] = (t % 5 == 0) ? 0.0f : 0.3f + 0.7f * static_cast<float>(t % 7) / 6.0f;
+  guard[7] = 1.0f;  // tet 7's slot: the scene keeps mesh order
   std::vector<float> delta(s.xyz.size(), 0.0f);
   const RotationPassStats stats =
       rotationPass(s.blocks.data(), static_cast<std::int32_t>(s.blocks.size()), s.u.data(), delta.data(), 2,
                    s.exact_lanes.data(), 0.0f, nullptr, guard.data(), kTau);
   std::vector<Eigen::Matrix3d> targets;
   double energy = 0.0;
-  int guarded = 0, inverted_guarded = 0;
+  int guarded = 0, inverted_guarded = 0, capped = 0;
   for (std::int32_t t = 0; t < s.mesh.tetCount(); ++t) {
     const Eigen::Matrix3d f = deformationGradient(s.mesh, s.frames, x, t);
     const Eigen::Matrix3d r = laneRotation(s, t).normalized().toRotationMatrix();
     const double k = guard[static_cast<size_t>(t)];
-    const double alpha = std::clamp(k * (kTau - f.determinant()) / kTau, 0.0, k);
+    double alpha = std::clamp(k * (kTau - f.determinant()) / kTau, 0.0, k);
+    const double off = (r - f).norm(), c = kInversionGuardPushCap;
+    double extra = alpha * off * off;
+    if (alpha * off > c) {  // capped: the push is c, the energy linear beyond (Huber)
+      ++capped;
+      extra = c * (2.0 * off - c / alpha);
+      alpha = c / off;
+    }
     guarded += alpha > 0.0;
     inverted_guarded += alpha > 0.0 && f.determinant() <= 0.0;
     targets.push_back(r + alpha * (r - f));
-    energy += s.weights[static_cast<size_t>(t)] * (1.0 + alpha) * (f - r).squaredNorm();
+    energy += s.weights[static_cast<size_t>(t)] * (off * off + extra);
   }
-  std::printf("inversion guard: %d tets guarded, %d of them inverted\n", guarded, inverted_guarded);
+  std::printf("inversion guard: %d tets guarded, %d of them inverted, %d pushes capped\n", guarded, inverted_guarded, capped);
+  ASSERT_GE(capped, 1) << "the inverted tet is far from its rotation: its push must be capped";
   ASSERT_GE(inverted_guarded, 1) << "the inverted tet must be guarded for the test to cover the exact path";
   ASSERT_GE(guarded, 10);
   EXPECT_NEAR(stats.energy, energy, 2e-5 * energy);

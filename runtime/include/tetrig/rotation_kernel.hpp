@@ -62,6 +62,13 @@ RotationPassStats rotationPass(TetBlock* blocks, std::int32_t block_count, const
                                const float* volume_weight = nullptr, const float* guard = nullptr,
                                float guard_threshold = 0.5f);
 
+// The inversion guard's largest push alpha ||R - F|| (Frobenius): a tet far from any rotation (a
+// frame's first iteration after a jump) is not kicked; beyond it the guard's energy grows linearly
+// (rotation_kernel.cpp, inversionGuard). 1: measured to leave the steady guard whole (the pushed
+// bar face) and to remove the kick at a cold start on CMU 85_02 (62 inverted tets at frame 0 without
+// a cap, 0 with it; 0.25 and 0.5 weakened the steady guard).
+inline constexpr float kInversionGuardPushCap = 1.0f;
+
 // The instruction set the kernels run with on this machine ("avx512f", "avx2", "baseline").
 const char* rotationKernelInstructionSet();
 
