@@ -30,6 +30,7 @@
 #include "tetrig/polar.hpp"
 #include "tetrig/pose_transfer.hpp"
 #include "tetrig/rig_file.hpp"
+#include "tetrig/rotation_kernel.hpp"
 #include "tetrig/rigbuild/write_file_atomic.hpp"
 
 #include <CLI/CLI.hpp>
@@ -86,12 +87,16 @@ class Measurer {
  public:
   // volume_weight: the energy is that of the volume term's deformer (DeformerOptions::volume_weight),
   // a_j [(1 - w) ||F_j - R_j||^2 + w ||F_j - T_j||^2], rigid-group tets plain.
-  Measurer(const Rig& rig, double volume_weight)
+  // guard, threshold: the inversion guard's (DeformerOptions::inversion_guard) extra a alpha ||F - R||^2
+  // on body tets squashed below the threshold.
+  Measurer(const Rig& rig, double volume_weight, double guard, double threshold)
       : rig_(rig), frames_(tetrig::computeRestFrames(rig.tet_mesh)),
         weights_(tetrig::tetWeights(frames_, rig.setup.stiffness)),
-        volume_weight_(static_cast<std::size_t>(rig.tet_mesh.tetCount()), volume_weight) {
+        volume_weight_(static_cast<std::size_t>(rig.tet_mesh.tetCount()), volume_weight),
+        guard_(static_cast<std::size_t>(rig.tet_mesh.tetCount()), 0.0), guard_threshold_(threshold) {
+    for (std::int32_t t = 0; t < rig.body_tet_count; ++t) guard_[static_cast<std::size_t>(t)] = guard;
     for (const auto& group : rig.setup.rigid_groups)
-      for (const std::int32_t t : group.tets) volume_weight_[static_cast<std::size_t>(t)] = 0.0;
+      for (const std::int32_t t : group.tets) volume_weight_[static_cast<std::size_t>(t)] = guard_[static_cast<std::size_t>(t)] = 0.0;
     fine_rest_volume_ = fineVolume(rig.fine_vertices.data());
   }
 
@@ -115,7 +120,11 @@ class Measurer {
         const Eigen::Matrix3d r = tetrig::closestRotation(f).toRotationMatrix();
         const double w = f.determinant() > 1e-6 ? volume_weight_[static_cast<std::size_t>(t)] : 0.0;  // as the kernel
         const double s = w > 0.0 ? tetrig::unitVolumeShift(f, r) : 0.0;
-        m.energy += weights_[static_cast<std::size_t>(t)] * ((1.0 - w) * (f - r).squaredNorm() + 3.0 * w * s * s);
+        const double k = guard_[static_cast<std::size_t>(t)];
+        const double alpha = std::clamp(k * (guard_threshold_ - f.determinant()) / guard_threshold_, 0.0, k);
+        const double off = (f - r).norm(), cap = tetrig::kInversionGuardPushCap;
+        const double guard = alpha * off <= cap ? alpha * off * off : cap * (2.0 * off - cap / alpha);  // as the kernel (Huber)
+        m.energy += weights_[static_cast<std::size_t>(t)] * ((1.0 - w) * off * off + guard + 3.0 * w * s * s);
       }
     }
     return m;
@@ -142,6 +151,8 @@ class Measurer {
   tetrig::TetRestFrames frames_;
   std::vector<double> weights_;
   std::vector<double> volume_weight_;  // per tet
+  std::vector<double> guard_;          // per tet: the inversion guard's k
+  double guard_threshold_ = 0.5;
   double fine_rest_volume_ = 0.0;
 };
 
@@ -174,6 +185,9 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
   // not depend on how a frame step gets there), with the live rig's energy (its volume term).
   tetrig::DeformerSetup reference_setup = rig.setup;
   reference_setup.options.volume_weight = cfg.live.volume_weight;  // the same energy as the live rig's
+  reference_setup.options.inversion_guard = cfg.live.inversion_guard;
+  reference_setup.options.inversion_guard_threshold = cfg.live.inversion_guard_threshold;
+  reference_setup.guarded_tet_count = rig.body_tet_count;
   tetrig::Deformer reference(rig.tet_mesh, reference_setup);
   std::vector<Eigen::Quaterniond> rotations(static_cast<std::size_t>(rig.tet_mesh.tetCount()));
 
@@ -209,6 +223,8 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
   }
   std::vector<double> region_sum2(rig.markers.size());
   int inverted_budget_max = 0, inverted_conv_max = 0;
+  std::size_t inverted_budget_max_frame = 0, inverted_budget_frames = 0;
+  std::vector<int> ref_inverted, ref_inverted_conv;
   std::size_t held = 0, predicted = 0;
   double step_us = 0.0;
   const double rest_volume = measurer.fineRestVolume();
@@ -222,7 +238,11 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
     const std::span<const double> x = live.deformer().positions();
     const bool is_reference = (f - first) % static_cast<std::size_t>(cfg.reference_every) == 0;
     const PoseMeasure mb = measurer.measure(x, is_reference);
-    inverted_budget_max = std::max(inverted_budget_max, mb.inverted_body_tets);
+    if (mb.inverted_body_tets > inverted_budget_max) {
+      inverted_budget_max = mb.inverted_body_tets;
+      inverted_budget_max_frame = f;
+    }
+    if (mb.inverted_body_tets > 0) ++inverted_budget_frames;
     volume_budget.push_back(measurer.fineVolume(fine.data()) / rest_volume - 1.0);
     if (!is_reference) continue;
 
@@ -245,6 +265,8 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
     const std::span<const double> xc = reference.positions();
     const PoseMeasure mc = measurer.measure(xc, true);
     inverted_conv_max = std::max(inverted_conv_max, mc.inverted_body_tets);
+    ref_inverted.push_back(mb.inverted_body_tets);
+    ref_inverted_conv.push_back(mc.inverted_body_tets);
     double sum2 = 0.0, w = 0.0;
     std::int32_t worst_v = 0;
     std::fill(region_sum2.begin(), region_sum2.end(), 0.0);
@@ -308,6 +330,8 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
       {"energy_excess", toJson(percentiles(excess))},
       {"energy_excess_left_out", left_out},
       {"inverted_body_tets_max", inverted_budget_max},
+      {"inverted_body_tets_max_frame", inverted_budget_max_frame},
+      {"frames_with_inverted_body_tets", inverted_budget_frames},
       {"inverted_body_tets_converged_max", inverted_conv_max},
       {"volume_change_max", absmax(volume_budget)},
       {"volume_change_converged_max", absmax(volume_conv)},
@@ -322,7 +346,8 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
   for (std::size_t i = 0; i < rms.size(); ++i) {
     per_frame.push_back({{"frame", ref_frame[i]}, {"rms_mm", rms[i]}, {"max_mm", worst[i]}, {"energy", e_budget[i]},
                          {"energy_converged", e_conv[i]}, {"reference_iterations", ref_iterations[i]},
-                         {"worst_near", ref_worst_near[i]}, {"worst_region_share", ref_region_share[i]}});
+                         {"worst_near", ref_worst_near[i]}, {"worst_region_share", ref_region_share[i]},
+                         {"inverted_body_tets", ref_inverted[i]}, {"inverted_body_tets_converged", ref_inverted_conv[i]}});
   }
   run["reference"] = std::move(per_frame);
   return run;
@@ -388,6 +413,13 @@ int main(int argc, char** argv) {
   app.add_option("--volume-weight", cfg.live.volume_weight,
                  "Volume term's share w of each tet's energy, live rig and reference alike (docs/deformation.md; default 0)")
       ->check(CLI::Range(0.0, 0.99));
+  app.add_option("--inversion-guard", cfg.live.inversion_guard,
+                 "Inversion guard's k: extra stiffness of squashed body tets, live rig and reference alike "
+                 "(docs/deformation.md; default 0)")
+      ->check(CLI::Range(0.0, 1.0));
+  app.add_option("--inversion-guard-threshold", cfg.live.inversion_guard_threshold,
+                 "Volume ratio below which the inversion guard acts (default 0.5)")
+      ->check(CLI::Range(0.01, 1.0));
   CLI11_PARSE(app, argc, argv);
   cfg.live.use_coarse_level = !no_coarse;
   try {
@@ -398,7 +430,7 @@ int main(int argc, char** argv) {
       coarse_rig = tetrig::loadRigFile(coarse_path);
       cfg.coarse = &coarse_rig;
     }
-    const Measurer measurer(rig, cfg.live.volume_weight);
+    const Measurer measurer(rig, cfg.live.volume_weight, cfg.live.inversion_guard, cfg.live.inversion_guard_threshold);
     nlohmann::json out = {{"rig", cfg.rig_path},
                           {"tet_vertices", rig.tet_mesh.vertexCount()},
                           {"tets", rig.tet_mesh.tetCount()},
@@ -406,6 +438,8 @@ int main(int argc, char** argv) {
                           {"reference_every", cfg.reference_every},
                           {"relax", cfg.live.rotation_relaxation},
                           {"volume_weight", cfg.live.volume_weight},
+                          {"inversion_guard", cfg.live.inversion_guard},
+                          {"inversion_guard_threshold", cfg.live.inversion_guard_threshold},
                           {"extrapolate", cfg.live.rotation_extrapolation},
                           {"runs", nlohmann::json::array()}};
     // The coarse level the live rig will use: --coarse-rig, else the rig's own unless --no-coarse.
@@ -421,11 +455,12 @@ int main(int argc, char** argv) {
       for (const int k : ks) {
         nlohmann::json run = runOne(rig, measurer, clip, name, k, cfg);
         const auto& r = run;
-        std::printf("%-32s k=%d  rms mm median %.2f p99 %.2f | worst mm median %.2f p99 %.2f max %.2f | excess median %.4f p99 %.4f | inverted %d (conv %d) | volume %.4f (conv %.4f)\n",
+        std::printf("%-32s k=%d  rms mm median %.2f p99 %.2f | worst mm median %.2f p99 %.2f max %.2f | excess median %.4f p99 %.4f | inverted %d at frame %zu, in %zu frames (conv %d) | volume %.4f (conv %.4f)\n",
                     name.c_str(), k, r["rms_error_mm"]["median"].get<double>(), r["rms_error_mm"]["p99"].get<double>(),
                     r["max_error_mm"]["median"].get<double>(), r["max_error_mm"]["p99"].get<double>(),
                     r["max_error_mm"]["max"].get<double>(), r["energy_excess"]["median"].get<double>(),
                     r["energy_excess"]["p99"].get<double>(), r["inverted_body_tets_max"].get<int>(),
+                    r["inverted_body_tets_max_frame"].get<std::size_t>(), r["frames_with_inverted_body_tets"].get<std::size_t>(),
                     r["inverted_body_tets_converged_max"].get<int>(), r["volume_change_max"].get<double>(),
                     r["volume_change_converged_max"].get<double>());
         std::fflush(stdout);

@@ -78,6 +78,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   setup.options.interpolate_rotations = (flags & 2u) == 0;
   static constexpr double kVolumeWeight[4] = {0.0, 0.0, 0.5, 0.95};  // the volume term on half the inputs
   setup.options.volume_weight = kVolumeWeight[(flags >> 2) & 3u];
+  static constexpr double kGuard[4] = {0.0, 0.0, 0.5, 1.0};  // the inversion guard on half the inputs
+  setup.options.inversion_guard = kGuard[(flags >> 4) & 3u];
+  setup.options.inversion_guard_threshold = (flags & 64u) != 0 ? 0.9 : 0.5;
   setup.options.rotation_steps = static_cast<int>(in.byte() % 6);
   // Handles: each vertex free, a vertex handle, or (rarely) claimed twice.
   for (std::int32_t v = 0; v < vertex_count; ++v) {

@@ -44,6 +44,10 @@ Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(s
     fail("rotation_extrapolation must be in [0, 1]");
   }
   if (!(options_.volume_weight >= 0.0 && options_.volume_weight < 1.0)) fail("volume_weight must be in [0, 1)");
+  if (!(options_.inversion_guard >= 0.0 && options_.inversion_guard <= 1.0)) fail("inversion_guard must be in [0, 1]");
+  if (!(options_.inversion_guard_threshold > 0.0 && options_.inversion_guard_threshold <= 1.0)) {
+    fail("inversion_guard_threshold must be in (0, 1]");
+  }
   if (!(options_.rotation_relaxation >= 1.0 && options_.rotation_relaxation < 2.0)) {
     fail("rotation_relaxation must be in [1, 2)");
   }
@@ -299,6 +303,15 @@ Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(s
         volume_weight_[static_cast<size_t>(slotOfTet(t))] = static_cast<float>(options_.volume_weight);
   }
 
+  if (options_.inversion_guard > 0.0 && options_.update_rotations) {
+    guard_.assign(static_cast<size_t>(block_count) * kTetBlockWidth, 0.0f);
+    const std::int32_t guarded =
+        setup.guarded_tet_count < 0 ? tet_count_ : std::min(setup.guarded_tet_count, tet_count_);
+    for (std::int32_t t = 0; t < guarded; ++t)
+      if (!grouped[static_cast<size_t>(t)])
+        guard_[static_cast<size_t>(slotOfTet(t))] = static_cast<float>(options_.inversion_guard);
+  }
+
   vertex_targets_.resize(static_cast<size_t>(vertex_handle_count_));
   region_targets_.resize(setup.region_handles.size());
   point_targets_.resize(setup.point_handles.size());
@@ -452,7 +465,8 @@ void Deformer::interpolateRotations() {
 
 void Deformer::rebuildDelta() {
   std::fill(delta_.begin(), delta_.end(), 0.0f);
-  differentialPass(blocks_.data(), static_cast<std::int32_t>(blocks_.size()), delta_.data(), u_.data(), volumeWeights());
+  differentialPass(blocks_.data(), static_cast<std::int32_t>(blocks_.size()), delta_.data(), u_.data(), volumeWeights(),
+                   guard(), static_cast<float>(options_.inversion_guard_threshold));
 }
 
 void Deformer::writePositions() {
@@ -509,7 +523,7 @@ StepStats Deformer::step(const HandleTargets& targets, const StepBudget& budget)
       const RotationPassStats pass =
           rotationPass(blocks_.data(), block_count, u_.data(), has_groups ? nullptr : delta_.data(),
                        options_.rotation_steps, exact_lanes_.data(), static_cast<float>(options_.rotation_relaxation - 1.0),
-                       volumeWeights());
+                       volumeWeights(), guard(), static_cast<float>(options_.inversion_guard_threshold));
       stats.energy = pass.energy;
       stats.exact_rotations += pass.exact_fallbacks;
       std::int64_t rigid_ns = 0;
@@ -517,7 +531,8 @@ StepStats Deformer::step(const HandleTargets& targets, const StepBudget& budget)
         const auto t2 = Clock::now();
         applyRigidGroups(group_start_, group_slot_, blocks_.data());
         rigid_ns = nanosecondsBetween(t2, Clock::now());
-        differentialPass(blocks_.data(), block_count, delta_.data(), u_.data(), volumeWeights());
+        differentialPass(blocks_.data(), block_count, delta_.data(), u_.data(), volumeWeights(), guard(),
+                         static_cast<float>(options_.inversion_guard_threshold));
       }
       stats.rigid_ns += rigid_ns;
       stats.rotation_ns += nanosecondsBetween(t1, Clock::now()) - rigid_ns;

@@ -32,6 +32,9 @@ DeformerSetup liveSetup(const Rig& rig, const LiveRigOptions& options, bool fram
   setup.options.rotation_extrapolation_max_deg = options.rotation_extrapolation_max_deg;
   setup.options.rotation_relaxation = options.rotation_relaxation;
   setup.options.volume_weight = options.volume_weight;
+  setup.options.inversion_guard = options.inversion_guard;
+  setup.options.inversion_guard_threshold = options.inversion_guard_threshold;
+  setup.guarded_tet_count = rig.body_tet_count;
   return setup;
 }
 
@@ -191,6 +194,9 @@ void LiveRig::buildCoarseLevel(const Rig& coarse) {
   setup.options.rotation_extrapolation = 0.0;  // measured: no gain on the coarse chain (docs/fidelity.md)
   setup.options.rotation_relaxation = options_.rotation_relaxation;
   setup.options.volume_weight = options_.volume_weight;
+  setup.options.inversion_guard = options_.inversion_guard;
+  setup.options.inversion_guard_threshold = options_.inversion_guard_threshold;
+  setup.guarded_tet_count = coarse.body_tet_count;
   setup.options.frame_guide = false;
   CoarseLevelOptions co;
   co.iterations = options_.coarse_iterations;

@@ -281,6 +281,42 @@ TETRIG_INLINE void volumeBlend(const Pack<N> (&h)[9], Matrix<N>& rm, Pack<N> w, 
   for (int i = 0; i < 9; i += 4) rm.m[i] = rm.m[i] + ws;  // the diagonal: s R = s (R - I) + s I
 }
 
+// The inversion guard (DeformerOptions::inversion_guard; docs/deformation.md, "Inversion guard").
+// A tet squashed below a volume ratio J = det F < tau takes extra stiffness alpha a on its
+// rotation term, alpha = k min(1, (tau - J) / tau) (k at J <= 0), without a new factor: the extra
+// term's pull is moved to the right-hand side with the current F,
+//   M - I = (R - I) + alpha (R - F),
+// so a fixed point minimises a (1 + alpha) ||F - R||^2 for those tets (a Jacobi-like splitting,
+// stable for k < 1 per tet, and a tet shares its vertices with its neighbours). `rm` holds the
+// target minus I on entry (R - I, or the volume term's M - I), `rot` R - I, `residual` the tet's
+// energy over a; lanes with k = 0 or J >= tau keep both exactly.
+template <int N>
+TETRIG_INLINE void inversionGuard(const Pack<N> (&h)[9], const Matrix<N>& rot, Matrix<N>& rm, Pack<N> det,
+                                  Pack<N> k, float tau, Pack<N>& residual) {
+  using V = Pack<N>;
+  V alpha = k * ((tau - det) * (1.0f / tau));
+  const PackMask<N> off = notAbove(alpha, 0.0f);  // J >= tau, k = 0; NaN too
+  alpha = select(off, splat<N>(0.0f), alpha);
+  alpha = select(alpha >= k, k, alpha);
+  V e[9];
+  V ee = splat<N>(0.0f);
+  for (int i = 0; i < 9; ++i) {
+    e[i] = select(off, splat<N>(0.0f), rot.m[i] - h[i]);  // R - F (0 where off: no 0 * inf)
+    ee += e[i] * e[i];
+  }
+  // The push alpha (R - F) is at most c = kInversionGuardPushCap (Frobenius): a tet far from any
+  // rotation (a frame's first iteration after a jump) must not be kicked. Beyond the cap the extra
+  // energy grows linearly (Huber): alpha x^2 up to x = c / alpha, then 2 c x - c^2 / alpha.
+  constexpr float c = kInversionGuardPushCap;
+  const V push2 = alpha * alpha * ee;
+  const PackMask<N> below = notAbove(push2, c * c);
+  const V x = squareRoot(ee);
+  const V extra = select(below, alpha * ee, c * (2.0f * x - c / alpha));
+  alpha = select(below, alpha, c / x);
+  for (int i = 0; i < 9; ++i) rm.m[i] = rm.m[i] + alpha * e[i];
+  residual = residual + extra;
+}
+
 // Lane l of a block -> bit l, by a vector AND and a tree of ORs (a per-lane loop compiles to
 // scalar code).
 TETRIG_INLINE unsigned laneBits(FMask m) {
@@ -299,8 +335,8 @@ TETRIG_INLINE unsigned laneBits(FMask m) {
 // over thousands of tets would lose the small terms.
 template <int N, bool kRelax, bool kVolume>
 TETRIG_INLINE void passBlocks(TetBlock* blocks, const double* u, float* delta, int steps, float relax,
-                              const float* volume_weight, Lanes (&energy)[2], std::uint16_t* exact_lanes,
-                              std::int64_t& flagged) {
+                              const float* volume_weight, const float* guard, float guard_threshold,
+                              Lanes (&energy)[2], std::uint16_t* exact_lanes, std::int64_t& flagged) {
   using V = Pack<N>;
   using M = PackMask<N>;
   V h[9];  // H = E'_u E^-1; F = I + H   (eq. 2.6)
@@ -433,6 +469,12 @@ TETRIG_INLINE void passBlocks(TetBlock* blocks, const double* u, float* delta, i
     w = select(needs_exact, splat<N>(0.0f), w);  // flagged lanes: the exact rotation alone
     volumeBlend<N>(h, target, w, residual);
   }
+  if (guard != nullptr) {
+    Pack<N> k;
+    for (int n = 0; n < N; ++n) k.v[n] = loadF(guard + n * W);
+    k = select(needs_exact, splat<N>(0.0f), k);  // flagged lanes: fixExactRotations adds theirs
+    inversionGuard<N>(h, rm, target, det, k, guard_threshold, residual);
+  }
   const V tet_energy = select(needs_exact, splat<N>(0.0f), loadField<N>(blocks, TETRIG_FIELD(weight, 0)) * residual);
   for (int n = 0; n < N; ++n) {
     energy[0] += lowHalf(tet_energy.v[n]);
@@ -448,7 +490,7 @@ TETRIG_INLINE void passBlocks(TetBlock* blocks, const double* u, float* delta, i
 // the pass flagged a tet.
 __attribute__((noinline, cold)) void fixExactRotations(TetBlock* blocks, std::int32_t block_count, const double* u,
                                                         float* delta, const std::uint16_t* exact_lanes,
-                                                        RotationPassStats& stats) {
+                                                        const float* guard, RotationPassStats& stats) {
   for (std::int32_t b = 0; b < block_count; ++b) {
     if (exact_lanes[b] == 0) continue;
     TetBlock& block = blocks[b];
@@ -475,10 +517,16 @@ __attribute__((noinline, cold)) void fixExactRotations(TetBlock* blocks, std::in
       const Eigen::Matrix3d r_refined = refined.normalized().toRotationMatrix();
       const Eigen::Matrix3d r_stored = stored.normalized().toRotationMatrix();
       const double a = block.weight[l];
-      stats.energy += a * (f - r_stored).squaredNorm();
+      // The inversion guard at J <= 0: its full k (inversionGuard).
+      double kg = guard != nullptr ? guard[static_cast<std::size_t>(b) * W + static_cast<std::size_t>(l)] : 0.0;
+      const double x = (r_stored - f).norm();
+      const double cap = kInversionGuardPushCap;
+      const double extra = kg * x <= cap ? kg * x * x : cap * (2.0 * x - cap / kg);  // the push cap (inversionGuard)
+      if (kg * x > cap) kg = cap / x;
+      stats.energy += a * (x * x + extra);
       ++stats.exact_fallbacks;
       if (delta == nullptr) continue;
-      const Eigen::Matrix3d change = r_stored - r_refined;
+      const Eigen::Matrix3d change = r_stored - r_refined + kg * (r_stored - f);
       Eigen::Vector3d sum = Eigen::Vector3d::Zero();
       for (int k = 0; k < 3; ++k) {
         const Eigen::Vector3d d = a * change * inv.row(k).transpose();
@@ -495,11 +543,13 @@ __attribute__((noinline, cold)) void fixExactRotations(TetBlock* blocks, std::in
 // The pass over all blocks (kRelax: with over-relaxation; kVolume: with the volume term).
 template <bool kRelax, bool kVolume>
 TETRIG_INLINE void passAll(TetBlock* blocks, std::int32_t block_count, const double* u, float* delta, int steps, float relax,
-                           const float* volume_weight, std::uint16_t* exact_lanes, RotationPassStats& stats) {
+                           const float* volume_weight, const float* guard, float guard_threshold,
+                           std::uint16_t* exact_lanes, RotationPassStats& stats) {
   Lanes energy[2] = {};
   std::int64_t flagged = 0;
   std::int32_t b = 0;
   auto weights = [&](std::int32_t block) { return kVolume ? volume_weight + static_cast<std::size_t>(block) * W : nullptr; };
+  auto guards = [&](std::int32_t block) { return guard != nullptr ? guard + static_cast<std::size_t>(block) * W : nullptr; };
   // Blocks beyond the L2 cache stream from memory: there, ask for the block after next now, so
   // its lines arrive while this one computes (measured 8-15 % on 27k tets with the double
   // layout; on meshes that fit in L2 the prefetches only cost, ~3 % on 2.6k tets).
@@ -508,17 +558,20 @@ TETRIG_INLINE void passAll(TetBlock* blocks, std::int32_t block_count, const dou
       const char* next = reinterpret_cast<const char*>(blocks + b + 2);
 #pragma GCC unroll 64
       for (std::size_t line = 0; line < 2 * sizeof(TetBlock); line += 64) __builtin_prefetch(next + line);
-      passBlocks<2, kRelax, kVolume>(blocks + b, u, delta, steps, relax, weights(b), energy, exact_lanes + b, flagged);
+      passBlocks<2, kRelax, kVolume>(blocks + b, u, delta, steps, relax, weights(b), guards(b), guard_threshold, energy,
+                                        exact_lanes + b, flagged);
     }
   }
   for (; b + 2 <= block_count; b += 2)
-    passBlocks<2, kRelax, kVolume>(blocks + b, u, delta, steps, relax, weights(b), energy, exact_lanes + b, flagged);
+    passBlocks<2, kRelax, kVolume>(blocks + b, u, delta, steps, relax, weights(b), guards(b), guard_threshold, energy,
+                                        exact_lanes + b, flagged);
   for (; b < block_count; ++b)
-    passBlocks<1, kRelax, kVolume>(blocks + b, u, delta, steps, relax, weights(b), energy, exact_lanes + b, flagged);
+    passBlocks<1, kRelax, kVolume>(blocks + b, u, delta, steps, relax, weights(b), guards(b), guard_threshold, energy,
+                                        exact_lanes + b, flagged);
   double total = 0.0;
   for (int l = 0; l < kHalf; ++l) total += energy[0][l] + energy[1][l];
   stats.energy = total;
-  if (flagged != 0) fixExactRotations(blocks, block_count, u, delta, exact_lanes, stats);
+  if (flagged != 0) fixExactRotations(blocks, block_count, u, delta, exact_lanes, guard, stats);
 }
 
 
@@ -526,15 +579,19 @@ TETRIG_INLINE void passAll(TetBlock* blocks, std::int32_t block_count, const dou
 
 TETRIG_MULTIVERSION
 RotationPassStats rotationPass(TetBlock* blocks, std::int32_t block_count, const double* u, float* delta,
-                               int steps, std::uint16_t* exact_lanes, float relax, const float* volume_weight) {
+                               int steps, std::uint16_t* exact_lanes, float relax, const float* volume_weight,
+                               const float* guard, float guard_threshold) {
   RotationPassStats stats;
   const bool relaxed = relax != 0.0f;
+  const float* vw = volume_weight;
+  const float* g = guard;
+  const float gt = guard_threshold;
   if (volume_weight != nullptr) {
-    if (relaxed) passAll<true, true>(blocks, block_count, u, delta, steps, relax, volume_weight, exact_lanes, stats);
-    else passAll<false, true>(blocks, block_count, u, delta, steps, relax, volume_weight, exact_lanes, stats);
+    if (relaxed) passAll<true, true>(blocks, block_count, u, delta, steps, relax, vw, g, gt, exact_lanes, stats);
+    else passAll<false, true>(blocks, block_count, u, delta, steps, relax, vw, g, gt, exact_lanes, stats);
   } else {
-    if (relaxed) passAll<true, false>(blocks, block_count, u, delta, steps, relax, nullptr, exact_lanes, stats);
-    else passAll<false, false>(blocks, block_count, u, delta, steps, relax, nullptr, exact_lanes, stats);
+    if (relaxed) passAll<true, false>(blocks, block_count, u, delta, steps, relax, nullptr, g, gt, exact_lanes, stats);
+    else passAll<false, false>(blocks, block_count, u, delta, steps, relax, nullptr, g, gt, exact_lanes, stats);
   }
   return stats;
 }
@@ -554,22 +611,35 @@ const char* rotationKernelInstructionSet() {
 
 TETRIG_MULTIVERSION
 void differentialPass(const TetBlock* blocks, std::int32_t block_count, float* delta, const double* u,
-                      const float* volume_weight) {
+                      const float* volume_weight, const float* guard, float guard_threshold) {
   for (std::int32_t b = 0; b < block_count; ++b) {
     const TetBlock& block = blocks[b];
     Matrix<1> rm = rotationMinusIdentity<1>(loadField<1>(&block, TETRIG_FIELD(rotation, 0)),
                                             loadField<1>(&block, TETRIG_FIELD(rotation, 1)),
                                             loadField<1>(&block, TETRIG_FIELD(rotation, 2)),
                                             loadField<1>(&block, TETRIG_FIELD(rotation, 3)));
-    if (volume_weight != nullptr) {
+    Matrix<1> target = rm;
+    if (volume_weight != nullptr || guard != nullptr) {
       Pack<1> h[9];
       displacementGradient<1>(&block, u, h);
       Pack<1> residual = splat<1>(0.0f);  // unused: no energy here
-      Pack<1> w;
-      w.v[0] = loadF(volume_weight + static_cast<std::size_t>(b) * W);
-      volumeBlend<1>(h, rm, w, residual);
+      Pack<1> f[9];
+      for (int i = 0; i < 9; ++i) f[i] = (i % 4 == 0) ? h[i] + 1.0f : h[i];
+      const Pack<1> det = f[0] * (f[4] * f[8] - f[5] * f[7]) - f[1] * (f[3] * f[8] - f[5] * f[6]) +
+                          f[2] * (f[3] * f[7] - f[4] * f[6]);
+      if (volume_weight != nullptr) {
+        Pack<1> w;
+        w.v[0] = loadF(volume_weight + static_cast<std::size_t>(b) * W);
+        volumeBlend<1>(h, target, w, residual);
+      }
+      if (guard != nullptr) {
+        // Inverted tets too: the stored rotation is the exact one there (no fallback in this pass).
+        Pack<1> k;
+        k.v[0] = loadF(guard + static_cast<std::size_t>(b) * W);
+        inversionGuard<1>(h, rm, target, det, k, guard_threshold, residual);
+      }
     }
-    scatterBlocks<1>(&block, rm, delta);
+    scatterBlocks<1>(&block, target, delta);
   }
 }
 

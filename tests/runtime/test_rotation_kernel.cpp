@@ -257,25 +257,93 @@ TEST(RotationKernel, MixedInvertedTetsGetTheExactRotationInDeltaAndEnergy) {
   }
 }
 
+// A bar squeezed along z (a little more on one side: tets at 80-95 % of their volume) with tet 7
+// inverted: its first corner moved `through` times its height beyond the opposite face.
+KernelScene squeezedScene(double through) {
+  KernelScene s = makeScene(11, 0.01);
+  for (std::int32_t v = 0; v < s.mesh.vertexCount(); ++v) {
+    double* p = &s.xyz[kVectorStride * static_cast<size_t>(v)];
+    p[2] *= 0.8 + 0.02 * p[0];
+  }
+  Vertices x = positions(s);
+  const auto c = s.mesh.tets.row(7);
+  const Eigen::Vector3d centroid = (x.row(c[1]) + x.row(c[2]) + x.row(c[3])).transpose() / 3.0;
+  const Eigen::Vector3d moved = centroid + through * (centroid - Eigen::Vector3d(x.row(c[0]).transpose()));
+  for (int k = 0; k < 3; ++k) s.xyz[kVectorStride * static_cast<size_t>(c[0]) + static_cast<size_t>(k)] = moved[k];
+  return s;
+}
+
+// The largest difference between `delta` and the plain pass's delta on the same scene.
+double differenceToPlainPass(KernelScene& s, const std::vector<float>& delta) {
+  std::vector<float> plain(s.xyz.size(), 0.0f);
+  rotationPass(s.blocks.data(), static_cast<std::int32_t>(s.blocks.size()), s.u.data(), plain.data(), 2, s.exact_lanes.data());
+  double differs = 0.0;
+  for (size_t i = 0; i < plain.size(); ++i) differs = std::max(differs, static_cast<double>(std::abs(plain[i] - delta[i])));
+  return differs;
+}
+
+// The inversion guard (rotation_kernel.hpp, inversionGuard): against the double reference, on the
+// squeezed bar below (tets at 80-95 % of their volume) with one inverted tet: each guarded tet's
+// target is M = R + alpha (R - F), alpha = k min(1, (tau - det F) / tau) (0 at det F >= tau, k on
+// the inverted tet, which takes the exact rotation), lowered so that alpha ||R - F|| is at most
+// c = kInversionGuardPushCap; delta is sum_j a_j (M_j - I) G_j and the energy
+// sum_j a_j (||F - R||^2 + alpha ||F - R||^2), or 2 c ||F - R|| - c^2 / alpha beyond the cap.
+// differentialPass gives the same delta.
+TEST(RotationKernel, InversionGuardMatchesTheDoubleReference) {
+  KernelScene s = squeezedScene(2.0);  // tet 7 far through: its push is capped
+  const Vertices x = positions(s);
+  for (int pass = 0; pass < 30; ++pass) runPass(s, nullptr, 2);
+  constexpr float kTau = 0.9f;
+  std::vector<float> guard(s.blocks.size() * kTetBlockWidth, 0.0f);
+  for (std::int32_t t = 0; t < s.mesh.tetCount(); ++t) guard[static_cast<size_t>(t)] = (t % 5 == 0) ? 0.0f : 0.3f + 0.7f * static_cast<float>(t % 7) / 6.0f;
+  guard[7] = 1.0f;  // tet 7's slot: the scene keeps mesh order
+  std::vector<float> delta(s.xyz.size(), 0.0f);
+  const RotationPassStats stats =
+      rotationPass(s.blocks.data(), static_cast<std::int32_t>(s.blocks.size()), s.u.data(), delta.data(), 2,
+                   s.exact_lanes.data(), 0.0f, nullptr, guard.data(), kTau);
+  std::vector<Eigen::Matrix3d> targets;
+  double energy = 0.0;
+  int guarded = 0, inverted_guarded = 0, capped = 0;
+  for (std::int32_t t = 0; t < s.mesh.tetCount(); ++t) {
+    const Eigen::Matrix3d f = deformationGradient(s.mesh, s.frames, x, t);
+    const Eigen::Matrix3d r = laneRotation(s, t).normalized().toRotationMatrix();
+    const double k = guard[static_cast<size_t>(t)];
+    double alpha = std::clamp(k * (kTau - f.determinant()) / kTau, 0.0, k);
+    const double off = (r - f).norm(), c = kInversionGuardPushCap;
+    double extra = alpha * off * off;
+    if (alpha * off > c) {  // capped: the push is c, the energy linear beyond (Huber)
+      ++capped;
+      extra = c * (2.0 * off - c / alpha);
+      alpha = c / off;
+    }
+    guarded += alpha > 0.0;
+    inverted_guarded += alpha > 0.0 && f.determinant() <= 0.0;
+    targets.push_back(r + alpha * (r - f));
+    energy += s.weights[static_cast<size_t>(t)] * (off * off + extra);
+  }
+  std::printf("inversion guard: %d tets guarded, %d of them inverted, %d pushes capped\n", guarded, inverted_guarded, capped);
+  ASSERT_GE(capped, 1) << "the inverted tet is far from its rotation: its push must be capped";
+  ASSERT_GE(inverted_guarded, 1) << "the inverted tet must be guarded for the test to cover the exact path";
+  ASSERT_GE(guarded, 10);
+  EXPECT_NEAR(stats.energy, energy, 2e-5 * energy);
+  const Vertices reference = referenceDelta(s, targets);
+  for (std::int32_t v = 0; v < s.mesh.vertexCount(); ++v)
+    for (int c = 0; c < 3; ++c)
+      EXPECT_NEAR(delta[kVectorStride * static_cast<size_t>(v) + static_cast<size_t>(c)], reference(v, c), 2e-6) << "vertex " << v;
+  EXPECT_GT(differenceToPlainPass(s, delta), 1e-3) << "without the guard the pass must differ (the test can fail)";
+  std::vector<float> again(s.xyz.size(), 0.0f);
+  differentialPass(s.blocks.data(), static_cast<std::int32_t>(s.blocks.size()), again.data(), s.u.data(), nullptr,
+                   guard.data(), kTau);
+  for (size_t i = 0; i < again.size(); ++i) EXPECT_NEAR(again[i], delta[i], 2e-6) << "entry " << i;
+}
+
 // The volume term (rotation_kernel.hpp, volumeBlend): against the double reference, on a bent bar
 // squeezed along its length (tets lose up to ~20 % of their volume) with one inverted tet: each
 // tet's target is M = (1 - w) R + w (F + s R) with det(F + s R) = 1 (unitVolumeShift), delta is
 // sum_j a_j (M_j - I) G_j, the energy sum_j a_j [(1 - w) ||F - R||^2 + 3 w s^2]; the inverted tet
 // and w = 0 lanes keep the plain R. differentialPass gives the same delta from the stored rotations.
 TEST(RotationKernel, VolumeTermMatchesTheDoubleReference) {
-  KernelScene s = makeScene(11, 0.01);
-  for (std::int32_t v = 0; v < s.mesh.vertexCount(); ++v) {
-    double* p = &s.xyz[kVectorStride * static_cast<size_t>(v)];
-    p[2] *= 0.8 + 0.02 * p[0];  // squeezed along z, a little more on one side
-  }
-  // Invert tet 7 by moving its first corner through the opposite face.
-  {
-    Vertices x = positions(s);
-    const auto c = s.mesh.tets.row(7);
-    const Eigen::Vector3d centroid = (x.row(c[1]) + x.row(c[2]) + x.row(c[3])).transpose() / 3.0;
-    const Eigen::Vector3d moved = centroid + 0.3 * (centroid - Eigen::Vector3d(x.row(c[0]).transpose()));
-    for (int k = 0; k < 3; ++k) s.xyz[kVectorStride * static_cast<size_t>(c[0]) + static_cast<size_t>(k)] = moved[k];
-  }
+  KernelScene s = squeezedScene(0.3);
   const Vertices x = positions(s);
   for (int pass = 0; pass < 30; ++pass) runPass(s, nullptr, 2);  // rotations converged: the reference uses them
   // Per-slot weights: w varies over the tets (0 on every fifth), 0 in padding lanes.
@@ -320,12 +388,7 @@ TEST(RotationKernel, VolumeTermMatchesTheDoubleReference) {
     }
   std::printf("volume term: worst delta difference to the double reference %.2g (|delta| up to %.2g)\n", worst,
               reference.cwiseAbs().maxCoeff());
-  // Without the volume term the same pass gives a different delta (the test can fail).
-  std::vector<float> plain(s.xyz.size(), 0.0f);
-  rotationPass(s.blocks.data(), static_cast<std::int32_t>(s.blocks.size()), s.u.data(), plain.data(), 2, s.exact_lanes.data());
-  double differs = 0.0;
-  for (size_t i = 0; i < plain.size(); ++i) differs = std::max(differs, static_cast<double>(std::abs(plain[i] - delta[i])));
-  EXPECT_GT(differs, 1e-3);
+  EXPECT_GT(differenceToPlainPass(s, delta), 1e-3) << "without the volume term the pass must differ (the test can fail)";
   // differentialPass: the same delta from the stored rotations and the displacements. (The inverted
   // tet's exact rotation is applied by the pass after its vector part; here it is simply stored.)
   std::vector<float> again(s.xyz.size(), 0.0f);

@@ -55,13 +55,15 @@ TEST(StepAllocations, NoneOnABarWithVertexHandles) {
   EXPECT_TRUE(flags & kStepExactRotations) << "the fallback path was meant to run";
 }
 
-// With the temporal prediction and the volume term (which differentialPass applies after the
-// frame-start prediction too).
+// With the temporal prediction, the volume term and the inversion guard (which differentialPass
+// applies after the frame-start prediction too).
 TEST(StepAllocations, NoneWithTheTemporalPredictionAndTheVolumeTerm) {
   const auto bar = scenes::makeBarScene(4, 4, 33);
   DeformerSetup setup = test::endVertexHandles(bar);
   setup.options.rotation_extrapolation = 1.0;
   setup.options.volume_weight = 0.5;
+  setup.options.inversion_guard = 1.0;
+  setup.options.inversion_guard_threshold = 0.95;  // the bend squashes tets a little: the guard acts
   Deformer deformer(bar.mesh, setup);
   std::vector<std::vector<Eigen::Vector3d>> positions;
   for (int f = 0; f < 6; ++f) positions.push_back(test::endTargets(bar, scenes::barBendTransform(bar, 0.1 * f)));

@@ -106,6 +106,10 @@ TEST_F(FidelityTool, MoreIterationsLandNearerAndTheReferenceIsConverged) {
     for (const char* key : {"rms_error_mm", "max_error_mm", "energy_excess"})
       for (const char* q : {"median", "p90", "p99", "max"}) ASSERT_TRUE((*run)[key].contains(q)) << key << " " << q;
     EXPECT_TRUE((*run)["inverted_body_tets_max"].is_number_integer());
+    // The frame of the most inverted tets is a played frame; frames with any are at most all of them.
+    EXPECT_LT((*run)["inverted_body_tets_max_frame"].get<std::size_t>(), (*run)["frames"].get<std::size_t>());
+    EXPECT_LE((*run)["frames_with_inverted_body_tets"].get<std::size_t>(), (*run)["frames"].get<std::size_t>());
+    EXPECT_EQ((*run)["frames_with_inverted_body_tets"].get<std::size_t>() == 0, (*run)["inverted_body_tets_max"].get<int>() == 0);
     EXPECT_TRUE((*run)["volume_change_max"].is_number());
     // The converged reference is a minimum the budgeted result does not undercut.
     for (const auto& f : (*run)["reference"]) EXPECT_GE(f["energy"].get<double>(), f["energy_converged"].get<double>() * (1 - 1e-6));
@@ -115,6 +119,8 @@ TEST_F(FidelityTool, MoreIterationsLandNearerAndTheReferenceIsConverged) {
       EXPECT_GE(f["worst_region_share"].get<double>(), 0.0);
       EXPECT_LE(f["worst_region_share"].get<double>(), 1.0);
       EXPECT_GT(f["reference_iterations"].get<double>(), 0.0);
+      EXPECT_LE(f["inverted_body_tets"].get<int>(), (*run)["inverted_body_tets_max"].get<int>());
+      EXPECT_LE(f["inverted_body_tets_converged"].get<int>(), (*run)["inverted_body_tets_converged_max"].get<int>());
     }
     // The reference converged (stopped by its tolerance, not its cap).
     EXPECT_LT((*run)["reference_iterations"]["max"].get<double>(), 3000);
@@ -260,6 +266,7 @@ TEST_F(FidelityTool, TheVolumeTermKeepsTheVolume) {
   const nlohmann::json jp = readJson(plain), jk = readJson(kept);
   EXPECT_EQ(jp["volume_weight"].get<double>(), 0.0);
   EXPECT_EQ(jk["volume_weight"].get<double>(), 0.9);
+  EXPECT_EQ(jk["inversion_guard"].get<double>(), 0.0);
   const auto value = [](const nlohmann::json& j, const char* key) { return j["runs"][0][key].get<double>(); };
   const double plain_conv = value(jp, "volume_change_converged_max"), kept_conv = value(jk, "volume_change_converged_max");
   const double plain_budget = value(jp, "volume_change_max"), kept_budget = value(jk, "volume_change_max");
@@ -272,6 +279,9 @@ TEST_F(FidelityTool, TheVolumeTermKeepsTheVolume) {
   const ToolRun bad = fidelity(args + "--volume-weight 1", dir);
   EXPECT_NE(bad.status, 0);
   EXPECT_NE(bad.err.find("--volume-weight"), std::string::npos) << bad.err;
+  const ToolRun bad_guard = fidelity(args + "--inversion-guard 2", dir);  // unstable beyond 1 (docs/deformation.md)
+  EXPECT_NE(bad_guard.status, 0);
+  EXPECT_NE(bad_guard.err.find("--inversion-guard"), std::string::npos) << bad_guard.err;
 }
 
 TEST_F(FidelityTool, BadArgumentsExitNonZeroWithOneLine) {

@@ -86,6 +86,10 @@ struct DeformerOptions {
   double volume_weight = 0.0;  // w in [0, 1): each tet's energy a [(1 - w) ||F - R||^2 + w ||F - T||^2] with T
                                // its nearest unit-volume shape (rotation_kernel.hpp, volume term); the factor
                                // is the same. Rigid-group tets take none. 0: as rigid as possible, no volume term
+  double inversion_guard = 0.0;  // k in [0, 1]: a guarded tet squashed below inversion_guard_threshold of its rest
+                                 // volume takes up to k times more stiffness (rotation_kernel.hpp, inversion
+                                 // guard); the factor is the same. 0: none
+  double inversion_guard_threshold = 0.5;  // tau in (0, 1]: the volume ratio det F where the guard starts
 };
 
 struct DeformerSetup {
@@ -94,6 +98,7 @@ struct DeformerSetup {
   std::vector<PointHandle> point_handles;
   std::vector<RigidGroup> rigid_groups;
   std::vector<double> stiffness;  // empty, or one positive weight per tet (1 = default)
+  std::int32_t guarded_tet_count = -1;  // the inversion guard covers tets [0, n) (a rig's body tets); -1: all
   DeformerOptions options;
 };
 
@@ -244,6 +249,9 @@ class Deformer {
   // lanes and rigid groups. Empty otherwise.
   AlignedVector<float> volume_weight_;
   const float* volumeWeights() const { return volume_weight_.empty() ? nullptr : volume_weight_.data(); }
+  // Inversion guard (options_.inversion_guard > 0): k per slot, 0 for unguarded tets and padding
+  AlignedVector<float> guard_;
+  const float* guard() const { return guard_.empty() ? nullptr : guard_.data(); }
 
   // Rigid groups: CSR over tet slots.
   std::vector<std::int32_t> group_start_, group_slot_;

@@ -89,6 +89,8 @@ struct LiveRigOptions {
   double rotation_extrapolation_max_deg = 5.0;  // DeformerOptions::rotation_extrapolation_max_deg
   double rotation_relaxation = 1.8;             // DeformerOptions::rotation_relaxation (docs/fidelity.md: 1.8 measured best on HDM05)
   double volume_weight = 0.0;  // DeformerOptions::volume_weight (the volume term; docs/deformation.md), rig and coarse level
+  double inversion_guard = 0.0;            // DeformerOptions::inversion_guard over the rig's body tets, rig and coarse level
+  double inversion_guard_threshold = 0.5;  // DeformerOptions::inversion_guard_threshold
   int coarse_iterations = 5;   // with a coarse rig: its iterations per frame (CoarseLevelOptions::iterations)
   bool use_coarse_level = true;  // use the rig's own coarse level (Rig::coarse, built with build-rig
                                  // --coarse-tet-vertices) when it has one and no coarse rig is given

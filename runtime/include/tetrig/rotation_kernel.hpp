@@ -59,7 +59,15 @@ struct RotationPassStats {
 // returned is then this combined one. nullptr: the plain as-rigid-as-possible pass.
 RotationPassStats rotationPass(TetBlock* blocks, std::int32_t block_count, const double* u, float* delta,
                                int steps, std::uint16_t* exact_lanes, float relax = 0.0f,
-                               const float* volume_weight = nullptr);
+                               const float* volume_weight = nullptr, const float* guard = nullptr,
+                               float guard_threshold = 0.5f);
+
+// The inversion guard's largest push alpha ||R - F|| (Frobenius): a tet far from any rotation (a
+// frame's first iteration after a jump) is not kicked; beyond it the guard's energy grows linearly
+// (rotation_kernel.cpp, inversionGuard). 1: measured to leave the steady guard whole (the pushed
+// bar face) and to remove the kick at a cold start on CMU 85_02 (62 inverted tets at frame 0 without
+// a cap, 0 with it; 0.25 and 0.5 weakened the steady guard).
+inline constexpr float kInversionGuardPushCap = 1.0f;
 
 // The instruction set the kernels run with on this machine ("avx512f", "avx2", "baseline").
 const char* rotationKernelInstructionSet();
@@ -67,6 +75,7 @@ const char* rotationKernelInstructionSet();
 // Adds a_j (R_j - I) G_j of every tet into `delta` from the stored rotations (no extraction);
 // with `volume_weight`, a_j (M_j - I) G_j with the volume target of the displacements `u`.
 void differentialPass(const TetBlock* blocks, std::int32_t block_count, float* delta, const double* u = nullptr,
-                      const float* volume_weight = nullptr);
+                      const float* volume_weight = nullptr, const float* guard = nullptr,
+                      float guard_threshold = 0.5f);
 
 }  // namespace tetrig
