@@ -149,7 +149,8 @@ TEST(Deformer, VolumeTermKeepsTheVolumeOfASquashedBar) {
 // under it (measured: 4, smallest det F -0.04); with the guard (k 1, tau 0.5) the squashed tets
 // take up to twice the stiffness and spread the dent: none inverts (smallest det F measured 0.15),
 // the handle still lands exactly, and the energy settles (no rise above 1e-5 of the lowest so far
-// after the first iterations). Pushed 3 units the handle forces inversion: the guard lessens it.
+// after the first iterations). Pushed 3 units the handle forces inversion: the guard lessens it
+// (smallest det F measured -0.302 -> -0.123).
 TEST(Deformer, InversionGuardKeepsAPushedFaceFromInverting) {
   const auto bar = scenes::makeBarScene(4, 4, 12);
   std::int32_t pushed = 0;  // the vertex of the +y face nearest the middle
