@@ -120,10 +120,9 @@ class Measurer {
         const Eigen::Matrix3d r = tetrig::closestRotation(f).toRotationMatrix();
         const double w = f.determinant() > 1e-6 ? volume_weight_[static_cast<std::size_t>(t)] : 0.0;  // as the kernel
         const double s = w > 0.0 ? tetrig::unitVolumeShift(f, r) : 0.0;
-        const double k = guard_[static_cast<std::size_t>(t)];
-        const double alpha = std::clamp(k * (guard_threshold_ - f.determinant()) / guard_threshold_, 0.0, k);
-        const double off = (f - r).norm(), cap = tetrig::kInversionGuardPushCap;
-        const double guard = alpha * off <= cap ? alpha * off * off : cap * (2.0 * off - cap / alpha);  // as the kernel (Huber)
+        const double off = (f - r).norm();
+        const double guard =
+            tetrig::inversionGuardTerm(guard_[static_cast<std::size_t>(t)], guard_threshold_, f.determinant(), off).extra;
         m.energy += weights_[static_cast<std::size_t>(t)] * ((1.0 - w) * off * off + guard + 3.0 * w * s * s);
       }
     }

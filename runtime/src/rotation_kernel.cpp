@@ -490,7 +490,8 @@ TETRIG_INLINE void passBlocks(TetBlock* blocks, const double* u, float* delta, i
 // the pass flagged a tet.
 __attribute__((noinline, cold)) void fixExactRotations(TetBlock* blocks, std::int32_t block_count, const double* u,
                                                         float* delta, const std::uint16_t* exact_lanes,
-                                                        const float* guard, RotationPassStats& stats) {
+                                                        const float* guard, float guard_threshold,
+                                                        RotationPassStats& stats) {
   for (std::int32_t b = 0; b < block_count; ++b) {
     if (exact_lanes[b] == 0) continue;
     TetBlock& block = blocks[b];
@@ -517,16 +518,15 @@ __attribute__((noinline, cold)) void fixExactRotations(TetBlock* blocks, std::in
       const Eigen::Matrix3d r_refined = refined.normalized().toRotationMatrix();
       const Eigen::Matrix3d r_stored = stored.normalized().toRotationMatrix();
       const double a = block.weight[l];
-      // The inversion guard at J <= 0: its full k (inversionGuard).
-      double kg = guard != nullptr ? guard[static_cast<std::size_t>(b) * W + static_cast<std::size_t>(l)] : 0.0;
-      const double x = (r_stored - f).norm();
-      const double cap = kInversionGuardPushCap;
-      const double extra = kg * x <= cap ? kg * x * x : cap * (2.0 * x - cap / kg);  // the push cap (inversionGuard)
-      if (kg * x > cap) kg = cap / x;
-      stats.energy += a * (x * x + extra);
+      const double off = (r_stored - f).norm();
+      const InversionGuardTerm g =
+          guard != nullptr ? inversionGuardTerm(guard[static_cast<std::size_t>(b) * W + static_cast<std::size_t>(l)],
+                                                guard_threshold, f.determinant(), off)
+                           : InversionGuardTerm{};
+      stats.energy += a * (off * off + g.extra);
       ++stats.exact_fallbacks;
       if (delta == nullptr) continue;
-      const Eigen::Matrix3d change = r_stored - r_refined + kg * (r_stored - f);
+      const Eigen::Matrix3d change = r_stored - r_refined + g.alpha * (r_stored - f);
       Eigen::Vector3d sum = Eigen::Vector3d::Zero();
       for (int k = 0; k < 3; ++k) {
         const Eigen::Vector3d d = a * change * inv.row(k).transpose();
@@ -571,7 +571,7 @@ TETRIG_INLINE void passAll(TetBlock* blocks, std::int32_t block_count, const dou
   double total = 0.0;
   for (int l = 0; l < kHalf; ++l) total += energy[0][l] + energy[1][l];
   stats.energy = total;
-  if (flagged != 0) fixExactRotations(blocks, block_count, u, delta, exact_lanes, guard, stats);
+  if (flagged != 0) fixExactRotations(blocks, block_count, u, delta, exact_lanes, guard, guard_threshold, stats);
 }
 
 
@@ -623,10 +623,6 @@ void differentialPass(const TetBlock* blocks, std::int32_t block_count, float* d
       Pack<1> h[9];
       displacementGradient<1>(&block, u, h);
       Pack<1> residual = splat<1>(0.0f);  // unused: no energy here
-      Pack<1> f[9];
-      for (int i = 0; i < 9; ++i) f[i] = (i % 4 == 0) ? h[i] + 1.0f : h[i];
-      const Pack<1> det = f[0] * (f[4] * f[8] - f[5] * f[7]) - f[1] * (f[3] * f[8] - f[5] * f[6]) +
-                          f[2] * (f[3] * f[7] - f[4] * f[6]);
       if (volume_weight != nullptr) {
         Pack<1> w;
         w.v[0] = loadF(volume_weight + static_cast<std::size_t>(b) * W);
@@ -634,6 +630,10 @@ void differentialPass(const TetBlock* blocks, std::int32_t block_count, float* d
       }
       if (guard != nullptr) {
         // Inverted tets too: the stored rotation is the exact one there (no fallback in this pass).
+        Pack<1> f[9];
+        for (int i = 0; i < 9; ++i) f[i] = (i % 4 == 0) ? h[i] + 1.0f : h[i];
+        const Pack<1> det = f[0] * (f[4] * f[8] - f[5] * f[7]) - f[1] * (f[3] * f[8] - f[5] * f[6]) +
+                            f[2] * (f[3] * f[7] - f[4] * f[6]);
         Pack<1> k;
         k.v[0] = loadF(guard + static_cast<std::size_t>(b) * W);
         inversionGuard<1>(h, rm, target, det, k, guard_threshold, residual);

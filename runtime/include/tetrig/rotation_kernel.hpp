@@ -69,6 +69,23 @@ RotationPassStats rotationPass(TetBlock* blocks, std::int32_t block_count, const
 // a cap, 0 with it; 0.25 and 0.5 weakened the steady guard).
 inline constexpr float kInversionGuardPushCap = 1.0f;
 
+// The inversion guard of one tet in double (the scalar form of the kernel's inversionGuard, for
+// the exact-rotation fallback and for reference energies): k and tau as in DeformerOptions, det F,
+// and off = ||F - R||. `alpha` is the push's factor (target R + alpha (R - F)), `extra` the
+// guard's energy over a: alpha off^2, or 2 c off - c^2 / alpha beyond the push cap c.
+struct InversionGuardTerm {
+  double alpha = 0.0;
+  double extra = 0.0;
+};
+inline InversionGuardTerm inversionGuardTerm(double k, double tau, double det, double off) {
+  const double alpha = k * (tau - det) / tau;
+  if (!(alpha > 0.0)) return {};
+  const double a = alpha < k ? alpha : k;
+  const double c = kInversionGuardPushCap;
+  if (a * off <= c) return {a, a * off * off};
+  return {c / off, c * (2.0 * off - c / a)};
+}
+
 // The instruction set the kernels run with on this machine ("avx512f", "avx2", "baseline").
 const char* rotationKernelInstructionSet();
 
