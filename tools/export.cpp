@@ -430,8 +430,8 @@ ExportReport exportClip(const ExportOptions& o) {
         report.worst_last_change = std::max(report.worst_last_change, change);
       }
     }
-    if (s.flags & kLiveNonFinitePose)
-      throw std::runtime_error("clip frame " + std::to_string(f) + ": the solver produced a non-finite pose (a bug: please report it with the rig and the clip)");
+    if (s.flags & kLivePoseRejected)
+      throw std::runtime_error("clip frame " + std::to_string(f) + ": the solver produced a non-finite or implausible pose (far outside its marker targets; a bug: please report it with the rig and the clip)");
     if (s.flags & kLiveTargetsRejected)
       throw std::runtime_error("clip frame " + std::to_string(f) + ": the solver rejected the marker targets as non-finite or absurd");
     report.iterations += static_cast<std::uint64_t>(frame_iterations);

@@ -269,6 +269,9 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
                 static_cast<unsigned long long>(c.budget_misses), static_cast<unsigned long long>(c.deadline_hits),
                 static_cast<unsigned long long>(c.mailbox_dropped), static_cast<unsigned long long>(c.held_frames),
                 static_cast<unsigned long long>(c.stale_periods), static_cast<unsigned long long>(c.frames_before_start));
+    if (c.rejected_target_frames != 0 || c.rejected_poses != 0)
+      std::printf("  frames with rejected marker targets %llu, rejected solved poses %llu (last pose republished; see docs/live.md)\n",
+                  static_cast<unsigned long long>(c.rejected_target_frames), static_cast<unsigned long long>(c.rejected_poses));
     std::printf("  occluded marker-frames %llu, unknown marker-frames %llu; source: %llu frames, %llu lost, %llu decode errors\n",
                 static_cast<unsigned long long>(c.occluded_marker_frames), static_cast<unsigned long long>(c.unknown_marker_frames),
                 static_cast<unsigned long long>(source_stats.frames_published), static_cast<unsigned long long>(source_stats.frames_lost),
@@ -300,6 +303,8 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
     j["occluded_marker_frames"] = c.occluded_marker_frames;
     j["unknown_marker_frames"] = c.unknown_marker_frames;
     j["held_frames"] = c.held_frames;
+    j["rejected_target_frames"] = c.rejected_target_frames;
+    j["rejected_poses"] = c.rejected_poses;
     j["stale_periods"] = c.stale_periods;
     j["frames_before_start"] = c.frames_before_start;
     j["deadline_hits"] = c.deadline_hits;

@@ -224,7 +224,7 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
   int inverted_budget_max = 0, inverted_conv_max = 0;
   std::size_t inverted_budget_max_frame = 0, inverted_budget_frames = 0;
   std::vector<int> ref_inverted, ref_inverted_conv;
-  std::size_t held = 0, predicted = 0;
+  std::size_t held = 0, predicted = 0, rejected = 0;
   double step_us = 0.0;
   const double rest_volume = measurer.fineRestVolume();
   const auto wall0 = std::chrono::steady_clock::now();
@@ -234,6 +234,7 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
     step_us += static_cast<double>(s.step.total_ns) * 1e-3;
     if ((s.flags & tetrig::kLivePoseHeld) != 0) ++held;
     if ((s.flags & tetrig::kLiveMarkersPredicted) != 0) ++predicted;
+    if ((s.flags & tetrig::kLivePoseRejected) != 0) ++rejected;  // the live rig reset itself: reported below
     const std::span<const double> x = live.deformer().positions();
     const bool is_reference = (f - first) % static_cast<std::size_t>(cfg.reference_every) == 0;
     const PoseMeasure mb = measurer.measure(x, is_reference);
@@ -337,6 +338,7 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
       {"reference_iterations", toJson(percentiles(ref_iterations))},
       {"frames_held", held},
       {"frames_with_predicted_markers", predicted},
+      {"rejected_poses", rejected},
       {"step_us_mean", step_us / static_cast<double>(end - first)},
       {"markers_matched", binding.matched},
       {"markers_missing", binding.missing},
@@ -462,6 +464,10 @@ int main(int argc, char** argv) {
                     r["inverted_body_tets_max_frame"].get<std::size_t>(), r["frames_with_inverted_body_tets"].get<std::size_t>(),
                     r["inverted_body_tets_converged_max"].get<int>(), r["volume_change_max"].get<double>(),
                     r["volume_change_converged_max"].get<double>());
+        if (const auto rejected = r["rejected_poses"].get<std::size_t>(); rejected > 0)
+          std::printf("%-32s k=%d  WARNING: %zu solved poses were rejected as implausible (the live rig published the last pose "
+                      "and restarted from rest): these figures do not describe a working chain\n",
+                      name.c_str(), k, rejected);
         std::fflush(stdout);
         out["runs"].push_back(std::move(run));
       }

@@ -105,11 +105,14 @@
 #define TETRIG_SHM_STATE_STOPPED 3u      /* clean shutdown: no more frames ever */
 
 /* TetrigShmFrameInfo.flags */
-#define TETRIG_SHM_FRAME_STALE_SOURCE 0x1u      /* no new source frame: previous markers reused */
+#define TETRIG_SHM_FRAME_STALE_SOURCE 0x1u      /* reserved: tetrig run publishes no frame while its source */
+                                                /* is silent (the header's state is STALE_SOURCE instead) */
 #define TETRIG_SHM_FRAME_POSE_HELD 0x2u         /* every marker occluded: pose held */
 #define TETRIG_SHM_FRAME_BUDGET_MISS 0x4u       /* iteration deadline hit before the count */
 #define TETRIG_SHM_FRAME_MARKERS_PREDICTED 0x8u /* some marker targets were predicted */
 #define TETRIG_SHM_FRAME_INPUT_REJECTED 0x10u   /* non-finite or absurd input was rejected */
+#define TETRIG_SHM_FRAME_POSE_REJECTED 0x20u    /* the solved pose was non-finite or implausible: the last */
+                                                /* good pose was published again */
 
 /* Return codes of tetrig_shm_open / tetrig_shm_attach / tetrig_shm_read_latest. */
 #define TETRIG_SHM_OK 0

@@ -223,6 +223,8 @@ void FrameLoop::run() noexcept {
     info.flags = 0;
     if (stats.flags & kLivePoseHeld) info.flags |= kShmFramePoseHeld;
     if (stats.occluded_markers != 0) info.flags |= kShmFrameMarkersPredicted;
+    if (stats.flags & kLiveTargetsRejected) info.flags |= kShmFrameInputRejected;
+    if (stats.flags & kLivePoseRejected) info.flags |= kShmFramePoseRejected;
     const bool miss = frame_deadline != 0 && pose_done_ns > frame_deadline;
     if (miss) info.flags |= kShmFrameBudgetMiss;
     publisher_.commit(info);
@@ -233,6 +235,8 @@ void FrameLoop::run() noexcept {
                                              : std::max(stats.pose_transfer_ns, (7 * pose_estimate_ns + stats.pose_transfer_ns) / 8);
     if (stats.flags & kLiveDeadlineHit) deadline_hits_.fetch_add(1, std::memory_order_relaxed);
     if (stats.flags & kLivePoseHeld) held_frames_.fetch_add(1, std::memory_order_relaxed);
+    if (stats.flags & kLiveTargetsRejected) rejected_target_frames_.fetch_add(1, std::memory_order_relaxed);
+    if (stats.flags & kLivePoseRejected) rejected_poses_.fetch_add(1, std::memory_order_relaxed);
     occluded_marker_frames_.fetch_add(stats.occluded_markers, std::memory_order_relaxed);
     unknown_marker_frames_.fetch_add(stats.unknown_markers, std::memory_order_relaxed);
     iterations_.fetch_add(static_cast<std::uint64_t>(std::max(0, stats.step.iterations)), std::memory_order_relaxed);
@@ -307,6 +311,8 @@ FrameLoopCounters FrameLoop::counters() const noexcept {
   c.budget_misses = budget_misses_.load(std::memory_order_relaxed);
   c.deadline_hits = deadline_hits_.load(std::memory_order_relaxed);
   c.held_frames = held_frames_.load(std::memory_order_relaxed);
+  c.rejected_target_frames = rejected_target_frames_.load(std::memory_order_relaxed);
+  c.rejected_poses = rejected_poses_.load(std::memory_order_relaxed);
   c.occluded_marker_frames = occluded_marker_frames_.load(std::memory_order_relaxed);
   c.unknown_marker_frames = unknown_marker_frames_.load(std::memory_order_relaxed);
   c.stale_periods = stale_periods_.load(std::memory_order_relaxed);

@@ -127,6 +127,7 @@ LiveRig::LiveRig(const Rig& rig, const LiveRigOptions& options, const Rig* coars
   const DeformerSetup& setup = rig.setup;
   restHandleTargets(rig.tet_mesh, setup, vertex_targets_, point_targets_);
   region_targets_.assign(setup.region_handles.size(), RigidTransform{});
+  for (const RegionHandle& region : setup.region_handles) region_centroid_.push_back(regionRestCentroid(rig.tet_mesh, region));
   for (const RigPoseSensor& sensor : rig.pose_sensors) {
     const auto& region = setup.region_handles.at(static_cast<std::size_t>(sensor.region_handle));
     sensors_.emplace_back(sensor, rig.alignment, regionRestCentroid(rig.tet_mesh, region));
@@ -156,6 +157,9 @@ LiveRig::LiveRig(const Rig& rig, const LiveRigOptions& options, const Rig* coars
 
   const auto fine = static_cast<std::size_t>(rig.fine_vertices.rows());
   rest_positions_.resize(fine * 3);
+  const Eigen::Vector3d rest_extent =
+      fine > 0 ? Eigen::Vector3d(rig.fine_vertices.colwise().maxCoeff() - rig.fine_vertices.colwise().minCoeff()) : Eigen::Vector3d::Zero();
+  pose_bound_ = PoseBound(rest_extent.norm(), max_abs_coordinate_);
   for (std::size_t v = 0; v < fine; ++v)
     for (int c = 0; c < 3; ++c) rest_positions_[v * 3 + static_cast<std::size_t>(c)] = static_cast<float>(rig.fine_vertices(static_cast<Eigen::Index>(v), c));
   last_positions_ = rest_positions_;
@@ -451,7 +455,7 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
   if (stats.step.flags & kStepDeadlineHit) stats.flags |= kLiveDeadlineHit;
   if (stats.step.flags & (kStepTargetsRejected | kStepTargetsWrongSize)) stats.flags |= kLiveTargetsRejected;
 
-  // 7. Pose transfer into the caller's buffer; never publish a non-finite value.
+  // 7. Pose transfer into the caller's buffer.
   const std::int64_t t0 = monotonicNowNs();
   const std::size_t n = rest_positions_.size();
   if (split_) {
@@ -461,17 +465,20 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
   } else {
     applyPoseTransferPadded(rig.pose_transfer.view(), deformer_.paddedPositions().data(), positions);
   }
-  bool finite = true;
-  for (std::size_t i = 0; i < n; ++i)
-    if (!std::isfinite(positions[i])) finite = false;
-  if (finite) {
+  // Never publish a non-finite or implausible value: the pose must lie near this frame's targets.
+  pose_bound_.beginTargets();
+  for (const Eigen::Vector3d& p : vertex_targets_) pose_bound_.addTarget(p);
+  for (const Eigen::Vector3d& p : point_targets_) pose_bound_.addTarget(p);
+  for (std::size_t r = 0; r < region_targets_.size(); ++r)
+    pose_bound_.addTarget(region_targets_[r].rotation * region_centroid_[r] + region_targets_[r].translation);
+  if (pose_bound_.accepts(positions, n)) {
     std::memcpy(last_positions_.data(), positions, n * sizeof(float));
     if (options_.normals) {
       vertexNormals(positions, fineTriangles(), normal_sum_, last_normals_.data(), last_normals_.data());
       if (normals != nullptr) std::memcpy(normals, last_normals_.data(), n * sizeof(float));
     }
   } else {
-    stats.flags |= kLiveNonFinitePose;
+    stats.flags |= kLivePoseRejected;
     writeLastPose(positions, normals);
     deformer_.reset();
     predictor_.reset();

@@ -34,6 +34,7 @@ static_assert(kShmFramePoseHeld == TETRIG_SHM_FRAME_POSE_HELD);
 static_assert(kShmFrameBudgetMiss == TETRIG_SHM_FRAME_BUDGET_MISS);
 static_assert(kShmFrameMarkersPredicted == TETRIG_SHM_FRAME_MARKERS_PREDICTED);
 static_assert(kShmFrameInputRejected == TETRIG_SHM_FRAME_INPUT_REJECTED);
+static_assert(kShmFramePoseRejected == TETRIG_SHM_FRAME_POSE_REJECTED);
 static_assert(kShmMarkerUnknown == TETRIG_SHM_MARKER_UNKNOWN);
 static_assert(kShmMarkerMeasured == TETRIG_SHM_MARKER_MEASURED);
 static_assert(kShmMarkerPredicted == TETRIG_SHM_MARKER_PREDICTED);

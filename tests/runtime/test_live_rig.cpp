@@ -592,6 +592,76 @@ TEST(LiveRig, AllOccludedHoldsThePoseBitIdentically) {
   EXPECT_GT(marker_jump, 5.0 * largest_step) << "the markers must have moved on during the hold";
 }
 
+// A solved pose outside the bound (tetrig/pose_bound.hpp) is never published: the last pose is
+// written again bit for bit, the frame is flagged and the deformer starts again from rest. Here
+// the rig's absolute bound is 8.3 units: markers shifted 0.6 along the 8-unit bar stay inside it
+// (z <= 8.1) and are measured, but they carry the bar's end to z = 8.6.
+TEST(LiveRig, AnImplausiblePoseIsNeverPublished) {
+  Rig rig = makeBarRig();
+  rig.setup.options.max_abs_coordinate = 8.3;
+  LiveRigOptions options;
+  options.normals = true;
+  LiveRig live(rig, options);
+  live.bindLabels(labelTable());
+  const std::size_t n = static_cast<std::size_t>(live.fineVertexCount()) * 3;
+  std::vector<float> x(n), nrm(n);
+  const std::vector<bool> all(kMarkers, true);
+  int f = 0;
+  for (; f < 10; ++f) {
+    const LiveFrameStats s = live.processFrame(makeFrame(rig, movedMarkers(rig, 0.01 * f, 0.0, Eigen::Vector3d::Zero()), all, static_cast<std::uint64_t>(f)),
+                                               StepBudget{3}, x.data(), nrm.data());
+    ASSERT_FALSE(s.flags & kLivePoseRejected) << "frame " << f;
+  }
+  const std::vector<float> last = x, last_normals = nrm;
+  const LiveFrameStats s = live.processFrame(makeFrame(rig, movedMarkers(rig, 0.01 * f, 0.0, Eigen::Vector3d(0, 0, 0.6)), all, static_cast<std::uint64_t>(f)),
+                                             StepBudget{3}, x.data(), nrm.data());
+  ++f;
+  EXPECT_TRUE(s.flags & kLivePoseRejected);
+  EXPECT_EQ(s.measured_markers, kMarkers) << "the markers themselves are inside the bound";
+  EXPECT_FALSE(s.flags & kLiveTargetsRejected);
+  EXPECT_EQ(std::memcmp(x.data(), last.data(), n * sizeof(float)), 0) << "the last pose, bit for bit";
+  EXPECT_EQ(std::memcmp(nrm.data(), last_normals.data(), n * sizeof(float)), 0);
+  const auto tets = live.deformer().positions();
+  double from_rest = 0.0;
+  for (std::int32_t v = 0; v < rig.tet_mesh.vertexCount(); ++v)
+    for (int c = 0; c < 3; ++c)
+      from_rest = std::max(from_rest, std::abs(tets[static_cast<std::size_t>(v) * 3 + static_cast<std::size_t>(c)] - rig.tet_mesh.vertices(v, c)));
+  EXPECT_EQ(from_rest, 0.0) << "the deformer was reset to rest";
+  // The markers back inside: solved and published again.
+  const LiveFrameStats back = live.processFrame(makeFrame(rig, movedMarkers(rig, 0.0, 0.0, Eigen::Vector3d::Zero()), all, static_cast<std::uint64_t>(f)),
+                                                StepBudget{3}, x.data(), nrm.data());
+  EXPECT_FALSE(back.flags & kLivePoseRejected);
+  EXPECT_GT(maxDistance(x, last), 0.0);
+}
+
+// Poses far from rest that the targets do produce are not mistaken for implausible ones: the whole
+// bar carried 500 units away, turned half round, and stretched to three times its length.
+TEST(LiveRig, FarStretchedAndTurnedPosesAreNotRejected) {
+  const Rig rig = makeBarRig();
+  LiveRig live(rig, LiveRigOptions{});
+  live.bindLabels(labelTable());
+  const std::size_t n = static_cast<std::size_t>(live.fineVertexCount()) * 3;
+  std::vector<float> x(n);
+  const std::vector<bool> all(kMarkers, true);
+  const Eigen::Vector3d shift(500.0, -300.0, 200.0);
+  std::vector<Eigen::Vector3d> targets;
+  for (int f = 0; f < 30; ++f) {
+    const double u = std::min(1.0, f / 10.0);
+    targets.clear();
+    for (const RigMarker& m : rig.markers) {
+      Eigen::Vector3d p = m.rest_position;
+      p.z() *= 1.0 + 2.0 * u;
+      targets.push_back(Eigen::AngleAxisd(M_PI * u, Eigen::Vector3d::UnitX()) * p + u * shift);
+    }
+    const LiveFrameStats s = live.processFrame(makeFrame(rig, targets, all, static_cast<std::uint64_t>(f)), StepBudget{3}, x.data(), nullptr);
+    ASSERT_FALSE(s.flags & kLivePoseRejected) << "frame " << f;
+  }
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero(), target_centroid = Eigen::Vector3d::Zero();
+  for (std::size_t v = 0; v < n; v += 3) centroid += Eigen::Vector3d(x[v], x[v + 1], x[v + 2]) / static_cast<double>(n / 3);
+  for (const auto& p : targets) target_centroid += p / static_cast<double>(targets.size());
+  EXPECT_LT((centroid - target_centroid).norm(), 1.0) << "the published bar is where its markers are";
+}
+
 TEST(LiveRig, SameFramesGiveBitIdenticalOutputs) {
   const Rig rig = makeBarRig();
   LiveRigOptions options;

@@ -111,6 +111,7 @@ TEST_F(FidelityTool, MoreIterationsLandNearerAndTheReferenceIsConverged) {
     EXPECT_LE((*run)["frames_with_inverted_body_tets"].get<std::size_t>(), (*run)["frames"].get<std::size_t>());
     EXPECT_EQ((*run)["frames_with_inverted_body_tets"].get<std::size_t>() == 0, (*run)["inverted_body_tets_max"].get<int>() == 0);
     EXPECT_TRUE((*run)["volume_change_max"].is_number());
+    EXPECT_EQ((*run)["rejected_poses"].get<std::size_t>(), 0u) << "a working chain never has a pose refused as implausible";
     // The converged reference is a minimum the budgeted result does not undercut.
     for (const auto& f : (*run)["reference"]) EXPECT_GE(f["energy"].get<double>(), f["energy_converged"].get<double>() * (1 - 1e-6));
     for (const auto& f : (*run)["reference"]) {

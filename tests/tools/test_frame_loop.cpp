@@ -18,6 +18,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cstring>
 #include <memory>
@@ -58,16 +59,16 @@ std::unique_ptr<drivers::SyntheticSource> makeSource(const Rig& rig, float dropo
 std::string segmentName(const char* what) { return "/tetrig-test-loop-" + std::string(what) + "-" + std::to_string(getpid()); }
 
 struct Harness {
-  explicit Harness(const char* what, FrameLoopOptions options, LiveRigOptions live_options = {})
-      : live(demoRig(), live_options), mailbox(std::make_unique<FrameMailbox>()), labels(rigLabels(demoRig())) {
-    live.bindLabels(rigLabels(demoRig()));
+  explicit Harness(const char* what, FrameLoopOptions options, LiveRigOptions live_options = {}, const Rig& rig = demoRig())
+      : live(rig, live_options), mailbox(std::make_unique<FrameMailbox>()), labels(rigLabels(rig)) {
+    live.bindLabels(labels);
     ShmPublisherOptions shm;
     shm.name = segmentName(what);
     shm.normals = live_options.normals;
     ShmStaticData data;
     data.triangles = live.fineTriangles();
     data.rest_positions = live.restPositions();
-    data.rig_name = demoRig().name;
+    data.rig_name = rig.name;
     data.marker_labels = labels;  // the marker block (layout 1.1) in rig order
     publisher = std::make_unique<ShmPublisher>(shm, live.fineVertexCount(), data);
     EXPECT_EQ(tetrig_shm_attach(&reader, publisher->segmentData(), publisher->segmentSize()), TETRIG_SHM_OK);
@@ -225,6 +226,55 @@ TEST(FrameLoop, StopsAfterMaxFramesAndCountsBudgetMisses) {
   EXPECT_EQ(h.loop->counters().frames, 5u);
   EXPECT_EQ(h.loop->counters().budget_misses, 5u);
   EXPECT_EQ(h.loop->counters().deadline_hits, 5u);
+}
+
+// A solved pose the live rig rejects as implausible (docs/live.md) is published as the last good
+// pose, flagged TETRIG_SHM_FRAME_POSE_REJECTED in the segment and counted. The demo bar runs from
+// z = 0 to 33 cm with its markers at z 2-31; with the rig's absolute bound at 33.5 cm, markers
+// shifted 1 cm along the bar are measured but carry its end to 34 cm.
+TEST(FrameLoop, ARejectedPoseIsFlaggedInTheSegmentAndCounted) {
+  Rig rig = demoRig();
+  rig.setup.options.max_abs_coordinate = 33.5;
+  FrameLoopOptions options;
+  options.lock_memory = false;
+  Harness h("rejected", options, {}, rig);
+  h.loop->start();
+  const std::vector<std::array<float, 3>> rest = markerRestPositionsMm(rig);
+  auto frame = std::make_unique<MarkerFrame>();
+  const auto fill = [&](std::uint64_t counter, float shift_mm) {
+    frame->frame_counter = counter;
+    frame->device_timestamp_ns = static_cast<std::int64_t>(counter) * 8'333'333;
+    frame->marker_count = static_cast<std::uint16_t>(rest.size());
+    for (std::size_t k = 0; k < rest.size(); ++k) {
+      Marker& m = frame->markers[k];
+      m.id = static_cast<std::uint16_t>(k);
+      m.valid = 1;
+      for (int c = 0; c < 3; ++c) m.position_mm[c] = rest[k][static_cast<std::size_t>(c)];
+      m.position_mm[2] += shift_mm;
+    }
+  };
+  const std::size_t n = static_cast<std::size_t>(h.live.fineVertexCount()) * 3;
+  std::vector<float> good(n), published(n);
+  TetrigShmFrameInfo info{};
+  fill(0, 0.0f);
+  ASSERT_TRUE(h.publishAndWait(*frame));
+  ASSERT_EQ(tetrig_shm_read_latest(&h.reader, good.data(), good.size(), nullptr, 0, &info), TETRIG_SHM_OK);
+  EXPECT_EQ(info.flags & TETRIG_SHM_FRAME_POSE_REJECTED, 0u);
+  fill(1, 10.0f);
+  ASSERT_TRUE(h.publishAndWait(*frame));
+  ASSERT_EQ(tetrig_shm_read_latest(&h.reader, published.data(), published.size(), nullptr, 0, &info), TETRIG_SHM_OK);
+  EXPECT_NE(info.flags & TETRIG_SHM_FRAME_POSE_REJECTED, 0u);
+  EXPECT_EQ(info.flags & TETRIG_SHM_FRAME_INPUT_REJECTED, 0u) << "the markers themselves were inside the bound";
+  EXPECT_EQ(std::memcmp(published.data(), good.data(), n * sizeof(float)), 0) << "the last good pose, bit for bit";
+  fill(2, 0.0f);
+  ASSERT_TRUE(h.publishAndWait(*frame));
+  ASSERT_EQ(tetrig_shm_read_latest(&h.reader, published.data(), published.size(), nullptr, 0, &info), TETRIG_SHM_OK);
+  EXPECT_EQ(info.flags & TETRIG_SHM_FRAME_POSE_REJECTED, 0u);
+  h.loop->requestStop();
+  h.loop->join();
+  EXPECT_EQ(h.loop->counters().frames, 3u);
+  EXPECT_EQ(h.loop->counters().rejected_poses, 1u);
+  EXPECT_EQ(h.loop->counters().rejected_target_frames, 0u);
 }
 
 TEST(FrameLoop, AFrameReceivedBeforeStartIsPublishedButKeptOutOfTheLatencies) {

@@ -503,6 +503,8 @@ void runEndToEnd(const Scene& s, const std::string& tag, const std::vector<std::
   EXPECT_EQ(o.stats.at("frames").get<std::uint64_t>(), kFrames) << st;
   EXPECT_EQ(o.stats.at("dropped_frames").get<std::uint64_t>(), 0u) << st;
   EXPECT_EQ(o.stats.at("held_frames").get<std::uint64_t>(), 0u) << st;
+  EXPECT_EQ(o.stats.at("rejected_target_frames").get<std::uint64_t>(), 0u) << st;
+  EXPECT_EQ(o.stats.at("rejected_poses").get<std::uint64_t>(), 0u) << st;
   EXPECT_EQ(o.stats.at("occluded_marker_frames").get<std::uint64_t>(), 0u) << st;
   EXPECT_EQ(o.stats.at("unknown_marker_frames").get<std::uint64_t>(), 0u) << st;
   EXPECT_EQ(o.stats.at("end").get<std::string>(), "frame limit reached") << st;

@@ -49,6 +49,7 @@
 #include "tetrig/deformer.hpp"
 #include "tetrig/marker_frame.hpp"
 #include "tetrig/marker_prediction.hpp"
+#include "tetrig/pose_bound.hpp"
 #include "tetrig/pose_sensor.hpp"
 #include "tetrig/pose_transfer_split.hpp"
 #include "tetrig/rig_file.hpp"
@@ -102,8 +103,9 @@ enum LiveFrameFlags : std::uint32_t {
   kLiveMarkersBlending = 1u << 2,   // some markers are blending between prediction and measurement
   kLiveDeadlineHit = 1u << 3,       // the step stopped at the deadline before max_iterations
   kLiveTargetsRejected = 1u << 4,   // the deformer rejected the targets (kept the previous ones)
-  kLiveNonFinitePose = 1u << 5,     // the step produced a non-finite pose: the last pose was written
-                                    // and the deformer was reset to rest (should never happen)
+  kLivePoseRejected = 1u << 5,      // the step produced a non-finite or implausible pose (outside
+                                    // tetrig/pose_bound.hpp's box): the last pose was written and the
+                                    // deformer was reset to rest (should never happen)
 };
 
 struct LiveFrameStats {
@@ -231,6 +233,8 @@ class LiveRig {
   std::int64_t blend_ns_ = 0;
   std::int64_t untimed_ns_ = 0;
   double max_abs_coordinate_ = 0.0;
+  PoseBound pose_bound_;                          // this frame's box (targets + margin)
+  std::vector<Eigen::Vector3d> region_centroid_;  // rest centroid of each region handle's tets
 
   // Binding: source id -> rig marker (-1: unknown).
   std::vector<std::int32_t> marker_of_id_;

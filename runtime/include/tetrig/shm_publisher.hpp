@@ -38,11 +38,12 @@ enum class ShmState : std::uint32_t {
 };
 
 // ShmFrameInfo::flags bits (TETRIG_SHM_FRAME_* in tetrig_shm.h).
-inline constexpr std::uint32_t kShmFrameStaleSource = 0x1u;       // source frame reused
+inline constexpr std::uint32_t kShmFrameStaleSource = 0x1u;       // reserved (a silent source publishes no frame)
 inline constexpr std::uint32_t kShmFramePoseHeld = 0x2u;          // every marker occluded: pose held
 inline constexpr std::uint32_t kShmFrameBudgetMiss = 0x4u;        // iteration deadline hit
 inline constexpr std::uint32_t kShmFrameMarkersPredicted = 0x8u;  // some targets predicted
 inline constexpr std::uint32_t kShmFrameInputRejected = 0x10u;    // non-finite/absurd input rejected
+inline constexpr std::uint32_t kShmFramePoseRejected = 0x20u;     // solved pose implausible: last pose republished
 
 // Marker state bytes of the marker block (TETRIG_SHM_MARKER_* in tetrig_shm.h; layout 1.1).
 inline constexpr std::uint8_t kShmMarkerUnknown = 0;    // no (finite) target
