@@ -536,19 +536,13 @@ std::uint32_t LiveRig::updateTargets() noexcept {
   // Regions driven by marker clusters: the best-fit rigid transform from the markers' rest
   // positions to their targets (tetrig/rig_file.hpp, RigMarkerRegion).
   for (const RigMarkerRegion& mr : rig_->marker_regions) {
-    const double w = 1.0 / static_cast<double>(mr.markers.size());
-    Eigen::Vector3d c0 = Eigen::Vector3d::Zero(), c = Eigen::Vector3d::Zero();
-    for (const std::int32_t m : mr.markers) {
-      c0 += w * rig_->markers[static_cast<std::size_t>(m)].rest_position;
-      c += w * marker_target_[static_cast<std::size_t>(m)];
-    }
-    Eigen::Matrix3d h = Eigen::Matrix3d::Zero();
-    for (const std::int32_t m : mr.markers) {
-      h += (marker_target_[static_cast<std::size_t>(m)] - c) * (rig_->markers[static_cast<std::size_t>(m)].rest_position - c0).transpose();
-    }
+    const auto marker = [&](std::size_t i) { return static_cast<std::size_t>(mr.markers[i]); };
+    const RigidFit fit = bestRigidFit(
+        mr.markers.size(), [&](std::size_t i) -> const Eigen::Vector3d& { return rig_->markers[marker(i)].rest_position; },
+        [&](std::size_t i) -> const Eigen::Vector3d& { return marker_target_[marker(i)]; });
     RigidTransform& t = region_targets_[static_cast<std::size_t>(mr.region_handle)];
-    t.rotation = closestRotation(h);
-    t.translation = c - t.rotation * c0;
+    t.rotation = fit.rotation;
+    t.translation = fit.translation;
   }
   return blending;
 }

@@ -7,6 +7,7 @@
 
 #include <cmath>
 #include <random>
+#include <vector>
 
 namespace tetrig {
 namespace {
@@ -129,6 +130,40 @@ TEST(Polar, NonFiniteInputGivesIdentityNotNaN) {
   Eigen::Quaterniond q = Eigen::Quaterniond::Identity();
   refineRotation(f, q, 3);
   EXPECT_TRUE(q.coeffs().allFinite());
+}
+
+// The best rigid fit recovers an exact rigid motion of a point set, and with noisy points it is
+// a minimum: no small change of its rotation or translation lowers the squared residual.
+TEST(Polar, BestRigidFitRecoversARigidMotionAndMinimisesTheResidual) {
+  std::mt19937 rng(11);
+  std::normal_distribution<double> g(0.0, 1.0);
+  std::vector<Eigen::Vector3d> a, b;
+  const Eigen::Quaterniond q = Eigen::Quaterniond(Eigen::AngleAxisd(2.3, Eigen::Vector3d(1, -2, 0.5).normalized()));
+  const Eigen::Vector3d t(4.0, -1.0, 7.5);
+  for (int i = 0; i < 7; ++i) {
+    a.emplace_back(g(rng), g(rng), g(rng));
+    b.push_back(q * a.back() + t);
+  }
+  const auto from = [&](std::size_t i) { return a[i]; };
+  const auto to = [&](std::size_t i) { return b[i]; };
+  const RigidFit exact = bestRigidFit(a.size(), from, to);
+  EXPECT_LT(exact.rotation.angularDistance(q), 1e-12);
+  EXPECT_LT((exact.translation - t).norm(), 1e-12);
+
+  for (auto& p : b) p += 0.05 * Eigen::Vector3d(g(rng), g(rng), g(rng));
+  const RigidFit fit = bestRigidFit(a.size(), from, to);
+  const auto residual = [&](const Eigen::Quaterniond& r, const Eigen::Vector3d& s) {
+    double e = 0.0;
+    for (std::size_t i = 0; i < a.size(); ++i) e += (b[i] - (r * a[i] + s)).squaredNorm();
+    return e;
+  };
+  const double best = residual(fit.rotation, fit.translation);
+  for (int axis = 0; axis < 3; ++axis)
+    for (const double step : {-1e-3, 1e-3}) {
+      const Eigen::Quaterniond turned = Eigen::Quaterniond(Eigen::AngleAxisd(step, Eigen::Vector3d::Unit(axis))) * fit.rotation;
+      EXPECT_GT(residual(turned, fit.translation), best) << "axis " << axis;
+      EXPECT_GT(residual(fit.rotation, fit.translation + step * Eigen::Vector3d::Unit(axis)), best) << "axis " << axis;
+    }
 }
 
 }  // namespace

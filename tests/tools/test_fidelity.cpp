@@ -157,14 +157,7 @@ TEST_F(FidelityTool, FeetDrivenByTheirMarkersTurnWithThem) {
   for (const int p : playback.selectedPoints()) labels[static_cast<std::size_t>(p)] = clip.labels()[static_cast<std::size_t>(p)];
   // Best-fit rotation from rest to current of a point set (Kabsch, via the closest rotation).
   const auto fit = [](const std::vector<Eigen::Vector3d>& rest, const std::vector<Eigen::Vector3d>& now) {
-    Eigen::Vector3d c0 = Eigen::Vector3d::Zero(), c = Eigen::Vector3d::Zero();
-    for (std::size_t i = 0; i < rest.size(); ++i) {
-      c0 += rest[i] / static_cast<double>(rest.size());
-      c += now[i] / static_cast<double>(rest.size());
-    }
-    Eigen::Matrix3d h = Eigen::Matrix3d::Zero();
-    for (std::size_t i = 0; i < rest.size(); ++i) h += (now[i] - c) * (rest[i] - c0).transpose();
-    return closestRotation(h);
+    return bestRigidFit(rest.size(), [&](std::size_t i) { return rest[i]; }, [&](std::size_t i) { return now[i]; }).rotation;
   };
   // The right foot's turn against its markers' at frame 400, in degrees.
   const auto foot_error_deg = [&](const Rig& rig) {

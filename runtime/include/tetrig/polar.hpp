@@ -20,6 +20,8 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
+#include <cstddef>
+
 namespace tetrig {
 
 Eigen::Quaterniond closestRotation(const Eigen::Matrix3d& f);
@@ -35,5 +37,30 @@ Eigen::Matrix4d hornMatrix(const Eigen::Matrix3d& f);
 // det F <= 1e-6 (inverted and degenerate tets take no volume term: w = 0 for them). The reference
 // for tests and for the exact energy of tools (a [(1 - w) ||F - R||^2 + w ||F - T||^2], ||F - T||^2 = 3 s^2).
 double unitVolumeShift(const Eigen::Matrix3d& f, const Eigen::Matrix3d& r);
+
+// Best rigid fit of n point pairs (Kabsch, solved by Horn's method above): the rotation R and
+// translation t minimising sum_i |b_i - (R a_i + t)|^2, from the centroids ca, cb and the cross-
+// covariance H = sum_i (b_i - cb)(a_i - ca)^T: R = closestRotation(H), t = cb - R ca. `from(i)` and
+// `to(i)` give a_i and b_i. n > 0; no allocation.
+struct RigidFit {
+  Eigen::Quaterniond rotation = Eigen::Quaterniond::Identity();
+  Eigen::Vector3d translation = Eigen::Vector3d::Zero();
+};
+
+template <class From, class To>
+RigidFit bestRigidFit(std::size_t n, From&& from, To&& to) {
+  const double w = 1.0 / static_cast<double>(n);
+  Eigen::Vector3d ca = Eigen::Vector3d::Zero(), cb = Eigen::Vector3d::Zero();
+  for (std::size_t i = 0; i < n; ++i) {
+    ca += w * from(i);
+    cb += w * to(i);
+  }
+  Eigen::Matrix3d h = Eigen::Matrix3d::Zero();
+  for (std::size_t i = 0; i < n; ++i) h.noalias() += (to(i) - cb) * (from(i) - ca).transpose();
+  RigidFit fit;
+  fit.rotation = closestRotation(h);
+  fit.translation = cb - fit.rotation * ca;
+  return fit;
+}
 
 }  // namespace tetrig
