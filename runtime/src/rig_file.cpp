@@ -347,18 +347,23 @@ std::string validateRig(const Rig& rig) {
     return "the alignment transform is not finite and invertible";
   }
   if (!(a.fit_scale > 0.0) || !(a.rig_units_per_mm > 0.0)) return "the alignment's fit scale or unit conversion is not positive";
+  // Each oriented region handle is driven by at most one pose sensor or marker cluster.
   std::vector<std::uint8_t> driven(s.region_handles.size(), 0);
+  const auto claimRegion = [&](const std::string& who, std::int32_t region) -> std::string {
+    if (region < 0 || static_cast<std::size_t>(region) >= s.region_handles.size()) {
+      return who + " names region handle " + num(region) + " of " + num(s.region_handles.size());
+    }
+    const auto r = static_cast<std::size_t>(region);
+    if (!s.region_handles[r].oriented) return who + " drives region handle " + num(r) + ", which is not oriented";
+    if (driven[r]) return "region handle " + num(r) + " is driven twice (by pose sensors or marker clusters)";
+    driven[r] = 1;
+    return {};
+  };
   for (std::size_t p = 0; p < rig.pose_sensors.size(); ++p) {
     const RigPoseSensor& ps = rig.pose_sensors[p];
     const std::string who = "pose sensor " + num(p) + (ps.sensor_label.empty() ? std::string() : " (" + printableText(ps.sensor_label, 64) + ")");
     if (ps.sensor_label.empty()) return who + " has an empty sensor label";
-    if (ps.region_handle < 0 || static_cast<std::size_t>(ps.region_handle) >= s.region_handles.size()) {
-      return who + " names region handle " + num(ps.region_handle) + " of " + num(s.region_handles.size());
-    }
-    const auto r = static_cast<std::size_t>(ps.region_handle);
-    if (!s.region_handles[r].oriented) return who + " drives region handle " + num(r) + ", which is not oriented";
-    if (driven[r]) return "region handle " + num(r) + " is driven by two pose sensors";
-    driven[r] = 1;
+    if (std::string error = claimRegion(who, ps.region_handle); !error.empty()) return error;
     if (ps.mode != PoseSensorMode::kClutch && ps.mode != PoseSensorMode::kAbsolute) return who + " has an unknown mode";
     if (ps.mode == PoseSensorMode::kClutch && ps.clutch_buttons == 0) return who + " is in clutch mode with no clutch button";
     if (!(ps.translation_scale > 0.0) || !std::isfinite(ps.translation_scale)) {
@@ -368,13 +373,7 @@ std::string validateRig(const Rig& rig) {
   for (std::size_t k = 0; k < rig.marker_regions.size(); ++k) {
     const RigMarkerRegion& mr = rig.marker_regions[k];
     const std::string who = "marker region " + num(k);
-    if (mr.region_handle < 0 || static_cast<std::size_t>(mr.region_handle) >= s.region_handles.size()) {
-      return who + " names region handle " + num(mr.region_handle) + " of " + num(s.region_handles.size());
-    }
-    const auto r = static_cast<std::size_t>(mr.region_handle);
-    if (!s.region_handles[r].oriented) return who + " drives region handle " + num(r) + ", which is not oriented";
-    if (driven[r]) return "region handle " + num(r) + " is driven twice (by pose sensors or marker clusters)";
-    driven[r] = 1;
+    if (std::string error = claimRegion(who, mr.region_handle); !error.empty()) return error;
     if (mr.markers.size() < 3) return who + " has " + num(mr.markers.size()) + " markers (a rotation needs at least 3)";
     Eigen::Vector3d c0 = Eigen::Vector3d::Zero();
     for (std::size_t i = 0; i < mr.markers.size(); ++i) {

@@ -566,7 +566,7 @@ TEST_F(SmallRig, InvalidPoseSensorsAreNotWritten) {
   EXPECT_CONTAINS(fault([](RigPoseSensor& p, Rig&) { p.translation_scale = 0.0; }), "translation scale");
   EXPECT_CONTAINS(fault([](RigPoseSensor& p, Rig&) { p.translation_scale = std::numeric_limits<double>::quiet_NaN(); }),
                   "translation scale");
-  EXPECT_CONTAINS(fault([](RigPoseSensor& p, Rig& r) { r.pose_sensors.push_back(p); }), "driven by two pose sensors");
+  EXPECT_CONTAINS(fault([](RigPoseSensor& p, Rig& r) { r.pose_sensors.push_back(p); }), "is driven twice (by pose sensors or marker clusters)");
   Rig ok = *rig_;
   ok.pose_sensors[0].mode = PoseSensorMode::kAbsolute;
   ok.pose_sensors[0].clutch_buttons = 0;  // buttons do not matter in absolute mode
