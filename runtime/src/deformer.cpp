@@ -296,20 +296,17 @@ Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(s
     }
     group_start_.push_back(static_cast<std::int32_t>(group_slot_.size()));
   }
-  if (options_.volume_weight > 0.0 && options_.update_rotations) {
-    volume_weight_.assign(static_cast<size_t>(block_count) * kTetBlockWidth, 0.0f);
-    for (std::int32_t t = 0; t < tet_count_; ++t)
-      if (!grouped[static_cast<size_t>(t)])
-        volume_weight_[static_cast<size_t>(slotOfTet(t))] = static_cast<float>(options_.volume_weight);
-  }
-
+  // Per-slot coefficients of the rotation pass: `value` on the first `count` tets that are in no
+  // rigid group, 0 on the others and on the padding lanes.
+  const auto perSlot = [&](AlignedVector<float>& slots, double value, std::int32_t count) {
+    slots.assign(static_cast<size_t>(block_count) * kTetBlockWidth, 0.0f);
+    for (std::int32_t t = 0; t < count; ++t)
+      if (!grouped[static_cast<size_t>(t)]) slots[static_cast<size_t>(slotOfTet(t))] = static_cast<float>(value);
+  };
+  if (options_.volume_weight > 0.0 && options_.update_rotations) perSlot(volume_weight_, options_.volume_weight, tet_count_);
   if (options_.inversion_guard > 0.0 && options_.update_rotations) {
-    guard_.assign(static_cast<size_t>(block_count) * kTetBlockWidth, 0.0f);
-    const std::int32_t guarded =
-        setup.guarded_tet_count < 0 ? tet_count_ : std::min(setup.guarded_tet_count, tet_count_);
-    for (std::int32_t t = 0; t < guarded; ++t)
-      if (!grouped[static_cast<size_t>(t)])
-        guard_[static_cast<size_t>(slotOfTet(t))] = static_cast<float>(options_.inversion_guard);
+    perSlot(guard_, options_.inversion_guard,
+            setup.guarded_tet_count < 0 ? tet_count_ : std::min(setup.guarded_tet_count, tet_count_));
   }
 
   vertex_targets_.resize(static_cast<size_t>(vertex_handle_count_));
