@@ -22,6 +22,8 @@
 #include "tetrig/render/picture_sheet.hpp"
 #include "tetrig/shm_publisher.hpp"
 #include "temp_dir.hpp"
+#include "tetrig_shm.h"
+#include "view.hpp"
 #include "test_data.hpp"
 
 #include <gtest/gtest.h>
@@ -32,6 +34,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -267,6 +270,23 @@ std::pair<std::uint64_t, std::uint64_t> shotFrameAndInstance(const std::string& 
   return {frame, instance};
 }
 
+
+// The overlay names each frame flag of tetrig_shm.h, keeps unknown bits visible, and says nothing
+// for 0.
+TEST(ViewFlags, EveryFrameFlagIsNamedAndUnknownBitsStayVisible) {
+  EXPECT_EQ(tools::frameFlagText(0), "");
+  EXPECT_EQ(tools::frameFlagText(TETRIG_SHM_FRAME_POSE_HELD | TETRIG_SHM_FRAME_MARKERS_PREDICTED), "pose held, markers predicted");
+  EXPECT_EQ(tools::frameFlagText(TETRIG_SHM_FRAME_POSE_REJECTED), "pose rejected: last pose repeated");
+  EXPECT_EQ(tools::frameFlagText(TETRIG_SHM_FRAME_BUDGET_MISS | 0x400u | 0x80000000u), "budget miss, flags 0x80000400");
+  std::vector<std::string> names;
+  for (const std::uint32_t bit : {TETRIG_SHM_FRAME_STALE_SOURCE, TETRIG_SHM_FRAME_POSE_HELD, TETRIG_SHM_FRAME_BUDGET_MISS,
+                                  TETRIG_SHM_FRAME_MARKERS_PREDICTED, TETRIG_SHM_FRAME_INPUT_REJECTED, TETRIG_SHM_FRAME_POSE_REJECTED}) {
+    const std::string name = tools::frameFlagText(bit);
+    EXPECT_EQ(name.find("0x"), std::string::npos) << "bit " << bit << " has no name";
+    EXPECT_EQ(std::count(names.begin(), names.end(), name), 0) << name;
+    names.push_back(name);
+  }
+}
 TEST(View, ScreenshotShowsTheMeshAndFollowsThePerformance) {
   TETRIG_REQUIRE_XVFB(xvfb_run);
   const TempDir dir("tetrig-view");

@@ -35,6 +35,7 @@
 #include <span>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <thread>
 #include <vector>
 
@@ -574,8 +575,9 @@ class Viewer {
     std::vector<std::string> lines;
     lines.push_back("tetrig view  " + name_ + (instances_ > 0 ? "  rig '" + rig_name_ + "'" : std::string()));
     if (have_frame_) {
-      lines.push_back(format("frame %" PRIu64 "  source %" PRIu64 "  iter %d  flags 0x%x  occluded %u", info_.frame_id, info_.source_frame,
-                             static_cast<int>(info_.iterations), static_cast<unsigned>(info_.flags), static_cast<unsigned>(info_.occluded_markers)));
+      lines.push_back(format("frame %" PRIu64 "  source %" PRIu64 "  iter %d  occluded %u", info_.frame_id, info_.source_frame,
+                             static_cast<int>(info_.iterations), static_cast<unsigned>(info_.occluded_markers)) +
+                      (info_.flags != 0 ? "  (" + frameFlagText(info_.flags) + ")" : std::string()));
       lines.push_back(format("producer %.1f Hz  drawn %.0f fps  recv->pub %.0f us  pub->seen %.0f us  recv->seen %.0f us", rate_hz_, fps_,
                              1e3 * recv_pub_ms_, 1e3 * pub_seen_ms_, 1e3 * recv_seen_ms_));
     }
@@ -758,6 +760,22 @@ class Viewer {
 };
 
 }  // namespace
+
+std::string frameFlagText(std::uint32_t flags) {
+  static constexpr std::pair<std::uint32_t, const char*> kNames[] = {
+      {TETRIG_SHM_FRAME_STALE_SOURCE, "stale source"},        {TETRIG_SHM_FRAME_POSE_HELD, "pose held"},
+      {TETRIG_SHM_FRAME_BUDGET_MISS, "budget miss"},          {TETRIG_SHM_FRAME_MARKERS_PREDICTED, "markers predicted"},
+      {TETRIG_SHM_FRAME_INPUT_REJECTED, "input rejected"},    {TETRIG_SHM_FRAME_POSE_REJECTED, "pose rejected: last pose repeated"}};
+  std::string text;
+  const auto add = [&](const std::string& part) { text += (text.empty() ? "" : ", ") + part; };
+  std::uint32_t known = 0;
+  for (const auto& [bit, name] : kNames) {
+    known |= bit;
+    if (flags & bit) add(name);
+  }
+  if (const std::uint32_t other = flags & ~known; other != 0) add(format("flags 0x%x", static_cast<unsigned>(other)));
+  return text;
+}
 
 int runView(const ViewOptions& options) {
   Viewer viewer(options);

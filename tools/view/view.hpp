@@ -11,6 +11,7 @@
 // std::invalid_argument with one line (bad arguments, no display, unusable segment, timeout).
 #pragma once
 
+#include <cstdint>
 #include <string>
 
 namespace tetrig::tools {
@@ -27,6 +28,11 @@ struct ViewOptions {
   double stale_ms = 1000.0;      // heartbeat age that counts as "not responding"
   bool quiet = false;            // no status lines on stderr
 };
+
+// The overlay's reading of a frame's flags (tetrig_shm.h TETRIG_SHM_FRAME_*): the names of the
+// bits set, comma-separated ("pose held, markers predicted"), unknown bits as one hex value;
+// "" for 0.
+std::string frameFlagText(std::uint32_t flags);
 
 // Runs the window until it is closed (exit 0) or, with a screenshot, until the file is written.
 int runView(const ViewOptions& options);
