@@ -128,10 +128,8 @@ LiveRig::LiveRig(const Rig& rig, const LiveRigOptions& options, const Rig* coars
   restHandleTargets(rig.tet_mesh, setup, vertex_targets_, point_targets_);
   region_targets_.assign(setup.region_handles.size(), RigidTransform{});
   for (const RegionHandle& region : setup.region_handles) region_centroid_.push_back(regionRestCentroid(rig.tet_mesh, region));
-  for (const RigPoseSensor& sensor : rig.pose_sensors) {
-    const auto& region = setup.region_handles.at(static_cast<std::size_t>(sensor.region_handle));
-    sensors_.emplace_back(sensor, rig.alignment, regionRestCentroid(rig.tet_mesh, region));
-  }
+  for (const RigPoseSensor& sensor : rig.pose_sensors)
+    sensors_.emplace_back(sensor, rig.alignment, region_centroid_.at(static_cast<std::size_t>(sensor.region_handle)));
   sensor_sample_.assign(sensors_.size(), nullptr);
 
   const std::size_t markers = rig.markers.size();
@@ -157,9 +155,7 @@ LiveRig::LiveRig(const Rig& rig, const LiveRigOptions& options, const Rig* coars
 
   const auto fine = static_cast<std::size_t>(rig.fine_vertices.rows());
   rest_positions_.resize(fine * 3);
-  const Eigen::Vector3d rest_extent =
-      fine > 0 ? Eigen::Vector3d(rig.fine_vertices.colwise().maxCoeff() - rig.fine_vertices.colwise().minCoeff()) : Eigen::Vector3d::Zero();
-  pose_bound_ = PoseBound(rest_extent.norm(), max_abs_coordinate_);
+  pose_bound_ = PoseBound(boundingBoxDiagonal(rig.fine_vertices), max_abs_coordinate_);
   for (std::size_t v = 0; v < fine; ++v)
     for (int c = 0; c < 3; ++c) rest_positions_[v * 3 + static_cast<std::size_t>(c)] = static_cast<float>(rig.fine_vertices(static_cast<Eigen::Index>(v), c));
   last_positions_ = rest_positions_;
