@@ -87,13 +87,34 @@ const RigScene* rigScene(std::string& error) { return tetrig::bench::buildOnce<R
 // (buildOnce keeps one scene per lambda).
 const RigScene* feetRigScene(std::string& error) { return tetrig::bench::buildOnce<RigScene>([] { return makeRigScene(true); }, error); }
 
-void rigFrame(benchmark::State& state, double extrapolation, double relaxation = 1.0, bool with_coarse = false) {
+// The scene, or null after marking the benchmark skipped (the data is absent).
+const RigScene* sceneOrSkip(benchmark::State& state, bool feet = false) {
   std::string error;
-  const RigScene* scene = rigScene(error);
-  if (scene == nullptr) {
-    state.SkipWithError(error.c_str());
-    return;
-  }
+  const RigScene* scene = feet ? feetRigScene(error) : rigScene(error);
+  if (scene == nullptr) state.SkipWithError(error.c_str());
+  return scene;
+}
+
+// Rest positions of a setup's vertex handles: the targets before any marker is seen.
+std::vector<Eigen::Vector3d> restVertexTargets(const tetrig::TetMesh& mesh, const tetrig::DeformerSetup& setup) {
+  std::vector<Eigen::Vector3d> targets;
+  for (const std::int32_t v : setup.vertex_handles) targets.push_back(mesh.vertices.row(v).transpose());
+  return targets;
+}
+
+// Rig marker m's target at a clip frame, in rig units; false when the clip has it occluded.
+bool markerTarget(const RigScene& scene, std::size_t frame, std::size_t m, Eigen::Vector3d& target) {
+  const int point = scene.clip_point[m];
+  if (!scene.clip.isValid(frame, point)) return false;
+  const float* p = scene.clip.positions(frame);
+  const double to_mm = scene.clip.unitsToMm();
+  target = scene.rig.alignment.apply(Eigen::Vector3d(to_mm * p[3 * point], to_mm * p[3 * point + 1], to_mm * p[3 * point + 2]));
+  return true;
+}
+
+void rigFrame(benchmark::State& state, double extrapolation, double relaxation = 1.0, bool with_coarse = false) {
+  const RigScene* scene = sceneOrSkip(state);
+  if (scene == nullptr) return;
   const tetrig::Rig& rig = scene->rig;
   tetrig::DeformerSetup setup = rig.setup;
   setup.options.padded_positions = true;  // the input of applyPoseTransferPadded
@@ -101,8 +122,7 @@ void rigFrame(benchmark::State& state, double extrapolation, double relaxation =
   setup.options.rotation_relaxation = relaxation;
   setup.options.frame_guide = with_coarse;
   tetrig::Deformer deformer(rig.tet_mesh, setup);
-  std::vector<Eigen::Vector3d> targets;
-  for (const std::int32_t v : rig.setup.vertex_handles) targets.push_back(rig.tet_mesh.vertices.row(v).transpose());
+  std::vector<Eigen::Vector3d> targets = restVertexTargets(rig.tet_mesh, rig.setup);
   tetrig::HandleTargets handle_targets;
   handle_targets.vertex_positions = targets;
   // Coarse level: its deformer, its handle targets and per rig marker its coarse vertex handle.
@@ -115,7 +135,7 @@ void rigFrame(benchmark::State& state, double extrapolation, double relaxation =
     tetrig::DeformerSetup cs = coarse_rig.setup;
     cs.options.rotation_relaxation = relaxation;
     coarse = std::make_unique<tetrig::CoarseLevel>(rig.tet_mesh, coarse_rig.tet_mesh, cs);
-    for (const std::int32_t v : cs.vertex_handles) coarse_targets.push_back(coarse_rig.tet_mesh.vertices.row(v).transpose());
+    coarse_targets = restVertexTargets(coarse_rig.tet_mesh, cs);
     for (std::size_t m = 0; m < rig.markers.size(); ++m)
       for (const tetrig::RigMarker& c : coarse_rig.markers)
         if (c.label == rig.markers[m].label) coarse_handle[m] = c.vertex_handle;
@@ -124,18 +144,15 @@ void rigFrame(benchmark::State& state, double extrapolation, double relaxation =
   std::int64_t coarse_ns = 0;
   const auto b = rig.pose_transfer.view();
   std::vector<double> fine(static_cast<std::size_t>(rig.pose_transfer.rows) * 3);
-  const double to_mm = scene->clip.unitsToMm();
   const std::size_t frames = scene->clip.frameCount();
   std::size_t frame = 0;
   std::int64_t step_ns = 0, pose_ns = 0, iterations = 0, solve_ns = 0, exact = 0;
   for (auto _ : state) {
-    const float* p = scene->clip.positions(frame);
     for (std::size_t m = 0; m < rig.markers.size(); ++m) {
-      const int point = scene->clip_point[m];
-      if (!scene->clip.isValid(frame, point)) continue;
-      const Eigen::Vector3d mm(to_mm * p[3 * point], to_mm * p[3 * point + 1], to_mm * p[3 * point + 2]);
-      targets[static_cast<std::size_t>(rig.markers[m].vertex_handle)] = rig.alignment.apply(mm);
-      if (coarse && coarse_handle[m] >= 0) coarse_targets[static_cast<std::size_t>(coarse_handle[m])] = rig.alignment.apply(mm);
+      Eigen::Vector3d target;
+      if (!markerTarget(*scene, frame, m, target)) continue;
+      targets[static_cast<std::size_t>(rig.markers[m].vertex_handle)] = target;
+      if (coarse && coarse_handle[m] >= 0) coarse_targets[static_cast<std::size_t>(coarse_handle[m])] = target;
     }
     std::int64_t frame_coarse_ns = 0;
     if (coarse) frame_coarse_ns = coarse->guide(coarse_handle_targets, deformer).total_ns;
@@ -184,11 +201,9 @@ BENCHMARK(BM_RigFrameCoarseRelaxed)->Name("BM_RigFrame/smpl_hdm05_coarse_relaxed
 void BM_RigFrameCoarsePredictedRelaxed(benchmark::State& state) { rigFrame(state, 1.0, 1.8, true); }
 BENCHMARK(BM_RigFrameCoarsePredictedRelaxed)->Name("BM_RigFrame/smpl_hdm05_coarse_predicted_relaxed")->Unit(benchmark::kMicrosecond);
 
-void liveRigFrame(benchmark::State& state, const RigScene* scene, const std::string& error) {
-  if (scene == nullptr) {
-    state.SkipWithError(error.c_str());
-    return;
-  }
+void liveRigFrame(benchmark::State& state, bool feet) {
+  const RigScene* scene = sceneOrSkip(state, feet);
+  if (scene == nullptr) return;
   tetrig::LiveRigOptions live_options;
   live_options.split_pose_transfer = state.range(0) != 0;
   tetrig::LiveRig live(scene->rig, live_options);
@@ -219,27 +234,15 @@ void liveRigFrame(benchmark::State& state, const RigScene* scene, const std::str
   state.counters["pose_transfer_us"] = static_cast<double>(pose_ns) / n * 1e-3;
   state.counters["iterations"] = static_cast<double>(iterations) / n;
 }
-void BM_LiveRigFrame(benchmark::State& state) {
-  std::string error;
-  const RigScene* scene = rigScene(error);
-  liveRigFrame(state, scene, error);
-}
-void BM_LiveRigFrameFeet(benchmark::State& state) {
-  std::string error;
-  const RigScene* scene = feetRigScene(error);
-  liveRigFrame(state, scene, error);
-}
+void BM_LiveRigFrame(benchmark::State& state) { liveRigFrame(state, false); }
+void BM_LiveRigFrameFeet(benchmark::State& state) { liveRigFrame(state, true); }
 BENCHMARK(BM_LiveRigFrameFeet)->Name("BM_LiveRigFrame/smpl_hdm05_feet")->Arg(0)->Unit(benchmark::kMicrosecond);
 // Argument: 0 = pose transfer on the calling thread, 1 = split with one worker (PoseTransferSplit).
 BENCHMARK(BM_LiveRigFrame)->Name("BM_LiveRigFrame/smpl_hdm05")->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
 
 void BM_PoseTransfer(benchmark::State& state) {
-  std::string error;
-  const RigScene* scene = rigScene(error);
-  if (scene == nullptr) {
-    state.SkipWithError(error.c_str());
-    return;
-  }
+  const RigScene* scene = sceneOrSkip(state);
+  if (scene == nullptr) return;
   const tetrig::Rig& rig = scene->rig;
   const bool compact = state.range(0) != 0, cold = state.range(1) != 0;
   // The input: the clip's frame 600 after 10 iterations from rest.
@@ -247,15 +250,10 @@ void BM_PoseTransfer(benchmark::State& state) {
   tetrig::DeformerSetup setup = rig.setup;
   setup.options.padded_positions = true;
   tetrig::Deformer deformer(rig.tet_mesh, setup);
-  std::vector<Eigen::Vector3d> targets;
-  for (const std::int32_t v : rig.setup.vertex_handles) targets.push_back(rig.tet_mesh.vertices.row(v).transpose());
-  const float* p = scene->clip.positions(kFrame);
-  const double to_mm = scene->clip.unitsToMm();
+  std::vector<Eigen::Vector3d> targets = restVertexTargets(rig.tet_mesh, rig.setup);
   for (std::size_t m = 0; m < rig.markers.size(); ++m) {
-    const int point = scene->clip_point[m];
-    if (!scene->clip.isValid(kFrame, point)) continue;
-    const Eigen::Vector3d mm(to_mm * p[3 * point], to_mm * p[3 * point + 1], to_mm * p[3 * point + 2]);
-    targets[static_cast<std::size_t>(rig.markers[m].vertex_handle)] = rig.alignment.apply(mm);
+    Eigen::Vector3d target;
+    if (markerTarget(*scene, kFrame, m, target)) targets[static_cast<std::size_t>(rig.markers[m].vertex_handle)] = target;
   }
   tetrig::HandleTargets handle_targets;
   handle_targets.vertex_positions = targets;

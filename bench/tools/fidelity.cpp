@@ -315,6 +315,10 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
     }
     excess.push_back((e_budget[i] - e_conv[i]) / e_conv[i]);
   }
+  const auto absolute = [](std::vector<double> v) {
+    for (double& d : v) d = std::abs(d);
+    return v;
+  };
   const auto absmax = [](const std::vector<double>& v) {
     double m = 0.0;
     for (const double d : v) m = std::max(m, std::abs(d));
@@ -333,6 +337,7 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
       {"inverted_body_tets_max_frame", inverted_budget_max_frame},
       {"frames_with_inverted_body_tets", inverted_budget_frames},
       {"inverted_body_tets_converged_max", inverted_conv_max},
+      {"volume_change", toJson(percentiles(absolute(volume_budget)))},
       {"volume_change_max", absmax(volume_budget)},
       {"volume_change_converged_max", absmax(volume_conv)},
       {"reference_iterations", toJson(percentiles(ref_iterations))},
@@ -348,7 +353,8 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
     per_frame.push_back({{"frame", ref_frame[i]}, {"rms_mm", rms[i]}, {"max_mm", worst[i]}, {"energy", e_budget[i]},
                          {"energy_converged", e_conv[i]}, {"reference_iterations", ref_iterations[i]},
                          {"worst_near", ref_worst_near[i]}, {"worst_region_share", ref_region_share[i]},
-                         {"inverted_body_tets", ref_inverted[i]}, {"inverted_body_tets_converged", ref_inverted_conv[i]}});
+                         {"inverted_body_tets", ref_inverted[i]}, {"inverted_body_tets_converged", ref_inverted_conv[i]},
+                         {"volume_change", volume_budget[ref_frame[i] - first]}, {"volume_change_converged", volume_conv[i]}});
   }
   run["reference"] = std::move(per_frame);
   return run;

@@ -16,6 +16,7 @@
 #include <limits>
 #include <sstream>
 #include <string_view>
+#include <type_traits>
 #include <unordered_map>
 
 namespace tetrig {
@@ -153,6 +154,26 @@ class Cursor {
     std::memcpy(&v, &b, sizeof v);
     if (!std::isfinite(v)) fail(std::string("non-finite value in ") + what);
     return v;
+  }
+  // `rows` rows of a fixed-width matrix, row-major: f64 entries for a double matrix, i32 for an
+  // integer one (each entry checked as f64/i32 check it; the whole size checked first).
+  template <class Matrix>
+  void rows(Matrix& m, std::size_t rows, const char* what) {
+    using Scalar = typename Matrix::Scalar;
+    constexpr bool kFloating = std::is_floating_point_v<Scalar>;
+    constexpr auto kCols = static_cast<std::size_t>(Matrix::ColsAtCompileTime);
+    static_assert(Matrix::ColsAtCompileTime > 0, "a fixed number of columns");
+    need(rows * kCols * (kFloating ? 8 : 4), what);
+    m.resize(static_cast<Eigen::Index>(rows), static_cast<Eigen::Index>(kCols));
+    for (std::size_t i = 0; i < rows; ++i) {
+      for (std::size_t k = 0; k < kCols; ++k) {
+        if constexpr (kFloating) {
+          m(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(k)) = f64(what);
+        } else {
+          m(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(k)) = i32(what);
+        }
+      }
+    }
   }
   // A count of records of at least `min_record_bytes` each: checked against the bytes left before
   // anything is allocated.
@@ -758,22 +779,14 @@ Rig parseRigAt(std::span<const std::uint8_t> bytes, std::string_view source_name
     Cursor c = section(kTagTetVertices);
     const std::size_t n = c.count("tet vertices", 0);
     rig.body_vertex_count = static_cast<std::int32_t>(c.u32("body vertex count"));
-    c.need(n * 24, "tet vertex positions");
-    rig.tet_mesh.vertices.resize(static_cast<Eigen::Index>(n), 3);
-    for (std::size_t i = 0; i < n; ++i) {
-      for (int k = 0; k < 3; ++k) rig.tet_mesh.vertices(static_cast<Eigen::Index>(i), k) = c.f64("tet vertex position");
-    }
+    c.rows(rig.tet_mesh.vertices, n, "tet vertex positions");
     c.end();
   }
   {
     Cursor c = section(kTagTets);
     const std::size_t n = c.count("tets", 0);
     rig.body_tet_count = static_cast<std::int32_t>(c.u32("body tet count"));
-    c.need(n * 16, "tets");
-    rig.tet_mesh.tets.resize(static_cast<Eigen::Index>(n), 4);
-    for (std::size_t i = 0; i < n; ++i) {
-      for (int k = 0; k < 4; ++k) rig.tet_mesh.tets(static_cast<Eigen::Index>(i), k) = c.i32("tet corner");
-    }
+    c.rows(rig.tet_mesh.tets, n, "tet corners");
     c.end();
   }
   {
@@ -781,14 +794,8 @@ Rig parseRigAt(std::span<const std::uint8_t> bytes, std::string_view source_name
     const std::size_t nv = c.count("fine vertices", 0);
     const std::size_t nf = c.count("fine triangles", 0);
     c.need(nv * 24 + nf * 12, "fine mesh");
-    rig.fine_vertices.resize(static_cast<Eigen::Index>(nv), 3);
-    for (std::size_t i = 0; i < nv; ++i) {
-      for (int k = 0; k < 3; ++k) rig.fine_vertices(static_cast<Eigen::Index>(i), k) = c.f64("fine vertex position");
-    }
-    rig.fine_triangles.resize(static_cast<Eigen::Index>(nf), 3);
-    for (std::size_t i = 0; i < nf; ++i) {
-      for (int k = 0; k < 3; ++k) rig.fine_triangles(static_cast<Eigen::Index>(i), k) = c.i32("fine triangle corner");
-    }
+    c.rows(rig.fine_vertices, nv, "fine vertex positions");
+    c.rows(rig.fine_triangles, nf, "fine triangle corners");
     c.end();
   }
   {

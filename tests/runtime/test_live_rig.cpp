@@ -221,6 +221,21 @@ double maxDistance(const std::vector<float>& a, const std::vector<float>& b) {
 
 double smoothstep(double u) { return u * u * (3.0 - 2.0 * u); }
 
+// The bar rig and a live rig on it with every marker's label bound (the set-up most tests share).
+struct BoundBar {
+  explicit BoundBar(LiveRigOptions options = {}) : rig(makeBarRig()), live(rig, options) { live.bindLabels(labelTable()); }
+  BoundBar(const BoundBar&) = delete;  // live refers to rig
+  std::size_t floats() const { return static_cast<std::size_t>(live.fineVertexCount()) * 3; }  // one position buffer
+  const Rig rig;
+  LiveRig live;
+};
+
+LiveRigOptions withNormals() {
+  LiveRigOptions options;
+  options.normals = true;
+  return options;
+}
+
 // ---------------------------------------------------------------------------------------------
 
 TEST(LiveRig, TheHandMadeRigIsValid) {
@@ -451,10 +466,10 @@ TEST(LiveRig, NoPopAtDropoutOrReturn) {
 }
 
 TEST(LiveRig, BlendsFollowTheSmoothstepInFrameTime) {
-  const Rig rig = makeBarRig();
-  LiveRig live(rig);  // T = 0.15 s
-  live.bindLabels(labelTable());
-  std::vector<float> x(static_cast<std::size_t>(live.fineVertexCount()) * 3);
+  BoundBar bar;  // T = 0.15 s
+  const Rig& rig = bar.rig;
+  LiveRig& live = bar.live;
+  std::vector<float> x(bar.floats());
   // Frames at irregular times (device clock), the receive clock elsewhere and running backwards:
   // only device time may count.
   std::int64_t t = 5'000'000'000;
@@ -532,12 +547,10 @@ TEST(LiveRig, KeptDropoutOffsetTurnsWithTheBody) {
 }
 
 TEST(LiveRig, AllOccludedHoldsThePoseBitIdentically) {
-  const Rig rig = makeBarRig();
-  LiveRigOptions options;
-  options.normals = true;
-  LiveRig live(rig, options);
-  live.bindLabels(labelTable());
-  const std::size_t n = static_cast<std::size_t>(live.fineVertexCount()) * 3;
+  BoundBar bar(withNormals());
+  const Rig& rig = bar.rig;
+  LiveRig& live = bar.live;
+  const std::size_t n = bar.floats();
   std::vector<float> x(n), nrm(n), held(n), held_normals(n);
   const std::vector<bool> all(kMarkers, true), none(kMarkers, false);
   // The markers twist the bar; M0 and M4 are measured 0.5 off their rest offsets (slid on the
@@ -637,10 +650,10 @@ TEST(LiveRig, AnImplausiblePoseIsNeverPublished) {
 // Poses far from rest that the targets do produce are not mistaken for implausible ones: the whole
 // bar carried 500 units away, turned half round, and stretched to three times its length.
 TEST(LiveRig, FarStretchedAndTurnedPosesAreNotRejected) {
-  const Rig rig = makeBarRig();
-  LiveRig live(rig, LiveRigOptions{});
-  live.bindLabels(labelTable());
-  const std::size_t n = static_cast<std::size_t>(live.fineVertexCount()) * 3;
+  BoundBar bar;
+  const Rig& rig = bar.rig;
+  LiveRig& live = bar.live;
+  const std::size_t n = bar.floats();
   std::vector<float> x(n);
   const std::vector<bool> all(kMarkers, true);
   const Eigen::Vector3d shift(500.0, -300.0, 200.0);
@@ -780,12 +793,10 @@ INSTANTIATE_TEST_SUITE_P(CoarseLevel, LiveRigAllocations, ::testing::Bool(),
                          [](const ::testing::TestParamInfo<bool>& i) { return i.param ? "WithCoarseLevel" : "Plain"; });
 
 TEST(LiveRig, NormalsAreUnitAndOutward) {
-  const Rig rig = makeBarRig();
-  LiveRigOptions options;
-  options.normals = true;
-  LiveRig live(rig, options);
-  live.bindLabels(labelTable());
-  const std::size_t n = static_cast<std::size_t>(live.fineVertexCount()) * 3;
+  BoundBar bar(withNormals());
+  const Rig& rig = bar.rig;
+  LiveRig& live = bar.live;
+  const std::size_t n = bar.floats();
   const auto rest = live.restPositions();
   auto check = [&](std::span<const float> x, std::span<const float> normals, const char* what) {
     Eigen::Vector3d centroid = Eigen::Vector3d::Zero();

@@ -122,7 +122,17 @@ TEST_F(FidelityTool, MoreIterationsLandNearerAndTheReferenceIsConverged) {
       EXPECT_GT(f["reference_iterations"].get<double>(), 0.0);
       EXPECT_LE(f["inverted_body_tets"].get<int>(), (*run)["inverted_body_tets_max"].get<int>());
       EXPECT_LE(f["inverted_body_tets_converged"].get<int>(), (*run)["inverted_body_tets_converged_max"].get<int>());
+      // A reference frame's volume changes are within the run's largest, and a real pose changes it.
+      EXPECT_LE(std::abs(f["volume_change"].get<double>()), (*run)["volume_change_max"].get<double>());
+      EXPECT_LE(std::abs(f["volume_change_converged"].get<double>()), (*run)["volume_change_converged_max"].get<double>());
     }
+    // The percentiles are of |V/V_rest - 1| over every played frame: ordered, the max is the largest.
+    const auto& vc = (*run)["volume_change"];
+    EXPECT_EQ(vc["count"].get<std::size_t>(), (*run)["frames"].get<std::size_t>());
+    EXPECT_GE(vc["median"].get<double>(), 0.0);
+    EXPECT_LE(vc["median"].get<double>(), vc["p99"].get<double>());
+    EXPECT_DOUBLE_EQ(vc["max"].get<double>(), (*run)["volume_change_max"].get<double>());
+    EXPECT_GT(vc["max"].get<double>(), 0.0);
     // The reference converged (stopped by its tolerance, not its cap).
     EXPECT_LT((*run)["reference_iterations"]["max"].get<double>(), 3000);
   }

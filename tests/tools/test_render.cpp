@@ -10,6 +10,8 @@
 // TETRIG_KEEP_TEMP=1 keeps the sheet (sheet.png) to look at.
 #include "small_rig.hpp"
 #include "tetrig/live_rig.hpp"
+#include "tetrig/render/gl_program.hpp"
+#include "tetrig/render/headless_gl.hpp"
 #include "tetrig/render/picture_sheet.hpp"
 
 #include <gtest/gtest.h>
@@ -193,6 +195,32 @@ TEST(PictureSheet, RefusesBadInput) {
   o = {};
   o.up_axis = 3;
   EXPECT_THROW(render::renderPictureSheet(one, p.triangles, o), std::invalid_argument);
+}
+
+TEST(GlProgram, LinksValidShadersAndNamesTheFailingOne) {
+  const tetrig::render::HeadlessGl gl;
+  const char* vs = "#version 330 core\nlayout(location = 0) in vec3 a;\nvoid main() { gl_Position = vec4(a, 1.0); }\n";
+  const char* fs = "#version 330 core\nout vec4 o;\nvoid main() { o = vec4(1.0); }\n";
+  EXPECT_NE(tetrig::render::linkProgram(vs, fs, "test"), 0u);
+  const char* broken = "#version 330 core\nout vec4 o;\nvoid main() { o = undeclared_name; }\n";
+  auto message = [&](const char* v, const char* f) {
+    try {
+      tetrig::render::linkProgram(v, f, "the test program");
+    } catch (const std::runtime_error& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  const std::string bad_fragment = message(vs, broken);
+  EXPECT_NE(bad_fragment.find("the test program"), std::string::npos) << bad_fragment;
+  EXPECT_NE(bad_fragment.find("fragment shader does not compile"), std::string::npos) << bad_fragment;
+  EXPECT_NE(bad_fragment.find("undeclared_name"), std::string::npos) << bad_fragment;  // the driver's log
+  const std::string bad_vertex = message(broken, fs);
+  EXPECT_NE(bad_vertex.find("vertex shader does not compile"), std::string::npos) << bad_vertex;
+  // Both compile, the link fails: the vertex shader has no main().
+  const char* no_main = "#version 330 core\nvoid helper() {}\n";
+  const std::string bad_link = message(no_main, fs);
+  EXPECT_NE(bad_link.find("does not link"), std::string::npos) << bad_link;
 }
 
 TEST(Png, RoundTripsEveryByte) {

@@ -5,6 +5,7 @@
 // Lighting in view space: Lambert key + fill + ambient, a Blinn-Phong highlight and a rim term;
 // back faces flip their normal (two-sided) and take their own tint.
 #include "tetrig/render/mesh_drawer.hpp"
+#include "tetrig/render/gl_program.hpp"
 
 #include <Eigen/Geometry>
 #include <epoxy/gl.h>
@@ -98,41 +99,6 @@ out vec4 o_color;
 void main() { o_color = vec4(mix(u_bottom, u_top, clamp(v_t, 0.0, 1.0)), 1.0); }
 )";
 
-GLuint compile(GLenum type, const char* source) {
-  const GLuint s = glCreateShader(type);
-  glShaderSource(s, 1, &source, nullptr);
-  glCompileShader(s);
-  GLint ok = 0;
-  glGetShaderiv(s, GL_COMPILE_STATUS, &ok);
-  if (!ok) {
-    char log[1024] = {};
-    glGetShaderInfoLog(s, sizeof log, nullptr, log);
-    glDeleteShader(s);
-    throw std::runtime_error(std::string("OpenGL shader does not compile: ") + log);
-  }
-  return s;
-}
-
-GLuint link(const char* vs, const char* fs) {
-  const GLuint v = compile(GL_VERTEX_SHADER, vs);
-  const GLuint f = compile(GL_FRAGMENT_SHADER, fs);
-  const GLuint p = glCreateProgram();
-  glAttachShader(p, v);
-  glAttachShader(p, f);
-  glLinkProgram(p);
-  glDeleteShader(v);
-  glDeleteShader(f);
-  GLint ok = 0;
-  glGetProgramiv(p, GL_LINK_STATUS, &ok);
-  if (!ok) {
-    char log[1024] = {};
-    glGetProgramInfoLog(p, sizeof log, nullptr, log);
-    glDeleteProgram(p);
-    throw std::runtime_error(std::string("OpenGL program does not link: ") + log);
-  }
-  return p;
-}
-
 void setMatrix(GLuint program, const char* name, const Eigen::Matrix4f& m) {
   glUniformMatrix4fv(glGetUniformLocation(program, name), 1, GL_FALSE, m.data());
 }
@@ -160,9 +126,9 @@ MeshDrawer::MeshDrawer(std::span<const std::int32_t> triangles, std::int32_t ver
   vertex_data_.assign(static_cast<std::size_t>(vertex_count) * 6, 0.0f);
   face_normals_.assign(static_cast<std::size_t>(vertex_count) * 3, 0.0f);
 
-  surface_program_ = link(kSurfaceVs, kSurfaceFs);
-  point_program_ = link(kPointVs, kPointFs);
-  background_program_ = link(kBackgroundVs, kBackgroundFs);
+  surface_program_ = linkProgram(kSurfaceVs, kSurfaceFs, "surface");
+  point_program_ = linkProgram(kPointVs, kPointFs, "points");
+  background_program_ = linkProgram(kBackgroundVs, kBackgroundFs, "background");
 
   glGenVertexArrays(1, &mesh_vao_);
   glGenBuffers(1, &mesh_vbo_);

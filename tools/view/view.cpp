@@ -8,6 +8,7 @@
 #include "view.hpp"
 
 #include "tetrig/render/camera.hpp"
+#include "tetrig/render/gl_program.hpp"
 #include "tetrig/render/mesh_drawer.hpp"
 #include "tetrig/render/offscreen_target.hpp"
 #include "tetrig/render/picture_sheet.hpp"
@@ -100,25 +101,7 @@ uniform sampler2D u_image;
 out vec4 o_color;
 void main() { o_color = texture(u_image, v_uv); }
 )";
-    auto compile = [](GLenum type, const char* src) {
-      const GLuint s = glCreateShader(type);
-      glShaderSource(s, 1, &src, nullptr);
-      glCompileShader(s);
-      GLint ok = 0;
-      glGetShaderiv(s, GL_COMPILE_STATUS, &ok);
-      if (!ok) throw std::runtime_error("overlay shader does not compile");
-      return s;
-    };
-    const GLuint v = compile(GL_VERTEX_SHADER, vs), f = compile(GL_FRAGMENT_SHADER, fs);
-    program_ = glCreateProgram();
-    glAttachShader(program_, v);
-    glAttachShader(program_, f);
-    glLinkProgram(program_);
-    glDeleteShader(v);
-    glDeleteShader(f);
-    GLint ok = 0;
-    glGetProgramiv(program_, GL_LINK_STATUS, &ok);
-    if (!ok) throw std::runtime_error("overlay program does not link");
+    program_ = render::linkProgram(vs, fs, "viewer overlay");
     glGenVertexArrays(1, &vao_);
     glGenTextures(1, &texture_);
     glBindTexture(GL_TEXTURE_2D, texture_);
@@ -202,25 +185,7 @@ void main() {
   o_color = vec4(v_color * (r2 > 0.12 ? 0.55 : 1.0), 1.0);
 }
 )";
-    auto compile = [](GLenum type, const char* src) {
-      const GLuint sh = glCreateShader(type);
-      glShaderSource(sh, 1, &src, nullptr);
-      glCompileShader(sh);
-      GLint ok = 0;
-      glGetShaderiv(sh, GL_COMPILE_STATUS, &ok);
-      if (!ok) throw std::runtime_error("marker shader does not compile");
-      return sh;
-    };
-    const GLuint v = compile(GL_VERTEX_SHADER, vs), f = compile(GL_FRAGMENT_SHADER, fs);
-    program_ = glCreateProgram();
-    glAttachShader(program_, v);
-    glAttachShader(program_, f);
-    glLinkProgram(program_);
-    glDeleteShader(v);
-    glDeleteShader(f);
-    GLint ok = 0;
-    glGetProgramiv(program_, GL_LINK_STATUS, &ok);
-    if (!ok) throw std::runtime_error("marker program does not link");
+    program_ = render::linkProgram(vs, fs, "viewer marker");
     glGenVertexArrays(1, &vao_);
     glGenBuffers(1, &vbo_);
     glBindVertexArray(vao_);
