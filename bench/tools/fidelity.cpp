@@ -45,6 +45,7 @@
 #include <memory>
 #include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace {
@@ -315,15 +316,12 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
     }
     excess.push_back((e_budget[i] - e_conv[i]) / e_conv[i]);
   }
-  const auto absolute = [](std::vector<double> v) {
+  // |V/V_rest - 1| per frame: its percentiles, whose max is the largest change.
+  const auto volume_percentiles = [](std::vector<double> v) {
     for (double& d : v) d = std::abs(d);
-    return v;
+    return percentiles(std::move(v));
   };
-  const auto absmax = [](const std::vector<double>& v) {
-    double m = 0.0;
-    for (const double d : v) m = std::max(m, std::abs(d));
-    return m;
-  };
+  const Percentiles volume = volume_percentiles(volume_budget);
   nlohmann::json run = {
       {"clip", clip_name},
       {"iterations", k},
@@ -337,9 +335,9 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
       {"inverted_body_tets_max_frame", inverted_budget_max_frame},
       {"frames_with_inverted_body_tets", inverted_budget_frames},
       {"inverted_body_tets_converged_max", inverted_conv_max},
-      {"volume_change", toJson(percentiles(absolute(volume_budget)))},
-      {"volume_change_max", absmax(volume_budget)},
-      {"volume_change_converged_max", absmax(volume_conv)},
+      {"volume_change", toJson(volume)},
+      {"volume_change_max", volume.max},
+      {"volume_change_converged_max", volume_percentiles(volume_conv).max},
       {"reference_iterations", toJson(percentiles(ref_iterations))},
       {"frames_held", held},
       {"frames_with_predicted_markers", predicted},
