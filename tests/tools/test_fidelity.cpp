@@ -288,6 +288,33 @@ TEST_F(FidelityTool, TheVolumeTermKeepsTheVolume) {
   EXPECT_NE(bad_guard.err.find("--inversion-guard"), std::string::npos) << bad_guard.err;
 }
 
+// A rig's own per-tet volume weights (the description's `volume`, section VOLW) reach both the live
+// rig and the tool's exact energy: a rig whose every tet carries w 0.6 measures exactly as the plain
+// rig with --volume-weight 0.6, reference frame by reference frame (if the exact energy ignored the
+// rig's weights, its energies would be the plain ones).
+TEST_F(FidelityTool, TheRigsOwnVolumeWeightsAreMeasured) {
+  const TempDir dir;
+  Rig weighted = loadRigFile(*rig_);
+  weighted.setup.volume_weights.assign(static_cast<std::size_t>(weighted.tet_mesh.tetCount()), 0.6);
+  const auto weighted_rig = dir.writeBytes("weighted.rig", serializeRig(weighted));
+  const auto by_option = dir.path() / "option.json", by_rig = dir.path() / "rig.json", plain = dir.path() / "plain.json";
+  const std::string args = "' --c3d '" + clip_->string() + "' --first-frame 400 --frames 40 --reference-every 20 --iterations 3 -q ";
+  ASSERT_EQ(fidelity("--rig '" + rig_->string() + args + "--volume-weight 0.6 --json '" + by_option.string() + "'", dir).status, 0);
+  ASSERT_EQ(fidelity("--rig '" + weighted_rig.string() + args + "--json '" + by_rig.string() + "'", dir).status, 0);
+  ASSERT_EQ(fidelity("--rig '" + rig_->string() + args + "--json '" + plain.string() + "'", dir).status, 0);
+  const nlohmann::json a = readJson(by_option)["runs"][0]["reference"];
+  const nlohmann::json b = readJson(by_rig)["runs"][0]["reference"];
+  const nlohmann::json p = readJson(plain)["runs"][0]["reference"];
+  ASSERT_EQ(a.size(), 2u);
+  ASSERT_EQ(b.size(), a.size());
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    for (const char* key : {"energy", "energy_converged", "rms_mm", "volume_change"}) {
+      EXPECT_EQ(a[i][key].get<double>(), b[i][key].get<double>()) << key << ", reference frame " << a[i]["frame"];
+    }
+    EXPECT_NE(p[i]["energy_converged"].get<double>(), b[i]["energy_converged"].get<double>());  // the term is there at all
+  }
+}
+
 TEST_F(FidelityTool, BadArgumentsExitNonZeroWithOneLine) {
   const TempDir dir;
   const ToolRun r = fidelity(common() + "--iterations 0,3", dir);
