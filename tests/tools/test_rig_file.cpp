@@ -708,14 +708,15 @@ TEST(RigBuild, ARegionDrivenByMarkersIsBuiltSavedAndLoaded) {
 // VOLW section; bad weights stop the parse, the writer and the loader (behind a valid checksum).
 TEST(RigBuild, VolumeRegionsAreBuiltSavedAndLoaded) {
   TempDir dir;
-  const auto build = [&](const std::string& volume) {
+  const auto build = [&](const std::string& volume, bool coarse_level = false, rigbuild::BuildRigReport* report = nullptr) {
     std::string json = test::smallRigJson();
     json.insert(json.rfind('}'), R"(, "volume": )" + volume);
     rigbuild::BuildRigInputs in;
     in.mesh = test::writeBlockTetMesh(dir, "block");
     in.description = rigbuild::parseRigDescription(json, dir.path() / "small.json");
     in.clip = test::writeSmallClip(dir);
-    return rigbuild::buildRig(in);
+    in.coarse_level = coarse_level;
+    return rigbuild::buildRig(in, report);
   };
   // The block's left two thirds (x <= 0.2) at 0.6, then its left third (x <= 0.1) at 0.3.
   const Rig rig = build(R"([{"name": "left two thirds", "select": {"box": {"min": [-1, -1, -1], "max": [0.2001, 1, 1]}}, "value": 0.6},
@@ -739,6 +740,19 @@ TEST(RigBuild, VolumeRegionsAreBuiltSavedAndLoaded) {
   EXPECT_EQ(serializeRig(back), bytes);
   EXPECT_CONTAINS(rigbuild::describeRig(back, 0, false), "volume term:   on " + std::to_string(at_third + at_two_thirds) + " of " +
                                                              std::to_string(rig.tet_mesh.tetCount()) + " tets, weight up to 0.6");
+  // A region no tet fills stops the build, but a coarse level (few large tets) goes without it, noted.
+  const std::string tiny = R"([{"name": "tiny", "select": {"sphere": {"center": [0.15, 0.1, 0.1], "radius": 0.01}}, "value": 0.5}])";
+  try {
+    (void)build(tiny);
+    ADD_FAILURE() << "an empty volume region was accepted";
+  } catch (const rigbuild::RigBuildError& e) {
+    EXPECT_CONTAINS(std::string(e.what()), "volume 'tiny': the selection contains no tet vertex");
+  }
+  rigbuild::BuildRigReport coarse_report;
+  EXPECT_TRUE(build(tiny, true, &coarse_report).setup.volume_weights.empty());
+  const auto noted = std::find_if(coarse_report.notes.begin(), coarse_report.notes.end(),
+                                  [](const std::string& n) { return n.starts_with("volume 'tiny': no coarse tet"); });
+  EXPECT_NE(noted, coarse_report.notes.end());
   // Without volume regions: no section, and the description says nothing of a volume term.
   const Rig plain = test::buildSmallRig(dir);
   EXPECT_TRUE(plain.setup.volume_weights.empty());

@@ -170,7 +170,8 @@ std::int32_t nearestTetVertex(const Context& ctx, const Eigen::Vector3d& p) {
   return best;
 }
 
-std::vector<std::uint8_t> resolveVertices(const Context& ctx, const Selection& s, const std::string& what) {
+// The tet vertices a selection names (as a mask); none is an error unless may_be_empty.
+std::vector<std::uint8_t> resolveVertices(const Context& ctx, const Selection& s, const std::string& what, bool may_be_empty = false) {
   const std::int32_t nv = ctx.body->vertexCount();
   std::vector<std::uint8_t> mask(static_cast<std::size_t>(nv), 0);
   auto inside = [&](auto pred) {
@@ -239,15 +240,15 @@ std::vector<std::uint8_t> resolveVertices(const Context& ctx, const Selection& s
       for (const std::int32_t f : unkept) mask[static_cast<std::size_t>(nearestTetVertex(ctx, ctx.fine->row(f).transpose()))] = 1;
     }
   }
-  if (std::find(mask.begin(), mask.end(), 1) == mask.end()) {
+  if (!may_be_empty && std::find(mask.begin(), mask.end(), 1) == mask.end()) {
     throw RigBuildError(what + ": the selection contains no tet vertex: enlarge it");
   }
   return mask;
 }
 
-// The body tets with at least s.min_corners corners in the selection (maybe none).
-std::vector<std::int32_t> selectTets(const Context& ctx, const Selection& s, const std::string& what) {
-  std::vector<std::uint8_t> mask = resolveVertices(ctx, s, what);
+// The body tets with at least s.min_corners corners in the selection (maybe none, if may_be_empty).
+std::vector<std::int32_t> selectTets(const Context& ctx, const Selection& s, const std::string& what, bool may_be_empty) {
+  std::vector<std::uint8_t> mask = resolveVertices(ctx, s, what, may_be_empty);
   // A selection of surface vertices reaches TetGen's interior points under it (extendSelectionInward).
   if (!ctx.tet_input && (s.kind == Selection::Kind::kVertices || s.kind == Selection::Kind::kSelFile)) {
     std::vector<std::uint8_t> is_surface(mask.size(), 0);
@@ -266,7 +267,7 @@ std::vector<std::int32_t> selectTets(const Context& ctx, const Selection& s, con
 }
 
 std::vector<std::int32_t> resolveTets(const Context& ctx, const Selection& s, const std::string& what) {
-  std::vector<std::int32_t> tets = selectTets(ctx, s, what);
+  std::vector<std::int32_t> tets = selectTets(ctx, s, what, false);
   if (tets.empty()) {
     throw RigBuildError(what + ": no tet has " + std::to_string(s.min_corners) +
                         " corners in the selection: enlarge it or lower min_corners");
@@ -763,8 +764,9 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
     const std::string who = "volume '" + n.name + "'";
     // The coarse level's few large tets may miss a small region: it then goes without it (the
     // term is a refinement; the fine level has it).
-    const std::vector<std::int32_t> tets = inputs.coarse_level ? selectTets(ctx, n.select, who) : resolveTets(ctx, n.select, who);
-    if (tets.empty()) report.notes.push_back(who + ": no coarse tet has " + std::to_string(n.select.min_corners) + " corners in it; the coarse level has no volume term there");
+    const std::vector<std::int32_t> tets = inputs.coarse_level ? selectTets(ctx, n.select, who, true) : resolveTets(ctx, n.select, who);
+    if (tets.empty()) report.notes.push_back(who + ": no coarse tet has " + std::to_string(n.select.min_corners) +
+                                               " corners in it; the coarse level has no volume term there");
     for (const std::int32_t t : tets) volume[static_cast<std::size_t>(t)] = n.value;
   }
 
