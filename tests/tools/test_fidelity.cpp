@@ -21,6 +21,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <memory>
@@ -204,6 +205,66 @@ TEST_F(FidelityTool, FeetDrivenByTheirMarkersTurnWithThem) {
   std::printf("frame 400, right foot against its markers: %.1f degrees plain, %.1f driven\n", plain_deg, feet_deg);
   EXPECT_GT(plain_deg, 30.0);
   EXPECT_LT(feet_deg, 5.0);
+}
+
+// assets/human_man_fitted.json (docs/fidelity.md, "A volume term at the knees and elbows"): its
+// volume boxes hold the joints they name on this mesh and marker fit (the knee markers in the knee
+// band, each elbow marker in its elbow box), the knee tets take 0.5 and the elbow tets 0.3, nothing
+// else takes the term, and the binding is the stiff one it asks for (stiffness 1, up to 6 faces).
+TEST_F(FidelityTool, TheFittedAssetPutsItsVolumeTermAtTheJoints) {
+  rigbuild::BuildRigInputs in;
+  in.mesh = test::dataPath("meshes/odedstein-meshes/human_man.obj");
+  in.clip = *clip_;
+  in.tet_vertices = 800;
+  in.max_marker_distance = 0.15;
+  in.check_deformer = false;
+  in.description = rigbuild::readRigDescription(std::filesystem::path(TETRIG_SOURCE_DIR) / "assets" / "human_man_fitted.json");
+  const Rig rig = rigbuild::buildRig(in);
+  const auto marker = [&](const char* label) {
+    for (const RigMarker& m : rig.markers)
+      if (m.label == label) return m.rest_position;
+    ADD_FAILURE() << label << " is not a marker of the rig";
+    return Eigen::Vector3d(0, 0, 0);
+  };
+  for (const char* knee : {"LKNE", "RKNE"}) {
+    EXPECT_GT(marker(knee).y(), 0.30) << knee;
+    EXPECT_LT(marker(knee).y(), 0.60) << knee;
+  }
+  for (const char* elbow : {"LELB", "RELB"}) {
+    EXPECT_GT(std::abs(marker(elbow).x()), 0.38) << elbow;
+    EXPECT_LT(std::abs(marker(elbow).x()), 0.56) << elbow;
+    EXPECT_GT(marker(elbow).y(), 1.1) << elbow;
+    EXPECT_LT(marker(elbow).y(), 1.7) << elbow;
+  }
+  EXPECT_GT(marker("LELB").x(), 0.0);  // left is +x on this mesh, as the left_elbow box says
+  ASSERT_EQ(rig.setup.volume_weights.size(), static_cast<std::size_t>(rig.tet_mesh.tetCount()));
+  int knees = 0, elbows = 0;
+  for (std::int32_t t = 0; t < rig.tet_mesh.tetCount(); ++t) {
+    const double w = rig.setup.volume_weights[static_cast<std::size_t>(t)];
+    if (w == 0.0) continue;
+    ASSERT_LT(t, rig.body_tet_count) << "an invisible tet took the volume term";
+    Eigen::Vector3d c = Eigen::Vector3d::Zero();
+    for (int k = 0; k < 4; ++k) c += 0.25 * rig.tet_mesh.vertices.row(rig.tet_mesh.tets(t, k)).transpose();
+    if (w == 0.5) {
+      ++knees;
+      EXPECT_TRUE(c.y() > 0.25 && c.y() < 0.65) << "tet " << t << " at height " << c.y();
+    } else {
+      ++elbows;
+      EXPECT_EQ(w, 0.3);
+      EXPECT_TRUE(std::abs(c.x()) > 0.33 && std::abs(c.x()) < 0.61 && c.y() > 1.05 && c.y() < 1.75) << "tet " << t;
+    }
+  }
+  std::printf("fitted asset, 800 tet vertices: volume term on %d knee and %d elbow tets of %d body tets\n", knees, elbows,
+              rig.body_tet_count);
+  EXPECT_GT(knees, 0);
+  EXPECT_GT(elbows, 0);
+  EXPECT_LT(knees + elbows, rig.body_tet_count / 3);
+  for (std::int32_t t = rig.body_tet_count; t < rig.tet_mesh.tetCount(); ++t) {
+    ASSERT_EQ(rig.setup.stiffness.empty() ? 1.0 : rig.setup.stiffness[static_cast<std::size_t>(t)], 1.0) << "invisible tet " << t;
+  }
+  int most_faces = 0;  // faces_per_marker 6 (the default binds 3)
+  for (const RigMarker& m : rig.markers) most_faces = std::max(most_faces, m.bound_faces);
+  EXPECT_EQ(most_faces, 6);
 }
 
 TEST_F(FidelityTool, TemporalPredictionLandsNearerThanThePlainWarmStart) {
