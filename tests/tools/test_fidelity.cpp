@@ -75,6 +75,17 @@ class FidelityTool : public ::testing::Test {
     TETRIG_REQUIRE_DATA(clip, "mocap/hdm05/HDM_mm_01-02_03_120.c3d");
     ASSERT_NE(rig_, nullptr);
   }
+  // The fixture's 800-tet-vertex SMPL rig built with a rig description from assets/.
+  static Rig withAsset(const char* description) {
+    rigbuild::BuildRigInputs in;
+    in.mesh = test::dataPath("meshes/odedstein-meshes/human_man.obj");
+    in.clip = *clip_;
+    in.tet_vertices = 800;
+    in.max_marker_distance = 0.15;
+    in.check_deformer = false;
+    in.description = rigbuild::readRigDescription(std::filesystem::path(TETRIG_SOURCE_DIR) / "assets" / description);
+    return rigbuild::buildRig(in);
+  }
   static std::string common() {
     return "--rig '" + rig_->string() + "' --c3d '" + clip_->string() + "' --frames 240 --reference-every 20 -q ";
   }
@@ -150,14 +161,7 @@ TEST_F(FidelityTool, MoreIterationsLandNearerAndTheReferenceIsConverged) {
 // the 800-vertex rig, frames 0-400 at 3 iterations through the live rig: 40.6 degrees plain,
 // 0.0 driven (the measured vertices are the region's, which takes the markers' fit exactly).
 TEST_F(FidelityTool, FeetDrivenByTheirMarkersTurnWithThem) {
-  rigbuild::BuildRigInputs in;
-  in.mesh = test::dataPath("meshes/odedstein-meshes/human_man.obj");
-  in.clip = *clip_;
-  in.tet_vertices = 800;
-  in.max_marker_distance = 0.15;
-  in.check_deformer = false;
-  in.description = rigbuild::readRigDescription(std::filesystem::path(TETRIG_SOURCE_DIR) / "assets" / "human_man_feet.json");
-  const Rig feet = rigbuild::buildRig(in);
+  const Rig feet = withAsset("human_man_feet.json");
   ASSERT_EQ(feet.marker_regions.size(), 2u);
   const Rig plain = loadRigFile(*rig_);
   const auto clip = drivers::C3DClip::load(*clip_);
@@ -212,14 +216,7 @@ TEST_F(FidelityTool, FeetDrivenByTheirMarkersTurnWithThem) {
 // band, each elbow marker in its elbow box), the knee tets take 0.5 and the elbow tets 0.3, nothing
 // else takes the term, and the binding is the stiff one it asks for (stiffness 1, up to 6 faces).
 TEST_F(FidelityTool, TheFittedAssetPutsItsVolumeTermAtTheJoints) {
-  rigbuild::BuildRigInputs in;
-  in.mesh = test::dataPath("meshes/odedstein-meshes/human_man.obj");
-  in.clip = *clip_;
-  in.tet_vertices = 800;
-  in.max_marker_distance = 0.15;
-  in.check_deformer = false;
-  in.description = rigbuild::readRigDescription(std::filesystem::path(TETRIG_SOURCE_DIR) / "assets" / "human_man_fitted.json");
-  const Rig rig = rigbuild::buildRig(in);
+  const Rig rig = withAsset("human_man_fitted.json");
   const auto marker = [&](const char* label) {
     for (const RigMarker& m : rig.markers)
       if (m.label == label) return m.rest_position;
