@@ -12,6 +12,9 @@
 //   _coarse_relaxed, _coarse_predicted_relaxed: with the coarse level too (tetrig/coarse_level.hpp:
 //   the same mesh and markers built with 150 tet vertices, 5 coarse iterations per frame, counted
 //   in the frame and in step_us; coarse_us is its share).
+//   _volume: with the volume term (w 0.5) on every tet; _joint_volume: w 0.5 on the body tets of the
+//   knees and elbows only (DeformerSetup::volume_weights; the boxes of assets/human_man_fitted.json,
+//   by rest centroid; the cost does not depend on w, only on which blocks of tets have one).
 //   BM_LiveRigFrame/smpl_hdm05: the same frames through the live path's own per-frame call,
 //   LiveRig::processFrame (clip frame as the C3D playback source fills it -> labels bound once ->
 //   targets incl. occlusion prediction -> step(3) -> pose transfer into a float buffer, what
@@ -112,11 +115,30 @@ bool markerTarget(const RigScene& scene, std::size_t frame, std::size_t m, Eigen
   return true;
 }
 
-void rigFrame(benchmark::State& state, double extrapolation, double relaxation = 1.0, bool with_coarse = false) {
+enum class Volume { kNone, kEverywhere, kJoints };
+
+// Per-tet volume weights w on the body tets whose rest centroid lies in the knee band or an elbow
+// box of assets/human_man_fitted.json (rig units, the SMPL's T-pose).
+std::vector<double> jointVolumeWeights(const tetrig::Rig& rig, double w) {
+  std::vector<double> weights(static_cast<std::size_t>(rig.tet_mesh.tetCount()), 0.0);
+  for (std::int32_t t = 0; t < rig.body_tet_count; ++t) {
+    Eigen::Vector3d c = Eigen::Vector3d::Zero();
+    for (int k = 0; k < 4; ++k) c += 0.25 * rig.tet_mesh.vertices.row(rig.tet_mesh.tets(t, k)).transpose();
+    const bool knee = c.y() >= 0.30 && c.y() <= 0.60;
+    const bool elbow = std::abs(c.x()) >= 0.38 && std::abs(c.x()) <= 0.56 && c.y() >= 1.1 && c.y() <= 1.7;
+    if (knee || elbow) weights[static_cast<std::size_t>(t)] = w;
+  }
+  return weights;
+}
+
+void rigFrame(benchmark::State& state, double extrapolation, double relaxation = 1.0, bool with_coarse = false,
+              Volume volume = Volume::kNone) {
   const RigScene* scene = sceneOrSkip(state);
   if (scene == nullptr) return;
   const tetrig::Rig& rig = scene->rig;
   tetrig::DeformerSetup setup = rig.setup;
+  if (volume == Volume::kEverywhere) setup.options.volume_weight = 0.5;
+  if (volume == Volume::kJoints) setup.volume_weights = jointVolumeWeights(rig, 0.5);
   setup.options.padded_positions = true;  // the input of applyPoseTransferPadded
   setup.options.rotation_extrapolation = extrapolation;
   setup.options.rotation_relaxation = relaxation;
@@ -188,6 +210,10 @@ void BM_RigFrame(benchmark::State& state) { rigFrame(state, 0.0); }
 BENCHMARK(BM_RigFrame)->Name("BM_RigFrame/smpl_hdm05")->Unit(benchmark::kMicrosecond);
 // The same with the temporal prediction of the warm start (DeformerOptions::rotation_extrapolation = 1,
 // issue #12): what it adds to a frame.
+void BM_RigFrameVolume(benchmark::State& state) { rigFrame(state, 0.0, 1.0, false, Volume::kEverywhere); }
+BENCHMARK(BM_RigFrameVolume)->Name("BM_RigFrame/smpl_hdm05_volume")->Unit(benchmark::kMicrosecond);
+void BM_RigFrameJointVolume(benchmark::State& state) { rigFrame(state, 0.0, 1.0, false, Volume::kJoints); }
+BENCHMARK(BM_RigFrameJointVolume)->Name("BM_RigFrame/smpl_hdm05_joint_volume")->Unit(benchmark::kMicrosecond);
 void BM_RigFramePredicted(benchmark::State& state) { rigFrame(state, 1.0); }
 BENCHMARK(BM_RigFramePredicted)->Name("BM_RigFrame/smpl_hdm05_predicted")->Unit(benchmark::kMicrosecond);
 // With the over-relaxation of the rotation update (DeformerOptions::rotation_relaxation = 1.8, the live

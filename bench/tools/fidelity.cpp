@@ -86,19 +86,26 @@ struct PoseMeasure {
 
 class Measurer {
  public:
-  // volume_weight: the energy is that of the volume term's deformer (DeformerOptions::volume_weight),
-  // a_j [(1 - w) ||F_j - R_j||^2 + w ||F_j - T_j||^2], rigid-group tets plain.
+  // volume_weight: the energy is that of the volume term's deformer (DeformerOptions::volume_weight,
+  // a floor under the rig's per-tet weights: tetrig::tetVolumeWeights),
+  // a_j [(1 - w_j) ||F_j - R_j||^2 + w_j ||F_j - T_j||^2], rigid-group tets plain.
   // guard, threshold: the inversion guard's (DeformerOptions::inversion_guard) extra a alpha ||F - R||^2
   // on body tets squashed below the threshold.
   Measurer(const Rig& rig, double volume_weight, double guard, double threshold)
       : rig_(rig), frames_(tetrig::computeRestFrames(rig.tet_mesh)),
         weights_(tetrig::tetWeights(frames_, rig.setup.stiffness)),
-        volume_weight_(static_cast<std::size_t>(rig.tet_mesh.tetCount()), volume_weight),
+        volume_weight_(volumeWeights(rig, volume_weight)),
         guard_(static_cast<std::size_t>(rig.tet_mesh.tetCount()), 0.0), guard_threshold_(threshold) {
     for (std::int32_t t = 0; t < rig.body_tet_count; ++t) guard_[static_cast<std::size_t>(t)] = guard;
     for (const auto& group : rig.setup.rigid_groups)
-      for (const std::int32_t t : group.tets) volume_weight_[static_cast<std::size_t>(t)] = guard_[static_cast<std::size_t>(t)] = 0.0;
+      for (const std::int32_t t : group.tets) guard_[static_cast<std::size_t>(t)] = 0.0;
     fine_rest_volume_ = fineVolume(rig.fine_vertices.data());
+  }
+
+  static std::vector<double> volumeWeights(const Rig& rig, double volume_weight) {
+    tetrig::DeformerSetup setup = rig.setup;
+    setup.options.volume_weight = volume_weight;
+    return tetrig::tetVolumeWeights(setup, rig.tet_mesh.tetCount());
   }
 
   PoseMeasure measure(std::span<const double> x, bool energy) const {

@@ -115,6 +115,10 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   if ((in.byte() & 3u) == 0) {
     for (std::int32_t t = 0; t < tet_count; ++t) setup.stiffness.push_back(in.byte() < 4 ? in.rawDouble() : 0.1 + in.byte());
   }
+  if ((flags & 128u) != 0) {  // per-tet volume weights (a rig's volume regions), rarely out of [0, 1) or of the wrong count
+    const std::int32_t n = tet_count + (in.byte() == 0 ? 1 : 0);
+    for (std::int32_t t = 0; t < n; ++t) setup.volume_weights.push_back(in.byte() < 4 ? in.rawDouble() : in.byte() / 256.0);
+  }
 
   std::unique_ptr<tetrig::Deformer> deformer;
   try {

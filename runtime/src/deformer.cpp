@@ -35,6 +35,24 @@ void checkTetIndex(std::int32_t t, std::int32_t tet_count, const std::string& wh
 
 }  // namespace
 
+std::vector<double> tetVolumeWeights(const DeformerSetup& setup, std::int32_t tet_count) {
+  const double floor = setup.options.volume_weight;
+  if (!(floor >= 0.0 && floor < 1.0)) fail("volume_weight must be in [0, 1)");
+  if (!setup.volume_weights.empty() && setup.volume_weights.size() != static_cast<size_t>(tet_count)) {
+    fail("volume_weights has " + std::to_string(setup.volume_weights.size()) + " values for " + std::to_string(tet_count) + " tets");
+  }
+  std::vector<double> w(static_cast<size_t>(tet_count), setup.options.update_rotations ? floor : 0.0);
+  for (size_t t = 0; t < setup.volume_weights.size(); ++t) {
+    const double v = setup.volume_weights[t];
+    if (!(v >= 0.0 && v < 1.0)) fail("volume weight of tet " + std::to_string(t) + " is not in [0, 1)");
+    if (setup.options.update_rotations) w[t] = std::max(w[t], v);
+  }
+  for (const RigidGroup& g : setup.rigid_groups)
+    for (const std::int32_t t : g.tets)
+      if (t >= 0 && t < tet_count) w[static_cast<size_t>(t)] = 0.0;
+  return w;
+}
+
 Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(setup.options) {
   vertex_count_ = mesh.vertexCount();
   tet_count_ = mesh.tetCount();
@@ -303,7 +321,10 @@ Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(s
     for (std::int32_t t = 0; t < count; ++t)
       if (!grouped[static_cast<size_t>(t)]) slots[static_cast<size_t>(slotOfTet(t))] = static_cast<float>(value);
   };
-  if (options_.volume_weight > 0.0 && options_.update_rotations) perSlot(volume_weight_, options_.volume_weight, tet_count_);
+  if (const std::vector<double> w = tetVolumeWeights(setup, tet_count_); std::any_of(w.begin(), w.end(), [](double x) { return x > 0.0; })) {
+    volume_weight_.assign(static_cast<size_t>(block_count) * kTetBlockWidth, 0.0f);
+    for (std::int32_t t = 0; t < tet_count_; ++t) volume_weight_[static_cast<size_t>(slotOfTet(t))] = static_cast<float>(w[static_cast<size_t>(t)]);
+  }
   if (options_.inversion_guard > 0.0 && options_.update_rotations) {
     perSlot(guard_, options_.inversion_guard,
             setup.guarded_tet_count < 0 ? tet_count_ : std::min(setup.guarded_tet_count, tet_count_));

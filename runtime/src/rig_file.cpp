@@ -15,6 +15,7 @@
 #include <fstream>
 #include <limits>
 #include <sstream>
+#include <stdexcept>
 #include <string_view>
 #include <type_traits>
 #include <unordered_map>
@@ -52,6 +53,7 @@ constexpr std::uint32_t kTagOptions = tag("OPTS");
 constexpr std::uint32_t kTagPoseSensors = tag("PSNS");
 constexpr std::uint32_t kTagCoarse = tag("CRSE");  // the coarse level: a whole rig file (its own header and checksum)
 constexpr std::uint32_t kTagMarkerRegions = tag("MKRG");  // regions driven by marker clusters
+constexpr std::uint32_t kTagVolumeWeights = tag("VOLW");  // per-tet volume-term weights (DeformerSetup::volume_weights)
 constexpr std::size_t kPoseSensorMinBytes = 4 + 4 + 1 + 1 + 8;  // empty label, region, mode, buttons, scale
 
 constexpr std::array<std::uint32_t, 13> kRequiredTags = {
@@ -304,6 +306,14 @@ std::string validateRig(const Rig& rig) {
       if (!(s.stiffness[t] > 0.0) || !std::isfinite(s.stiffness[t])) return "stiffness of tet " + num(t) + " is not a positive number";
     }
   }
+  if (!s.volume_weights.empty()) {
+    if (s.volume_weights.size() != static_cast<std::size_t>(nt)) {
+      return "volume weights has " + num(s.volume_weights.size()) + " values for " + num(nt) + " tets";
+    }
+    for (std::size_t t = 0; t < s.volume_weights.size(); ++t) {
+      if (!(s.volume_weights[t] >= 0.0 && s.volume_weights[t] < 1.0)) return "volume weight of tet " + num(t) + " is not in [0, 1)";
+    }
+  }
   if (rig.vertex_handle_names.size() != s.vertex_handles.size() || rig.region_handle_names.size() != s.region_handles.size() ||
       rig.point_handle_names.size() != s.point_handles.size() || rig.rigid_group_names.size() != s.rigid_groups.size()) {
     return "the handle name lists do not match the handle counts";
@@ -474,7 +484,8 @@ std::vector<std::uint8_t> serializeRig(const Rig& rig) {
   Writer out;
   // Header and table placeholders; filled at the end.
   const std::size_t section_count =
-      kRequiredTags.size() + (rig.pose_sensors.empty() ? 0 : 1) + (rig.marker_regions.empty() ? 0 : 1) + (rig.coarse ? 1 : 0);
+      kRequiredTags.size() + (rig.pose_sensors.empty() ? 0 : 1) + (rig.marker_regions.empty() ? 0 : 1) +
+      (rig.setup.volume_weights.empty() ? 0 : 1) + (rig.coarse ? 1 : 0);
   out.bytes().resize(kHeaderBytes + section_count * kTableEntryBytes, 0);
   {
     Writer w;
@@ -630,8 +641,17 @@ std::vector<std::uint8_t> serializeRig(const Rig& rig) {
     }
     writeSection(out, table, kTagMarkerRegions, w.bytes());
   }
+  if (!rig.setup.volume_weights.empty()) {
+    Writer w;
+    w.count(rig.setup.volume_weights.size(), "volume weights");
+    for (const double x : rig.setup.volume_weights) w.f64(x);
+    writeSection(out, table, kTagVolumeWeights, w.bytes());
+  }
   if (rig.coarse) writeSection(out, table, kTagCoarse, serializeRig(*rig.coarse));
   // No padding after the last section: the file ends where it does.
+  if (table.size() != section_count) {  // a section written but not counted above (or the reverse)
+    throw std::logic_error("rig file: wrote " + std::to_string(table.size()) + " sections, counted " + std::to_string(section_count));
+  }
   std::vector<std::uint8_t>& bytes = out.bytes();
   // Section table.
   for (std::size_t i = 0; i < table.size(); ++i) {
@@ -947,6 +967,13 @@ Rig parseRigAt(std::span<const std::uint8_t> bytes, std::string_view source_name
     }
     c.end();
   }
+  if (has_section(kTagVolumeWeights)) {
+    Cursor c = section(kTagVolumeWeights);
+    const std::size_t n = c.count("volume weights", 8);
+    rig.setup.volume_weights.resize(n);
+    for (double& x : rig.setup.volume_weights) x = c.f64("volume weight");
+    c.end();
+  }
   if (has_section(kTagCoarse)) {
     if (nested) fail("the coarse level has a coarse level of its own (section CRSE)");
     for (const Entry& e : entries) {
@@ -974,7 +1001,7 @@ std::int64_t rigMemoryBytes(const Rig& rig) {
   bytes += rig.fine_vertices.size() * 8 + rig.fine_triangles.size() * 4;
   bytes += rig.pose_transfer.bytes();
   bytes += static_cast<std::int64_t>(rig.setup.vertex_handles.size() * 4 + rig.setup.point_handles.size() * 40 +
-                                     rig.setup.stiffness.size() * 8 + rig.markers.size() * sizeof(RigMarker) +
+                                     (rig.setup.stiffness.size() + rig.setup.volume_weights.size()) * 8 + rig.markers.size() * sizeof(RigMarker) +
                                      rig.pose_sensors.size() * sizeof(RigPoseSensor));
   for (const RigMarkerRegion& mr : rig.marker_regions) bytes += static_cast<std::int64_t>(8 + mr.markers.size() * 4);
   for (const RegionHandle& r : rig.setup.region_handles) bytes += static_cast<std::int64_t>(r.tets.size() * 4);

@@ -540,7 +540,26 @@ __attribute__((noinline, cold)) void fixExactRotations(TetBlock* blocks, std::in
   }
 }
 
-// The pass over all blocks (kRelax: with over-relaxation; kVolume: with the volume term).
+// passBlocks, with the volume term only when some lane of these N blocks has a weight: a rig's
+// volume regions leave most blocks without, and those take the plain pass (the same result as
+// w = 0, for less work).
+template <int N, bool kRelax, bool kVolume>
+TETRIG_INLINE void passBlocksWeighted(TetBlock* blocks, const double* u, float* delta, int steps, float relax,
+                                      const float* volume_weight, const float* guard, float guard_threshold, Lanes (&energy)[2],
+                                      std::uint16_t* exact_lanes, std::int64_t& flagged) {
+  bool any = false;
+  if constexpr (kVolume) {
+    for (int i = 0; i < N * W; ++i) any |= volume_weight[i] != 0.0f;
+  }
+  if (any) {
+    passBlocks<N, kRelax, true>(blocks, u, delta, steps, relax, volume_weight, guard, guard_threshold, energy, exact_lanes, flagged);
+  } else {
+    passBlocks<N, kRelax, false>(blocks, u, delta, steps, relax, nullptr, guard, guard_threshold, energy, exact_lanes, flagged);
+  }
+}
+
+// The pass over all blocks (kRelax: with over-relaxation; kVolume: with the volume term, on the
+// blocks that have a weight).
 template <bool kRelax, bool kVolume>
 TETRIG_INLINE void passAll(TetBlock* blocks, std::int32_t block_count, const double* u, float* delta, int steps, float relax,
                            const float* volume_weight, const float* guard, float guard_threshold,
@@ -558,16 +577,16 @@ TETRIG_INLINE void passAll(TetBlock* blocks, std::int32_t block_count, const dou
       const char* next = reinterpret_cast<const char*>(blocks + b + 2);
 #pragma GCC unroll 64
       for (std::size_t line = 0; line < 2 * sizeof(TetBlock); line += 64) __builtin_prefetch(next + line);
-      passBlocks<2, kRelax, kVolume>(blocks + b, u, delta, steps, relax, weights(b), guards(b), guard_threshold, energy,
-                                        exact_lanes + b, flagged);
+      passBlocksWeighted<2, kRelax, kVolume>(blocks + b, u, delta, steps, relax, weights(b), guards(b), guard_threshold, energy,
+                                             exact_lanes + b, flagged);
     }
   }
   for (; b + 2 <= block_count; b += 2)
-    passBlocks<2, kRelax, kVolume>(blocks + b, u, delta, steps, relax, weights(b), guards(b), guard_threshold, energy,
-                                        exact_lanes + b, flagged);
+    passBlocksWeighted<2, kRelax, kVolume>(blocks + b, u, delta, steps, relax, weights(b), guards(b), guard_threshold, energy,
+                                           exact_lanes + b, flagged);
   for (; b < block_count; ++b)
-    passBlocks<1, kRelax, kVolume>(blocks + b, u, delta, steps, relax, weights(b), guards(b), guard_threshold, energy,
-                                        exact_lanes + b, flagged);
+    passBlocksWeighted<1, kRelax, kVolume>(blocks + b, u, delta, steps, relax, weights(b), guards(b), guard_threshold, energy,
+                                           exact_lanes + b, flagged);
   double total = 0.0;
   for (int l = 0; l < kHalf; ++l) total += energy[0][l] + energy[1][l];
   stats.energy = total;

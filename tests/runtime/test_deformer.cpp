@@ -144,6 +144,84 @@ TEST(Deformer, VolumeTermKeepsTheVolumeOfASquashedBar) {
   EXPECT_LT(std::abs(kept), 0.5 * std::abs(half));
 }
 
+// Per-tet volume weights (DeformerSetup::volume_weights, a rig's volume regions): a bar squashed
+// to 75 % of its length with its ends and its middle cross-section held, so each half takes the same
+// squash on its own; the term (w 0.9) on the near half only. That half keeps its volume as the
+// whole bar with the term does; the far half loses what the plain bar loses. (Without the held
+// middle the weighted half, cheaper to squash at constant volume, would take the whole squash.)
+// Weights equal everywhere are the uniform option exactly; the option is a floor under them;
+// rigid groups and linear editing (no rotations) take none.
+TEST(Deformer, VolumeWeightsActOnlyOnTheirTets) {
+  const auto bar = scenes::makeBarScene(4, 4, 32);
+  const std::int32_t tets = bar.mesh.tetCount();
+  const auto zOf = [&](std::int32_t v) { return bar.mesh.vertices(v, 2) - bar.axis_point.z(); };
+  DeformerSetup plain = test::endVertexHandles(bar);
+  std::vector<Eigen::Vector3d> targets;
+  for (const std::int32_t v : plain.vertex_handles) targets.emplace_back(bar.mesh.vertices.row(v).transpose() - Eigen::Vector3d(0, 0, 0.25 * zOf(v)));
+  for (std::int32_t v = 0; v < bar.mesh.vertexCount(); ++v) {
+    if (std::abs(zOf(v) - 0.5 * bar.length) > 1e-9) continue;
+    plain.vertex_handles.push_back(v);
+    targets.emplace_back(bar.mesh.vertices.row(v).transpose() - Eigen::Vector3d(0, 0, 0.125 * bar.length));
+  }
+  ASSERT_EQ(targets.size(), bar.near_vertices.size() + bar.far_vertices.size() + 25u);  // a 4 x 4 section has 25 vertices
+  std::vector<char> near_half(static_cast<std::size_t>(tets), 0);
+  for (std::int32_t t = 0; t < tets; ++t) {
+    double z = 0.0;
+    for (int k = 0; k < 4; ++k) z += 0.25 * zOf(bar.mesh.tets(t, k));
+    near_half[static_cast<std::size_t>(t)] = z < 0.5 * bar.length;
+  }
+  // Volume change of each half (by rest centroid).
+  const auto halves = [&](const Vertices& x) {
+    const TetMesh deformed{x, bar.mesh.tets};
+    double rest[2] = {0, 0}, now[2] = {0, 0};
+    for (std::int32_t t = 0; t < tets; ++t) {
+      const int h = near_half[static_cast<std::size_t>(t)] ? 0 : 1;
+      rest[h] += signedVolume(bar.mesh, t);
+      now[h] += signedVolume(deformed, t);
+    }
+    return std::array<double, 2>{now[0] / rest[0] - 1.0, now[1] / rest[1] - 1.0};
+  };
+  const auto squash = [&](const DeformerSetup& setup, int iterations) {
+    Deformer deformer(bar.mesh, setup);
+    for (int i = 0; i < iterations; ++i) deformer.step(vertexTargets(targets), StepBudget{1});
+    return test::deformedVertices(deformer);
+  };
+  DeformerSetup uniform = plain;
+  uniform.options.volume_weight = 0.9;
+  DeformerSetup regional = plain;
+  regional.volume_weights.assign(static_cast<std::size_t>(tets), 0.0);
+  for (std::int32_t t = 0; t < tets; ++t) regional.volume_weights[static_cast<std::size_t>(t)] = near_half[static_cast<std::size_t>(t)] ? 0.9 : 0.0;
+  const auto p = halves(squash(plain, 2000)), u = halves(squash(uniform, 2000)), r = halves(squash(regional, 2000));
+  std::printf("bar squashed to 75 %% (middle held), volume change near / far half: %+.2f / %+.2f %% plain, %+.2f / %+.2f %% w 0.9 "
+              "everywhere, %+.2f / %+.2f %% w 0.9 on the near half\n", 100 * p[0], 100 * p[1], 100 * u[0], 100 * u[1], 100 * r[0], 100 * r[1]);
+  ASSERT_LT(p[0], -0.1) << "the squash must lose volume without the term for the test to mean anything";
+  EXPECT_LT(std::abs(r[0] - u[0]), 0.1 * std::abs(p[0]));  // the weighted half keeps its volume like the uniform term
+  EXPECT_LT(std::abs(u[0]), 0.3 * std::abs(p[0]));
+  EXPECT_LT(std::abs(r[1] - p[1]), 0.1 * std::abs(p[1]));  // the other half loses what the plain bar loses
+
+  // Equal weights everywhere are the uniform option, bit for bit.
+  DeformerSetup equal = plain;
+  equal.volume_weights.assign(static_cast<std::size_t>(tets), 0.9);
+  EXPECT_EQ(squash(equal, 40), squash(uniform, 40));
+  // The option is a floor: 0.5 under {0.9 near, 0 far} is {0.9 near, 0.5 far}.
+  DeformerSetup floored = regional;
+  floored.options.volume_weight = 0.5;
+  DeformerSetup explicit_max = regional;
+  for (double& w : explicit_max.volume_weights) w = std::max(w, 0.5);
+  EXPECT_EQ(squash(floored, 40), squash(explicit_max, 40));
+  EXPECT_NE(squash(floored, 40), squash(regional, 40));
+  // What each tet takes.
+  DeformerSetup grouped = floored;
+  grouped.rigid_groups = {RigidGroup{{0, 5}}};
+  const std::vector<double> w = tetVolumeWeights(grouped, tets);
+  for (std::int32_t t = 0; t < tets; ++t) {
+    const double expected = (t == 0 || t == 5) ? 0.0 : near_half[static_cast<std::size_t>(t)] ? 0.9 : 0.5;
+    ASSERT_EQ(w[static_cast<std::size_t>(t)], expected) << "tet " << t;
+  }
+  grouped.options.update_rotations = false;
+  for (const double x : tetVolumeWeights(grouped, tets)) ASSERT_EQ(x, 0.0);
+}
+
 // The inversion guard (DeformerOptions::inversion_guard): a surface vertex of a 4-thick bar pushed 2
 // units into it by a vertex handle. As rigid as possible, the converged pose inverts the tets
 // under it (measured: 4, smallest det F -0.04); with the guard (k 1, tau 0.5) the squashed tets
@@ -608,6 +686,16 @@ TEST(Deformer, SetupErrorsNameTheProblem) {
     bad_volume.options.volume_weight = w;
     EXPECT_NE(message(bad_volume).find("volume_weight must be in [0, 1)"), std::string::npos) << w;
   }
+  for (const double w : {-0.1, 1.0, std::numeric_limits<double>::quiet_NaN()}) {
+    DeformerSetup bad_volume = test::endVertexHandles(bar);
+    bad_volume.volume_weights.assign(static_cast<std::size_t>(bar.mesh.tetCount()), 0.5);
+    bad_volume.volume_weights[7] = w;
+    EXPECT_NE(message(bad_volume).find("volume weight of tet 7 is not in [0, 1)"), std::string::npos) << w;
+  }
+  DeformerSetup short_volume = test::endVertexHandles(bar);
+  short_volume.volume_weights.assign(3, 0.5);
+  EXPECT_NE(message(short_volume).find("volume_weights has 3 values for " + std::to_string(bar.mesh.tetCount()) + " tets"),
+            std::string::npos);
   for (const double k : {-0.1, 1.5, std::numeric_limits<double>::quiet_NaN()}) {
     DeformerSetup bad_guard = test::endVertexHandles(bar);
     bad_guard.options.inversion_guard = k;

@@ -346,9 +346,14 @@ TEST(RotationKernel, VolumeTermMatchesTheDoubleReference) {
   KernelScene s = squeezedScene(0.3);
   const Vertices x = positions(s);
   for (int pass = 0; pass < 30; ++pass) runPass(s, nullptr, 2);  // rotations converged: the reference uses them
-  // Per-slot weights: w varies over the tets (0 on every fifth), 0 in padding lanes.
+  // Per-slot weights: w varies over the tets (0 on every fifth, and on all of blocks 2-4: the pair
+  // 2-3 then takes the plain pass, the pair 4-5 the volume pass for block 5), 0 in padding lanes.
+  ASSERT_GE(s.blocks.size(), 7u);
   std::vector<float> weight(s.blocks.size() * kTetBlockWidth, 0.0f);
-  for (std::int32_t t = 0; t < s.mesh.tetCount(); ++t) weight[static_cast<size_t>(t)] = (t % 5 == 0) ? 0.0f : 0.3f + 0.6f * static_cast<float>(t % 7) / 6.0f;
+  for (std::int32_t t = 0; t < s.mesh.tetCount(); ++t) {
+    const bool none = t % 5 == 0 || (t >= 2 * kTetBlockWidth && t < 5 * kTetBlockWidth);
+    weight[static_cast<size_t>(t)] = none ? 0.0f : 0.3f + 0.6f * static_cast<float>(t % 7) / 6.0f;
+  }
   std::vector<float> delta(s.xyz.size(), 0.0f);
   const RotationPassStats stats =
       rotationPass(s.blocks.data(), static_cast<std::int32_t>(s.blocks.size()), s.u.data(), delta.data(), 2,

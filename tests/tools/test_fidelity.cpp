@@ -21,6 +21,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <memory>
@@ -73,6 +74,17 @@ class FidelityTool : public ::testing::Test {
     TETRIG_REQUIRE_DATA(man, "meshes/odedstein-meshes/human_man.obj");
     TETRIG_REQUIRE_DATA(clip, "mocap/hdm05/HDM_mm_01-02_03_120.c3d");
     ASSERT_NE(rig_, nullptr);
+  }
+  // The fixture's 800-tet-vertex SMPL rig built with a rig description from assets/.
+  static Rig withAsset(const char* description) {
+    rigbuild::BuildRigInputs in;
+    in.mesh = test::dataPath("meshes/odedstein-meshes/human_man.obj");
+    in.clip = *clip_;
+    in.tet_vertices = 800;
+    in.max_marker_distance = 0.15;
+    in.check_deformer = false;
+    in.description = rigbuild::readRigDescription(std::filesystem::path(TETRIG_SOURCE_DIR) / "assets" / description);
+    return rigbuild::buildRig(in);
   }
   static std::string common() {
     return "--rig '" + rig_->string() + "' --c3d '" + clip_->string() + "' --frames 240 --reference-every 20 -q ";
@@ -149,14 +161,7 @@ TEST_F(FidelityTool, MoreIterationsLandNearerAndTheReferenceIsConverged) {
 // the 800-vertex rig, frames 0-400 at 3 iterations through the live rig: 40.6 degrees plain,
 // 0.0 driven (the measured vertices are the region's, which takes the markers' fit exactly).
 TEST_F(FidelityTool, FeetDrivenByTheirMarkersTurnWithThem) {
-  rigbuild::BuildRigInputs in;
-  in.mesh = test::dataPath("meshes/odedstein-meshes/human_man.obj");
-  in.clip = *clip_;
-  in.tet_vertices = 800;
-  in.max_marker_distance = 0.15;
-  in.check_deformer = false;
-  in.description = rigbuild::readRigDescription(std::filesystem::path(TETRIG_SOURCE_DIR) / "assets" / "human_man_feet.json");
-  const Rig feet = rigbuild::buildRig(in);
+  const Rig feet = withAsset("human_man_feet.json");
   ASSERT_EQ(feet.marker_regions.size(), 2u);
   const Rig plain = loadRigFile(*rig_);
   const auto clip = drivers::C3DClip::load(*clip_);
@@ -204,6 +209,59 @@ TEST_F(FidelityTool, FeetDrivenByTheirMarkersTurnWithThem) {
   std::printf("frame 400, right foot against its markers: %.1f degrees plain, %.1f driven\n", plain_deg, feet_deg);
   EXPECT_GT(plain_deg, 30.0);
   EXPECT_LT(feet_deg, 5.0);
+}
+
+// assets/human_man_fitted.json (docs/fidelity.md, "A volume term at the knees and elbows"): its
+// volume boxes hold the joints they name on this mesh and marker fit (the knee markers in the knee
+// band, each elbow marker in its elbow box), the knee tets take 0.5 and the elbow tets 0.3, nothing
+// else takes the term, and the binding is the stiff one it asks for (stiffness 1, up to 6 faces).
+TEST_F(FidelityTool, TheFittedAssetPutsItsVolumeTermAtTheJoints) {
+  const Rig rig = withAsset("human_man_fitted.json");
+  const auto marker = [&](const char* label) {
+    for (const RigMarker& m : rig.markers)
+      if (m.label == label) return m.rest_position;
+    ADD_FAILURE() << label << " is not a marker of the rig";
+    return Eigen::Vector3d(0, 0, 0);
+  };
+  for (const char* knee : {"LKNE", "RKNE"}) {
+    EXPECT_GT(marker(knee).y(), 0.30) << knee;
+    EXPECT_LT(marker(knee).y(), 0.60) << knee;
+  }
+  for (const char* elbow : {"LELB", "RELB"}) {
+    EXPECT_GT(std::abs(marker(elbow).x()), 0.38) << elbow;
+    EXPECT_LT(std::abs(marker(elbow).x()), 0.56) << elbow;
+    EXPECT_GT(marker(elbow).y(), 1.1) << elbow;
+    EXPECT_LT(marker(elbow).y(), 1.7) << elbow;
+  }
+  EXPECT_GT(marker("LELB").x(), 0.0);  // left is +x on this mesh, as the left_elbow box says
+  ASSERT_EQ(rig.setup.volume_weights.size(), static_cast<std::size_t>(rig.tet_mesh.tetCount()));
+  int knees = 0, elbows = 0;
+  for (std::int32_t t = 0; t < rig.tet_mesh.tetCount(); ++t) {
+    const double w = rig.setup.volume_weights[static_cast<std::size_t>(t)];
+    if (w == 0.0) continue;
+    ASSERT_LT(t, rig.body_tet_count) << "an invisible tet took the volume term";
+    Eigen::Vector3d c = Eigen::Vector3d::Zero();
+    for (int k = 0; k < 4; ++k) c += 0.25 * rig.tet_mesh.vertices.row(rig.tet_mesh.tets(t, k)).transpose();
+    if (w == 0.5) {
+      ++knees;
+      EXPECT_TRUE(c.y() > 0.25 && c.y() < 0.65) << "tet " << t << " at height " << c.y();
+    } else {
+      ++elbows;
+      EXPECT_EQ(w, 0.3);
+      EXPECT_TRUE(std::abs(c.x()) > 0.33 && std::abs(c.x()) < 0.61 && c.y() > 1.05 && c.y() < 1.75) << "tet " << t;
+    }
+  }
+  std::printf("fitted asset, 800 tet vertices: volume term on %d knee and %d elbow tets of %d body tets\n", knees, elbows,
+              rig.body_tet_count);
+  EXPECT_GT(knees, 0);
+  EXPECT_GT(elbows, 0);
+  EXPECT_LT(knees + elbows, rig.body_tet_count / 3);
+  for (std::int32_t t = rig.body_tet_count; t < rig.tet_mesh.tetCount(); ++t) {
+    ASSERT_EQ(rig.setup.stiffness.empty() ? 1.0 : rig.setup.stiffness[static_cast<std::size_t>(t)], 1.0) << "invisible tet " << t;
+  }
+  int most_faces = 0;  // faces_per_marker 6 (the default binds 3)
+  for (const RigMarker& m : rig.markers) most_faces = std::max(most_faces, m.bound_faces);
+  EXPECT_EQ(most_faces, 6);
 }
 
 TEST_F(FidelityTool, TemporalPredictionLandsNearerThanThePlainWarmStart) {
@@ -286,6 +344,33 @@ TEST_F(FidelityTool, TheVolumeTermKeepsTheVolume) {
   const ToolRun bad_guard = fidelity(args + "--inversion-guard 2", dir);  // unstable beyond 1 (docs/deformation.md)
   EXPECT_NE(bad_guard.status, 0);
   EXPECT_NE(bad_guard.err.find("--inversion-guard"), std::string::npos) << bad_guard.err;
+}
+
+// A rig's own per-tet volume weights (the description's `volume`, section VOLW) reach both the live
+// rig and the tool's exact energy: a rig whose every tet carries w 0.6 measures exactly as the plain
+// rig with --volume-weight 0.6, reference frame by reference frame (if the exact energy ignored the
+// rig's weights, its energies would be the plain ones).
+TEST_F(FidelityTool, TheRigsOwnVolumeWeightsAreMeasured) {
+  const TempDir dir;
+  Rig weighted = loadRigFile(*rig_);
+  weighted.setup.volume_weights.assign(static_cast<std::size_t>(weighted.tet_mesh.tetCount()), 0.6);
+  const auto weighted_rig = dir.writeBytes("weighted.rig", serializeRig(weighted));
+  const auto by_option = dir.path() / "option.json", by_rig = dir.path() / "rig.json", plain = dir.path() / "plain.json";
+  const std::string args = "' --c3d '" + clip_->string() + "' --first-frame 400 --frames 40 --reference-every 20 --iterations 3 -q ";
+  ASSERT_EQ(fidelity("--rig '" + rig_->string() + args + "--volume-weight 0.6 --json '" + by_option.string() + "'", dir).status, 0);
+  ASSERT_EQ(fidelity("--rig '" + weighted_rig.string() + args + "--json '" + by_rig.string() + "'", dir).status, 0);
+  ASSERT_EQ(fidelity("--rig '" + rig_->string() + args + "--json '" + plain.string() + "'", dir).status, 0);
+  const nlohmann::json a = readJson(by_option)["runs"][0]["reference"];
+  const nlohmann::json b = readJson(by_rig)["runs"][0]["reference"];
+  const nlohmann::json p = readJson(plain)["runs"][0]["reference"];
+  ASSERT_EQ(a.size(), 2u);
+  ASSERT_EQ(b.size(), a.size());
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    for (const char* key : {"energy", "energy_converged", "rms_mm", "volume_change"}) {
+      EXPECT_EQ(a[i][key].get<double>(), b[i][key].get<double>()) << key << ", reference frame " << a[i]["frame"];
+    }
+    EXPECT_NE(p[i]["energy_converged"].get<double>(), b[i]["energy_converged"].get<double>());  // the term is there at all
+  }
 }
 
 TEST_F(FidelityTool, BadArgumentsExitNonZeroWithOneLine) {

@@ -702,6 +702,94 @@ TEST(RigBuild, ARegionDrivenByMarkersIsBuiltSavedAndLoaded) {
                   "pose_sensors[0].region: region handle 'foot' is already driven by its markers");
 }
 
+// Volume regions (the description's "volume" list -> DeformerSetup::volume_weights, section VOLW):
+// each selected body tet takes its entry's weight (a later entry wins where they overlap), every
+// other tet and every invisible tet 0; the section round-trips; a rig without volume regions has no
+// VOLW section; bad weights stop the parse, the writer and the loader (behind a valid checksum).
+TEST(RigBuild, VolumeRegionsAreBuiltSavedAndLoaded) {
+  TempDir dir;
+  const auto build = [&](const std::string& volume, bool coarse_level = false, rigbuild::BuildRigReport* report = nullptr) {
+    std::string json = test::smallRigJson();
+    json.insert(json.rfind('}'), R"(, "volume": )" + volume);
+    rigbuild::BuildRigInputs in;
+    in.mesh = test::writeBlockTetMesh(dir, "block");
+    in.description = rigbuild::parseRigDescription(json, dir.path() / "small.json");
+    in.clip = test::writeSmallClip(dir);
+    in.coarse_level = coarse_level;
+    return rigbuild::buildRig(in, report);
+  };
+  // The block's left two thirds (x <= 0.2) at 0.6, then its left third (x <= 0.1) at 0.3.
+  const Rig rig = build(R"([{"name": "left two thirds", "select": {"box": {"min": [-1, -1, -1], "max": [0.2001, 1, 1]}}, "value": 0.6},
+                            {"name": "left third", "select": {"box": {"min": [-1, -1, -1], "max": [0.1001, 1, 1]}}, "value": 0.3}])");
+  ASSERT_EQ(rig.setup.volume_weights.size(), static_cast<std::size_t>(rig.tet_mesh.tetCount()));
+  int at_third = 0, at_two_thirds = 0;
+  for (std::int32_t t = 0; t < rig.tet_mesh.tetCount(); ++t) {
+    double max_x = -1.0;
+    for (int k = 0; k < 4; ++k) max_x = std::max(max_x, rig.tet_mesh.vertices(rig.tet_mesh.tets(t, k), 0));
+    const double expected = t >= rig.body_tet_count ? 0.0 : max_x <= 0.1001 ? 0.3 : max_x <= 0.2001 ? 0.6 : 0.0;
+    EXPECT_EQ(rig.setup.volume_weights[static_cast<std::size_t>(t)], expected) << "tet " << t;
+    at_third += expected == 0.3;
+    at_two_thirds += expected == 0.6;
+  }
+  EXPECT_EQ(at_third, rig.body_tet_count / 3);  // 4 of the block's 12 cells, 6 tets each
+  EXPECT_EQ(at_two_thirds, rig.body_tet_count / 3);
+  const std::vector<std::uint8_t> bytes = serializeRig(rig);
+  EXPECT_EQ(findSection(bytes, "VOLW").second, 4u + 8u * static_cast<std::size_t>(rig.tet_mesh.tetCount()));  // count, weights
+  const Rig back = parseRig(bytes, "volw.rig");
+  EXPECT_EQ(back.setup.volume_weights, rig.setup.volume_weights);
+  EXPECT_EQ(serializeRig(back), bytes);
+  EXPECT_CONTAINS(rigbuild::describeRig(back, 0, false), "volume term:   on " + std::to_string(at_third + at_two_thirds) + " of " +
+                                                             std::to_string(rig.tet_mesh.tetCount()) + " tets, weight up to 0.6");
+  // A region no tet fills stops the build, but a coarse level (few large tets) goes without it, noted.
+  const std::string tiny = R"([{"name": "tiny", "select": {"sphere": {"center": [0.15, 0.1, 0.1], "radius": 0.01}}, "value": 0.5}])";
+  try {
+    (void)build(tiny);
+    ADD_FAILURE() << "an empty volume region was accepted";
+  } catch (const rigbuild::RigBuildError& e) {
+    EXPECT_CONTAINS(std::string(e.what()), "volume 'tiny': the selection contains no tet vertex");
+  }
+  rigbuild::BuildRigReport coarse_report;
+  EXPECT_TRUE(build(tiny, true, &coarse_report).setup.volume_weights.empty());
+  const auto noted = std::find_if(coarse_report.notes.begin(), coarse_report.notes.end(),
+                                  [](const std::string& n) { return n.starts_with("volume 'tiny': no coarse tet"); });
+  EXPECT_NE(noted, coarse_report.notes.end());
+  // Without volume regions: no section, and the description says nothing of a volume term.
+  const Rig plain = test::buildSmallRig(dir);
+  EXPECT_TRUE(plain.setup.volume_weights.empty());
+  EXPECT_EQ(findSection(serializeRig(plain), "VOLW").second, 0u);
+  EXPECT_EQ(rigbuild::describeRig(plain, 0, false).find("volume term"), std::string::npos);
+  // A weight of 1 (the term alone: no rotation left) or a wrong count is neither written nor loaded.
+  Rig bad = rig;
+  bad.setup.volume_weights[3] = 1.0;
+  EXPECT_CONTAINS(validateRig(bad), "volume weight of tet 3 is not in [0, 1)");
+  EXPECT_THROW((void)serializeRig(bad), RigFileError);
+  bad.setup.volume_weights.pop_back();
+  EXPECT_CONTAINS(validateRig(bad), "volume weights has " + std::to_string(rig.tet_mesh.tetCount() - 1) + " values for");
+  std::vector<std::uint8_t> crafted = bytes;
+  const std::size_t first_weight = findSection(crafted, "VOLW").first + 4;
+  const double too_large = 1.5, nan = std::numeric_limits<double>::quiet_NaN();
+  std::memcpy(crafted.data() + first_weight, &too_large, 8);
+  fixChecksum(crafted);
+  EXPECT_CONTAINS(parseError(crafted), "volume weight of tet 0 is not in [0, 1)");
+  std::memcpy(crafted.data() + first_weight, &nan, 8);
+  fixChecksum(crafted);
+  EXPECT_CONTAINS(parseError(crafted), "section VOLW at byte 12: non-finite value in volume weight");
+  const auto error = [](const std::string& volume) {
+    try {
+      (void)rigbuild::parseRigDescription(R"({"volume": )" + volume + "}", "v.json");
+    } catch (const rigbuild::RigBuildError& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  const std::string select = R"({"select": {"vertices": [0]}, )";
+  EXPECT_CONTAINS(error("[" + select + R"("value": 1}])"), "v.json: volume[0].value: must be in [0, 1)");
+  EXPECT_CONTAINS(error("[" + select + R"("value": -0.1}])"), "volume[0].value: must be in [0, 1)");
+  EXPECT_CONTAINS(error(R"([{"select": {"vertices": [0]}}])"), "volume[0]: needs a value");
+  EXPECT_CONTAINS(error("[" + select + R"("value": 0.5, "oriented": true}])"), "volume[0]: unknown key 'oriented'");
+  EXPECT_EQ(error("[" + select + R"("value": 0}])"), "");
+}
+
 TEST(RigBuild, PoseSensorsWithoutAClipTakeTheAlignmentFromTheDescription) {
   const TempDir dir;
   rigbuild::BuildRigInputs in;

@@ -170,7 +170,8 @@ std::int32_t nearestTetVertex(const Context& ctx, const Eigen::Vector3d& p) {
   return best;
 }
 
-std::vector<std::uint8_t> resolveVertices(const Context& ctx, const Selection& s, const std::string& what) {
+// The tet vertices a selection names (as a mask); none is an error unless may_be_empty.
+std::vector<std::uint8_t> resolveVertices(const Context& ctx, const Selection& s, const std::string& what, bool may_be_empty = false) {
   const std::int32_t nv = ctx.body->vertexCount();
   std::vector<std::uint8_t> mask(static_cast<std::size_t>(nv), 0);
   auto inside = [&](auto pred) {
@@ -239,14 +240,15 @@ std::vector<std::uint8_t> resolveVertices(const Context& ctx, const Selection& s
       for (const std::int32_t f : unkept) mask[static_cast<std::size_t>(nearestTetVertex(ctx, ctx.fine->row(f).transpose()))] = 1;
     }
   }
-  if (std::find(mask.begin(), mask.end(), 1) == mask.end()) {
+  if (!may_be_empty && std::find(mask.begin(), mask.end(), 1) == mask.end()) {
     throw RigBuildError(what + ": the selection contains no tet vertex: enlarge it");
   }
   return mask;
 }
 
-std::vector<std::int32_t> resolveTets(const Context& ctx, const Selection& s, const std::string& what) {
-  std::vector<std::uint8_t> mask = resolveVertices(ctx, s, what);
+// The body tets with at least s.min_corners corners in the selection (maybe none, if may_be_empty).
+std::vector<std::int32_t> selectTets(const Context& ctx, const Selection& s, const std::string& what, bool may_be_empty) {
+  std::vector<std::uint8_t> mask = resolveVertices(ctx, s, what, may_be_empty);
   // A selection of surface vertices reaches TetGen's interior points under it (extendSelectionInward).
   if (!ctx.tet_input && (s.kind == Selection::Kind::kVertices || s.kind == Selection::Kind::kSelFile)) {
     std::vector<std::uint8_t> is_surface(mask.size(), 0);
@@ -261,6 +263,11 @@ std::vector<std::int32_t> resolveTets(const Context& ctx, const Selection& s, co
     for (int k = 0; k < 4; ++k) corners += mask[static_cast<std::size_t>(ctx.body->tets(t, k))];
     if (corners >= s.min_corners) tets.push_back(t);
   }
+  return tets;
+}
+
+std::vector<std::int32_t> resolveTets(const Context& ctx, const Selection& s, const std::string& what) {
+  std::vector<std::int32_t> tets = selectTets(ctx, s, what, false);
   if (tets.empty()) {
     throw RigBuildError(what + ": no tet has " + std::to_string(s.min_corners) +
                         " corners in the selection: enlarge it or lower min_corners");
@@ -752,6 +759,16 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
   for (const NamedSelection& n : desc.stiffness) {
     for (const std::int32_t t : resolveTets(ctx, n.select, "stiffness '" + n.name + "'")) stiffness[static_cast<std::size_t>(t)] = n.value;
   }
+  std::vector<double> volume(static_cast<std::size_t>(body.tetCount()), 0.0);  // invisible tets take none
+  for (const NamedSelection& n : desc.volume) {
+    const std::string who = "volume '" + n.name + "'";
+    // The coarse level's few large tets may miss a small region: it then goes without it (the
+    // term is a refinement; the fine level has it).
+    const std::vector<std::int32_t> tets = inputs.coarse_level ? selectTets(ctx, n.select, who, true) : resolveTets(ctx, n.select, who);
+    if (tets.empty()) report.notes.push_back(who + ": no coarse tet has " + std::to_string(n.select.min_corners) +
+                                               " corners in it; the coarse level has no volume term there");
+    for (const std::int32_t t : tets) volume[static_cast<std::size_t>(t)] = n.value;
+  }
 
   // Markers bound by invisible tets.
   TetMesh full = body;
@@ -821,6 +838,8 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
   rig.pose_transfer.cols = full.vertexCount();
   const bool uniform = std::all_of(stiffness.begin(), stiffness.end(), [](double s) { return s == 1.0; });
   if (!uniform) setup.stiffness = stiffness;
+  volume.resize(static_cast<std::size_t>(full.tetCount()), 0.0);
+  if (std::any_of(volume.begin(), volume.end(), [](double w) { return w > 0.0; })) setup.volume_weights = volume;
 
   if (std::string e = validateRig(rig); !e.empty()) throw RigBuildError("the built rig is inconsistent: " + e);
   if (inputs.check_deformer) {
@@ -844,9 +863,14 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
     BuildRigInputs coarse_inputs = inputs;
     coarse_inputs.tet_vertices = n;
     coarse_inputs.coarse_tet_vertices.reset();
+    coarse_inputs.coarse_level = true;
     coarse_inputs.frame_auto = false;
     if (report.rest_frame >= 0) coarse_inputs.frame = report.rest_frame;
-    Rig coarse = buildRig(coarse_inputs);
+    BuildRigReport coarse_report;
+    Rig coarse = buildRig(coarse_inputs, &coarse_report);
+    for (const std::string& note : coarse_report.notes) {
+      if (note.starts_with("volume '")) report.notes.push_back("coarse level: " + note);
+    }
     rig.coarse = std::make_shared<const Rig>(std::move(coarse));
     if (std::string e = validateRig(rig); !e.empty()) throw RigBuildError("the coarse level does not fit the rig: " + e);
     report.coarse_seconds = since(t0);

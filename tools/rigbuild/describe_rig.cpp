@@ -83,7 +83,10 @@ std::string describeRig(const Rig& rig, std::int64_t file_bytes, bool list_marke
   }
   for (const RigMarkerRegion& mr : rig.marker_regions) {
     std::string labels;
-    for (const std::int32_t m : mr.markers) labels += (labels.empty() ? "" : " ") + shown(rig.markers[static_cast<std::size_t>(m)].label);
+    for (const std::int32_t m : mr.markers) {
+      if (!labels.empty()) labels += ' ';  // (not `(empty ? "" : " ") + shown(..)`: GCC 12 -Wrestrict false positive)
+      labels += shown(rig.markers[static_cast<std::size_t>(m)].label);
+    }
     line("  markers %s drive region '%s' (best-fit rigid transform)", labels.c_str(),
          shown(rig.region_handle_names[static_cast<std::size_t>(mr.region_handle)]).c_str());
   }
@@ -96,6 +99,11 @@ std::string describeRig(const Rig& rig, std::int64_t file_bytes, bool list_marke
   } else {
     const auto [mn, mx] = std::minmax_element(s.stiffness.begin(), s.stiffness.end());
     line("stiffness:     per tet, %.4g .. %.4g", *mn, *mx);
+  }
+  if (!s.volume_weights.empty()) {
+    const auto weighted = std::count_if(s.volume_weights.begin(), s.volume_weights.end(), [](double w) { return w > 0.0; });
+    line("volume term:   on %td of %zu tets, weight up to %.4g", weighted, s.volume_weights.size(),
+         *std::max_element(s.volume_weights.begin(), s.volume_weights.end()));
   }
   if (!rig.markers.empty()) {
     std::vector<double> d;

@@ -152,7 +152,9 @@ class Reader {
     return s;
   }
 
-  std::vector<NamedSelection> list(const json& root, const char* key, bool region, bool stiffness) const {
+  enum class Value { kNone, kStiffness, kVolume };  // what an entry's `value` is
+
+  std::vector<NamedSelection> list(const json& root, const char* key, bool region, Value value = Value::kNone) const {
     std::vector<NamedSelection> out;
     if (!root.contains(key)) return out;
     const json& arr = root[key];
@@ -161,7 +163,7 @@ class Reader {
       const std::string where = std::string(key) + "[" + std::to_string(i) + "]";
       if (region) {
         allowKeys(arr[i], where, {"name", "select", "oriented", "markers"});
-      } else if (stiffness) {
+      } else if (value != Value::kNone) {
         allowKeys(arr[i], where, {"name", "select", "value"});
       } else {
         allowKeys(arr[i], where, {"name", "select"});
@@ -181,10 +183,16 @@ class Reader {
         }
         if (!n.oriented) fail(where + ".markers", "a region driven by markers takes their rotation: it must be oriented");
       }
-      if (stiffness) {
+      if (value == Value::kStiffness) {
         if (!arr[i].contains("value")) fail(where, "needs a value (stiffness weight; body tets default to 1)");
         n.value = number(arr[i]["value"], where + ".value");
         if (!(n.value > 0)) fail(where + ".value", "must be positive");
+      } else if (value == Value::kVolume) {
+        if (!arr[i].contains("value")) fail(where, "needs a value (the volume term's share of each tet's energy, in [0, 1))");
+        n.value = number(arr[i]["value"], where + ".value");
+        if (!(n.value >= 0 && n.value < 1)) {
+          fail(where + ".value", "must be in [0, 1) (0: as rigid as possible; the term slows convergence by about 1 / (1 - value))");
+        }
       }
       out.push_back(std::move(n));
     }
@@ -214,7 +222,7 @@ RigDescription parseRigDescription(const std::string& json_text, const std::file
     throw RigBuildError(file + ": not valid JSON at byte " + std::to_string(e.byte) + ": fix the syntax");
   }
   r.allowKeys(root, "", {"format", "version", "name", "mesh_unit", "mesh_up", "tet_vertices", "pose_transfer", "vertex_handles",
-                         "region_handles", "point_handles", "rigid_groups", "stiffness", "markers", "pose_sensors", "deformer"});
+                         "region_handles", "point_handles", "rigid_groups", "stiffness", "volume", "markers", "pose_sensors", "deformer"});
   if (root.contains("format") && r.string(root["format"], "format") != "tetrig-rig") {
     r.fail("format", "expected \"tetrig-rig\"");
   }
@@ -249,10 +257,11 @@ RigDescription parseRigDescription(const std::string& json_text, const std::file
       if (d.pose_max_nonzeros > 0 && d.pose_max_nonzeros < 4) r.fail("pose_transfer.max_nonzeros_per_row", "must be 0 (no cap) or at least 4");
     }
   }
-  d.vertex_handles = r.list(root, "vertex_handles", false, false);
-  d.region_handles = r.list(root, "region_handles", true, false);
-  d.rigid_groups = r.list(root, "rigid_groups", false, false);
-  d.stiffness = r.list(root, "stiffness", false, true);
+  d.vertex_handles = r.list(root, "vertex_handles", false);
+  d.region_handles = r.list(root, "region_handles", true);
+  d.rigid_groups = r.list(root, "rigid_groups", false);
+  d.stiffness = r.list(root, "stiffness", false, Reader::Value::kStiffness);
+  d.volume = r.list(root, "volume", false, Reader::Value::kVolume);
   if (root.contains("point_handles")) {
     const json& arr = root["point_handles"];
     if (!arr.is_array()) r.fail("point_handles", "expected an array");

@@ -98,6 +98,8 @@ struct DeformerSetup {
   std::vector<PointHandle> point_handles;
   std::vector<RigidGroup> rigid_groups;
   std::vector<double> stiffness;  // empty, or one positive weight per tet (1 = default)
+  std::vector<double> volume_weights;  // empty, or one volume-term weight w_j in [0, 1) per tet (a rig's
+                                       // per-region volume, docs/deformation.md); options.volume_weight is a floor
   std::int32_t guarded_tet_count = -1;  // the inversion guard covers tets [0, n) (a rig's body tets); -1: all
   DeformerOptions options;
 };
@@ -141,6 +143,11 @@ struct StepStats {
   std::int64_t rigid_ns = 0;              // rigid groups
   std::int64_t total_ns = 0;              // the whole step
 };
+
+// Each tet's volume-term weight w_j: max(options.volume_weight, volume_weights[j]) (volume_weights
+// may be empty), 0 in rigid groups and everywhere when options.update_rotations is false.
+// Throws std::invalid_argument when volume_weights has the wrong size or a weight outside [0, 1).
+std::vector<double> tetVolumeWeights(const DeformerSetup& setup, std::int32_t tet_count);
 
 class Deformer {
  public:

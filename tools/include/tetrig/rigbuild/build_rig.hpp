@@ -52,6 +52,8 @@ struct BuildRigInputs {
   bool accept_pose_mismatch = false;              // ... although the pose checks fail (the scale is still checked)
   std::optional<double> min_fit_scale, max_fit_scale;  // override description.markers.checks
   bool check_deformer = true;                     // build a Deformer from the result (factorizes once)
+  bool coarse_level = false;  // this is a coarse level (set by the build of its rig): a volume region that selects no
+                              // tet is left out (noted) instead of stopping the build
   std::optional<std::int32_t> coarse_tet_vertices;  // also build the coarse level (Rig::coarse): the same inputs
                                                     // and rest frame with this tet-vertex budget (< tet_vertices)
 };

@@ -42,7 +42,7 @@ struct NamedSelection {
   Selection select;
   bool oriented = true;    // region handles only
   std::vector<std::string> markers;  // region handles only: a marker cluster driving it (RigMarkerRegion); empty: none
-  double value = 1.0;      // stiffness entries only
+  double value = 1.0;      // stiffness and volume entries only
 };
 
 struct PointHandleSpec {
@@ -102,6 +102,7 @@ struct RigDescription {
   std::vector<PointHandleSpec> point_handles;
   std::vector<NamedSelection> rigid_groups;
   std::vector<NamedSelection> stiffness;   // later entries override earlier ones
+  std::vector<NamedSelection> volume;      // volume-term weights in [0, 1) (DeformerSetup::volume_weights); later entries override
   MarkerOptions markers;
   std::vector<PoseSensorSpec> pose_sensors;
   int rotation_steps = 2;
