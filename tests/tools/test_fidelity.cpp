@@ -212,9 +212,10 @@ TEST_F(FidelityTool, FeetDrivenByTheirMarkersTurnWithThem) {
 }
 
 // assets/human_man_fitted.json (docs/fidelity.md, "A volume term at the knees and elbows"): its
-// volume boxes hold the joints they name on this mesh and marker fit (the knee markers in the knee
-// band, each elbow marker in its elbow box), the knee tets take 0.5 and the elbow tets 0.3, nothing
-// else takes the term, and the binding is the stiff one it asks for (stiffness 1, up to 6 faces).
+// volume boxes hold the parts they name on this mesh and marker fit (the knee markers in the knee
+// band, each elbow marker in its elbow box, the sternum and the 10th thoracic vertebra in the torso
+// box), the knee and torso tets take 0.5 and the elbow tets 0.3, nothing else takes the term, and
+// the binding is the stiff one it asks for (stiffness 1, up to 6 faces).
 TEST_F(FidelityTool, TheFittedAssetPutsItsVolumeTermAtTheJoints) {
   const Rig rig = withAsset("human_man_fitted.json");
   const auto marker = [&](const char* label) {
@@ -234,28 +235,37 @@ TEST_F(FidelityTool, TheFittedAssetPutsItsVolumeTermAtTheJoints) {
     EXPECT_LT(marker(elbow).y(), 1.7) << elbow;
   }
   EXPECT_GT(marker("LELB").x(), 0.0);  // left is +x on this mesh, as the left_elbow box says
+  for (const char* trunk : {"STRN", "T10"}) {
+    EXPECT_LT(std::abs(marker(trunk).x()), 0.2) << trunk;
+    EXPECT_GT(marker(trunk).y(), 0.95) << trunk;
+    EXPECT_LT(marker(trunk).y(), 1.45) << trunk;
+  }
   ASSERT_EQ(rig.setup.volume_weights.size(), static_cast<std::size_t>(rig.tet_mesh.tetCount()));
-  int knees = 0, elbows = 0;
+  int knees = 0, elbows = 0, torso = 0;
   for (std::int32_t t = 0; t < rig.tet_mesh.tetCount(); ++t) {
     const double w = rig.setup.volume_weights[static_cast<std::size_t>(t)];
     if (w == 0.0) continue;
     ASSERT_LT(t, rig.body_tet_count) << "an invisible tet took the volume term";
     Eigen::Vector3d c = Eigen::Vector3d::Zero();
     for (int k = 0; k < 4; ++k) c += 0.25 * rig.tet_mesh.vertices.row(rig.tet_mesh.tets(t, k)).transpose();
-    if (w == 0.5) {
+    if (w == 0.5 && c.y() < 0.8) {
       ++knees;
       EXPECT_TRUE(c.y() > 0.25 && c.y() < 0.65) << "tet " << t << " at height " << c.y();
+    } else if (w == 0.5) {
+      ++torso;
+      EXPECT_TRUE(std::abs(c.x()) < 0.25 && c.y() > 0.9 && c.y() < 1.5) << "tet " << t;
     } else {
       ++elbows;
       EXPECT_EQ(w, 0.3);
       EXPECT_TRUE(std::abs(c.x()) > 0.33 && std::abs(c.x()) < 0.61 && c.y() > 1.05 && c.y() < 1.75) << "tet " << t;
     }
   }
-  std::printf("fitted asset, 800 tet vertices: volume term on %d knee and %d elbow tets of %d body tets\n", knees, elbows,
-              rig.body_tet_count);
+  std::printf("fitted asset, 800 tet vertices: volume term on %d knee, %d elbow and %d torso tets of %d body tets\n", knees,
+              elbows, torso, rig.body_tet_count);
   EXPECT_GT(knees, 0);
   EXPECT_GT(elbows, 0);
-  EXPECT_LT(knees + elbows, rig.body_tet_count / 3);
+  EXPECT_GT(torso, 0);
+  EXPECT_LT(knees + elbows + torso, rig.body_tet_count / 2);
   for (std::int32_t t = rig.body_tet_count; t < rig.tet_mesh.tetCount(); ++t) {
     ASSERT_EQ(rig.setup.stiffness.empty() ? 1.0 : rig.setup.stiffness[static_cast<std::size_t>(t)], 1.0) << "invisible tet " << t;
   }
