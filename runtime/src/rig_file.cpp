@@ -15,7 +15,6 @@
 #include <fstream>
 #include <limits>
 #include <sstream>
-#include <stdexcept>
 #include <string_view>
 #include <type_traits>
 #include <unordered_map>
@@ -481,12 +480,9 @@ std::string coarseLevelMismatch(const Rig& rig, const Rig& coarse) {
 std::vector<std::uint8_t> serializeRig(const Rig& rig) {
   if (std::string e = validateRig(rig); !e.empty()) throw RigFileError("rig file: cannot write an invalid rig: " + e);
   std::vector<std::array<std::uint64_t, 3>> table;
+  // The sections, at offsets from their own start: the header and the table (32 + 24 n bytes, a
+  // multiple of 8, so every section stays 8-aligned) go in front once n is known.
   Writer out;
-  // Header and table placeholders; filled at the end.
-  const std::size_t section_count =
-      kRequiredTags.size() + (rig.pose_sensors.empty() ? 0 : 1) + (rig.marker_regions.empty() ? 0 : 1) +
-      (rig.setup.volume_weights.empty() ? 0 : 1) + (rig.coarse ? 1 : 0);
-  out.bytes().resize(kHeaderBytes + section_count * kTableEntryBytes, 0);
   {
     Writer w;
     w.str(rig.name);
@@ -649,16 +645,15 @@ std::vector<std::uint8_t> serializeRig(const Rig& rig) {
   }
   if (rig.coarse) writeSection(out, table, kTagCoarse, serializeRig(*rig.coarse));
   // No padding after the last section: the file ends where it does.
-  if (table.size() != section_count) {  // a section written but not counted above (or the reverse)
-    throw std::logic_error("rig file: wrote " + std::to_string(table.size()) + " sections, counted " + std::to_string(section_count));
-  }
-  std::vector<std::uint8_t>& bytes = out.bytes();
+  const std::size_t prefix = kHeaderBytes + table.size() * kTableEntryBytes;
+  std::vector<std::uint8_t> bytes(prefix, 0);
+  bytes.insert(bytes.end(), out.bytes().begin(), out.bytes().end());
   // Section table.
   for (std::size_t i = 0; i < table.size(); ++i) {
     Writer e;
     e.u32(static_cast<std::uint32_t>(table[i][0]));
     e.u32(0);
-    e.u64(table[i][1]);
+    e.u64(prefix + table[i][1]);
     e.u64(table[i][2]);
     std::copy(e.bytes().begin(), e.bytes().end(), bytes.begin() + static_cast<std::ptrdiff_t>(kHeaderBytes + i * kTableEntryBytes));
   }
