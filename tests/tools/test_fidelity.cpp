@@ -25,6 +25,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <memory>
+#include <set>
 #include <span>
 #include <vector>
 #include <fstream>
@@ -101,6 +102,42 @@ nlohmann::json readJson(const std::filesystem::path& p) {
   return nlohmann::json::parse(in);
 }
 
+// Where the volume goes and the tets invert (each reference frame's `regions`), by the rig marker
+// nearest each body tet: the regions' inverted tets add up to the frame's count (counted apart, by
+// the energy's measure), and the regions that lost the most volume come first, each a few percent of
+// the body at most. Returns the number of poses (budgeted or converged) with inverted tets.
+int checkRegions(const Rig& rig, const nlohmann::json& run) {
+  std::set<std::string> labels;
+  for (const auto& m : rig.markers) labels.insert(m.label);
+  int with_inversions = 0;
+  for (const auto& f : run["reference"]) {
+    for (const char* pose : {"budgeted", "converged"}) {
+      const auto& t = f["regions"][pose];
+      int inverted = 0;
+      for (const auto& [label, n] : t["inverted_near"].items()) {
+        EXPECT_TRUE(labels.count(label)) << label;
+        EXPECT_GT(n.get<int>(), 0);
+        inverted += n.get<int>();
+      }
+      EXPECT_EQ(inverted, f[std::string(pose) == "budgeted" ? "inverted_body_tets" : "inverted_body_tets_converged"].get<int>())
+          << "frame " << f["frame"] << " " << pose;
+      with_inversions += inverted > 0;
+      EXPECT_LE(t["volume_change_near"].size(), 3u);
+      double previous = -1.0;
+      for (const auto& region : t["volume_change_near"]) {
+        EXPECT_TRUE(labels.count(region["label"].get<std::string>()));
+        const double c = region["change"].get<double>();
+        EXPECT_LT(c, 0.0);
+        EXPECT_GT(c, -0.05) << "one region lost more than 5 % of the body: frame " << f["frame"];
+        EXPECT_GE(c, previous) << "most lost first";
+        previous = c;
+      }
+    }
+    EXPECT_FALSE(f["regions"]["converged"]["volume_change_near"].empty()) << "a real pose loses volume somewhere";
+  }
+  return with_inversions;
+}
+
 TEST_F(FidelityTool, MoreIterationsLandNearerAndTheReferenceIsConverged) {
   const TempDir dir;
   const auto json = dir.path() / "f.json";
@@ -148,9 +185,25 @@ TEST_F(FidelityTool, MoreIterationsLandNearerAndTheReferenceIsConverged) {
     // The reference converged (stopped by its tolerance, not its cap).
     EXPECT_LT((*run)["reference_iterations"]["max"].get<double>(), 3000);
   }
+  const Rig rig = loadRigFile(*rig_);
+  for (const auto* run : {&one, &five}) checkRegions(rig, *run);
   EXPECT_LT(five["rms_error_mm"]["median"].get<double>(), one["rms_error_mm"]["median"].get<double>());
   EXPECT_LT(five["energy_excess"]["median"].get<double>(), one["energy_excess"]["median"].get<double>());
   EXPECT_GT(one["rms_error_mm"]["median"].get<double>(), 0.0);
+}
+
+// A run started mid-clip jumps from rest on its first frame: one iteration there (frame 1600 of
+// HDM05, arms swung far from the T-pose) inverts tets at the forearms, and the regions name them.
+TEST_F(FidelityTool, TheRegionsNameWhereTetsInvertAndVolumeIsLost) {
+  const TempDir dir;
+  const auto json = dir.path() / "f.json";
+  const ToolRun r = fidelity("--rig '" + rig_->string() + "' --c3d '" + clip_->string() +
+                                 "' --first-frame 1600 --frames 1 --iterations 1 -q --json '" + json.string() + "'",
+                             dir);
+  ASSERT_EQ(r.status, 0) << r.err;
+  const nlohmann::json run = readJson(json)["runs"][0];
+  ASSERT_GT(run["reference"][0]["inverted_body_tets"].get<int>(), 0) << "the jump must invert tets for the test to mean anything";
+  EXPECT_GT(checkRegions(loadRigFile(*rig_), run), 0);
 }
 
 // The feet driven by their markers (assets/human_man_feet.json: each foot an oriented region
