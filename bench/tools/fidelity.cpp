@@ -32,6 +32,7 @@
 #include "tetrig/rig_file.hpp"
 #include "tetrig/rotation_kernel.hpp"
 #include "tetrig/tet_mesh.hpp"
+#include "tetrig/volume_constraint.hpp"
 #include "tetrig/rigbuild/write_file_atomic.hpp"
 
 #include <CLI/CLI.hpp>
@@ -258,7 +259,20 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
   reference_setup.options.inversion_guard = cfg.live.inversion_guard;
   reference_setup.options.inversion_guard_threshold = cfg.live.inversion_guard_threshold;
   reference_setup.guarded_tet_count = rig.body_tet_count;
+  reference_setup.options.linear_constraint = cfg.live.volume_constraint;
   tetrig::Deformer reference(rig.tet_mesh, reference_setup);
+  // With --volume-constraint the reference keeps the fine volume too, linearized again every 25
+  // iterations (so it converges to the constrained minimum).
+  std::unique_ptr<tetrig::FineVolumeConstraint> constraint;
+  std::vector<double> constraint_g, constraint_fine;
+  if (cfg.live.volume_constraint) {
+    constraint = std::make_unique<tetrig::FineVolumeConstraint>(
+        rig.pose_transfer.view(),
+        std::span<const std::int32_t>(rig.fine_triangles.data(), static_cast<std::size_t>(rig.fine_triangles.size())),
+        std::span<const double>(rig.fine_vertices.data(), static_cast<std::size_t>(rig.fine_vertices.size())));
+    constraint_g.resize(3 * static_cast<std::size_t>(rig.tet_mesh.vertexCount()));
+    constraint_fine.resize(3 * static_cast<std::size_t>(rig.fine_vertices.rows()));
+  }
   std::vector<Eigen::Quaterniond> rotations(static_cast<std::size_t>(rig.tet_mesh.tetCount()));
 
   const double to_mm = 1.0 / rig.alignment.rig_units_per_mm;
@@ -329,6 +343,12 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
     double last = std::numeric_limits<double>::infinity();
     int done = 0;
     while (done < cfg.max_reference_iterations) {
+      if (constraint) {
+        const std::span<const double> at = done == 0 ? x : reference.positions();
+        tetrig::applyPoseTransfer(b, at.data(), constraint_fine.data());
+        const double c = constraint->linearize(at, constraint_fine.data(), constraint_g);
+        if (!reference.setLinearConstraint(constraint_g, c)) throw std::runtime_error("the volume constraint was refused");
+      }
       const tetrig::StepStats rs = reference.step(targets, tetrig::StepBudget{25});
       done += rs.iterations;
       if (std::abs(last - rs.energy) <= cfg.tolerance * std::max(rs.energy, 1e-300)) break;
@@ -492,6 +512,11 @@ int main(int argc, char** argv) {
   app.add_option("--volume-weight", cfg.live.volume_weight,
                  "Volume term's share w of each tet's energy, live rig and reference alike (docs/deformation.md; default 0)")
       ->check(CLI::Range(0.0, 0.99));
+  app.add_flag("--volume-constraint", cfg.live.volume_constraint,
+               "Keep the fine mesh's enclosed volume at rest (a Lagrange multiplier), live rig and reference alike");
+  app.add_option("--volume-constraint-refresh", cfg.live.volume_constraint_refresh_frames,
+                 "Volume constraint: frames between linearizations of its gradient (default 1: every frame)")
+      ->check(CLI::Range(1, 1000));
   app.add_option("--inversion-guard", cfg.live.inversion_guard,
                  "Inversion guard's k: extra stiffness of squashed body tets, live rig and reference alike "
                  "(docs/deformation.md; default 0)")
@@ -517,6 +542,8 @@ int main(int argc, char** argv) {
                           {"reference_every", cfg.reference_every},
                           {"relax", cfg.live.rotation_relaxation},
                           {"volume_weight", cfg.live.volume_weight},
+                          {"volume_constraint", cfg.live.volume_constraint},
+                          {"volume_constraint_refresh_frames", cfg.live.volume_constraint_refresh_frames},
                           {"inversion_guard", cfg.live.inversion_guard},
                           {"inversion_guard_threshold", cfg.live.inversion_guard_threshold},
                           {"extrapolate", cfg.live.rotation_extrapolation},
