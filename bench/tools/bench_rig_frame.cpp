@@ -24,6 +24,9 @@
 //   assets/human_man_feet.json (each foot a region driven by its TOE/HEE/MT5 markers; issue #12),
 //   against BM_LiveRigFrame/smpl_hdm05/0: what the marker fits and the rotation interpolation of
 //   two oriented regions add to a frame.
+//   BM_LiveRigFrame/smpl_hdm05_volume_constraint: the same live path (no split) keeping the fine
+//   mesh's volume (LiveRigOptions::volume_constraint: after the pose transfer, the volume's gradient,
+//   B^T of it with the rig's double B, and one solve; counted in pose_transfer_us).
 //   BM_PoseTransfer/smpl_hdm05/<layout>/<cache>: the pose transfer alone, from the padded positions of
 //   one posed frame into a float buffer; layout 0 = the rig's B (double weights, 32-bit columns, 12
 //   bytes per entry), 1 = the live rig's compact copy (float, 16-bit, 6 bytes: narrowPoseTransfer);
@@ -227,11 +230,12 @@ BENCHMARK(BM_RigFrameCoarseRelaxed)->Name("BM_RigFrame/smpl_hdm05_coarse_relaxed
 void BM_RigFrameCoarsePredictedRelaxed(benchmark::State& state) { rigFrame(state, 1.0, 1.8, true); }
 BENCHMARK(BM_RigFrameCoarsePredictedRelaxed)->Name("BM_RigFrame/smpl_hdm05_coarse_predicted_relaxed")->Unit(benchmark::kMicrosecond);
 
-void liveRigFrame(benchmark::State& state, bool feet) {
+void liveRigFrame(benchmark::State& state, bool feet, bool volume_constraint = false) {
   const RigScene* scene = sceneOrSkip(state, feet);
   if (scene == nullptr) return;
   tetrig::LiveRigOptions live_options;
   live_options.split_pose_transfer = state.range(0) != 0;
+  live_options.volume_constraint = volume_constraint;
   tetrig::LiveRig live(scene->rig, live_options);
   tetrig::drivers::C3DPlaybackOptions options;
   options.pacing = tetrig::drivers::Pacing::kAsFastAsPossible;
@@ -262,6 +266,8 @@ void liveRigFrame(benchmark::State& state, bool feet) {
 }
 void BM_LiveRigFrame(benchmark::State& state) { liveRigFrame(state, false); }
 void BM_LiveRigFrameFeet(benchmark::State& state) { liveRigFrame(state, true); }
+void BM_LiveRigFrameVolumeConstraint(benchmark::State& state) { liveRigFrame(state, false, true); }
+BENCHMARK(BM_LiveRigFrameVolumeConstraint)->Name("BM_LiveRigFrame/smpl_hdm05_volume_constraint")->Arg(0)->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_LiveRigFrameFeet)->Name("BM_LiveRigFrame/smpl_hdm05_feet")->Arg(0)->Unit(benchmark::kMicrosecond);
 // Argument: 0 = pose transfer on the calling thread, 1 = split with one worker (PoseTransferSplit).
 BENCHMARK(BM_LiveRigFrame)->Name("BM_LiveRigFrame/smpl_hdm05")->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);

@@ -31,6 +31,8 @@
 #include "tetrig/pose_transfer.hpp"
 #include "tetrig/rig_file.hpp"
 #include "tetrig/rotation_kernel.hpp"
+#include "tetrig/tet_mesh.hpp"
+#include "tetrig/volume_constraint.hpp"
 #include "tetrig/rigbuild/write_file_atomic.hpp"
 
 #include <CLI/CLI.hpp>
@@ -42,7 +44,9 @@
 #include <cstdio>
 #include <cstdlib>
 #include <exception>
+#include <limits>
 #include <memory>
+#include <span>
 #include <sstream>
 #include <string>
 #include <utility>
@@ -82,6 +86,66 @@ nlohmann::json toJson(const Percentiles& p) {
 struct PoseMeasure {
   double energy = 0.0;
   int inverted_body_tets = 0;
+};
+
+// Where a pose loses volume and inverts tets: its body tets summed by region, a region being the
+// rig marker nearest to a tet's rest centroid (the same regions `worst_near` names, for tets).
+class RegionTally {
+ public:
+  explicit RegionTally(const Rig& rig) : rig_(rig), rest_volume_(static_cast<std::size_t>(rig.body_tet_count)) {
+    region_.assign(static_cast<std::size_t>(rig.body_tet_count), -1);
+    for (std::int32_t t = 0; t < rig.body_tet_count; ++t) {
+      rest_volume_[static_cast<std::size_t>(t)] = tetrig::signedVolume(rig.tet_mesh, t);
+      body_rest_volume_ += rest_volume_[static_cast<std::size_t>(t)];
+      Eigen::RowVector3d c = Eigen::RowVector3d::Zero();
+      for (int k = 0; k < 4; ++k) c += 0.25 * rig.tet_mesh.vertices.row(rig.tet_mesh.tets(t, k));
+      double best = std::numeric_limits<double>::infinity();
+      for (std::size_t m = 0; m < rig.markers.size(); ++m) {
+        const double d = (c - rig.tet_mesh.vertices.row(rig.markers[m].tet_vertex)).squaredNorm();
+        if (d < best) {
+          best = d;
+          region_[static_cast<std::size_t>(t)] = static_cast<std::int32_t>(m);
+        }
+      }
+    }
+  }
+
+  // x: tet-mesh positions (#V*3 doubles). {"volume_change_near": the `top` regions whose body tets
+  // lost the most volume, each {label, change: their volume change over the whole body's rest
+  // volume}, most lost first; "inverted_near": {label: inverted body tets}}. Empty without markers.
+  nlohmann::json tally(std::span<const double> x, std::size_t top) const {
+    std::vector<double> change(rig_.markers.size(), 0.0);
+    std::vector<int> inverted(rig_.markers.size(), 0);
+    for (std::int32_t t = 0; t < rig_.body_tet_count; ++t) {
+      const std::int32_t r = region_[static_cast<std::size_t>(t)];
+      if (r < 0) continue;
+      const auto p = [&](int k) {
+        const auto v = 3 * static_cast<std::size_t>(rig_.tet_mesh.tets(t, k));
+        return Eigen::Vector3d(x[v], x[v + 1], x[v + 2]);
+      };
+      const Eigen::Vector3d a = p(0);
+      const double volume = (p(1) - a).dot((p(2) - a).cross(p(3) - a)) / 6.0;  // as tetrig::signedVolume
+      const double rest = rest_volume_[static_cast<std::size_t>(t)];
+      change[static_cast<std::size_t>(r)] += volume - rest;
+      if (volume * rest <= 0.0) ++inverted[static_cast<std::size_t>(r)];
+    }
+    std::vector<std::size_t> order(change.size());
+    for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+    std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return change[a] < change[b]; });
+    nlohmann::json lost = nlohmann::json::array();
+    for (std::size_t i = 0; i < std::min(top, order.size()) && change[order[i]] < 0.0; ++i)
+      lost.push_back({{"label", rig_.markers[order[i]].label}, {"change", change[order[i]] / body_rest_volume_}});
+    nlohmann::json inv = nlohmann::json::object();
+    for (std::size_t m = 0; m < inverted.size(); ++m)
+      if (inverted[m] > 0) inv[rig_.markers[m].label] = inverted[m];
+    return {{"volume_change_near", std::move(lost)}, {"inverted_near", std::move(inv)}};
+  }
+
+ private:
+  const Rig& rig_;
+  std::vector<double> rest_volume_;
+  std::vector<std::int32_t> region_;  // per body tet: index into rig.markers, -1 without markers
+  double body_rest_volume_ = 0.0;
 };
 
 class Measurer {
@@ -195,7 +259,20 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
   reference_setup.options.inversion_guard = cfg.live.inversion_guard;
   reference_setup.options.inversion_guard_threshold = cfg.live.inversion_guard_threshold;
   reference_setup.guarded_tet_count = rig.body_tet_count;
+  reference_setup.options.linear_constraint = cfg.live.volume_constraint;
   tetrig::Deformer reference(rig.tet_mesh, reference_setup);
+  // With --volume-constraint the reference keeps the fine volume too, linearized again every 25
+  // iterations (so it converges to the constrained minimum).
+  std::unique_ptr<tetrig::FineVolumeConstraint> constraint;
+  std::vector<double> constraint_g, constraint_fine;
+  if (cfg.live.volume_constraint) {
+    constraint = std::make_unique<tetrig::FineVolumeConstraint>(
+        rig.pose_transfer.view(),
+        std::span<const std::int32_t>(rig.fine_triangles.data(), static_cast<std::size_t>(rig.fine_triangles.size())),
+        std::span<const double>(rig.fine_vertices.data(), static_cast<std::size_t>(rig.fine_vertices.size())));
+    constraint_g.resize(3 * static_cast<std::size_t>(rig.tet_mesh.vertexCount()));
+    constraint_fine.resize(3 * static_cast<std::size_t>(rig.fine_vertices.rows()));
+  }
   std::vector<Eigen::Quaterniond> rotations(static_cast<std::size_t>(rig.tet_mesh.tetCount()));
 
   const double to_mm = 1.0 / rig.alignment.rig_units_per_mm;
@@ -213,6 +290,8 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
   std::vector<double> rms, worst, e_budget, e_conv, volume_budget, volume_conv, ref_iterations;
   std::vector<std::size_t> ref_frame;
   std::vector<std::string> ref_worst_near;
+  std::vector<nlohmann::json> ref_regions;  // RegionTally of the budgeted and the converged pose
+  const RegionTally regions(rig);
   std::vector<double> ref_region_share;
   // Each body vertex's region: the rig marker nearest to it at rest.
   std::vector<std::int32_t> region(static_cast<std::size_t>(rig.body_vertex_count), -1);
@@ -264,6 +343,12 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
     double last = std::numeric_limits<double>::infinity();
     int done = 0;
     while (done < cfg.max_reference_iterations) {
+      if (constraint) {
+        const std::span<const double> at = done == 0 ? x : reference.positions();
+        tetrig::applyPoseTransfer(b, at.data(), constraint_fine.data());
+        const double c = constraint->linearize(at, constraint_fine.data(), constraint_g);
+        if (!reference.setLinearConstraint(constraint_g, c)) throw std::runtime_error("the volume constraint was refused");
+      }
       const tetrig::StepStats rs = reference.step(targets, tetrig::StepBudget{25});
       done += rs.iterations;
       if (std::abs(last - rs.energy) <= cfg.tolerance * std::max(rs.energy, 1e-300)) break;
@@ -275,6 +360,7 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
     inverted_conv_max = std::max(inverted_conv_max, mc.inverted_body_tets);
     ref_inverted.push_back(mb.inverted_body_tets);
     ref_inverted_conv.push_back(mc.inverted_body_tets);
+    ref_regions.push_back({{"budgeted", regions.tally(x, 3)}, {"converged", regions.tally(xc, 3)}});
     double sum2 = 0.0, w = 0.0;
     std::int32_t worst_v = 0;
     std::fill(region_sum2.begin(), region_sum2.end(), 0.0);
@@ -359,7 +445,8 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
                          {"energy_converged", e_conv[i]}, {"reference_iterations", ref_iterations[i]},
                          {"worst_near", ref_worst_near[i]}, {"worst_region_share", ref_region_share[i]},
                          {"inverted_body_tets", ref_inverted[i]}, {"inverted_body_tets_converged", ref_inverted_conv[i]},
-                         {"volume_change", volume_budget[ref_frame[i] - first]}, {"volume_change_converged", volume_conv[i]}});
+                         {"volume_change", volume_budget[ref_frame[i] - first]}, {"volume_change_converged", volume_conv[i]},
+                         {"regions", std::move(ref_regions[i])}});
   }
   run["reference"] = std::move(per_frame);
   return run;
@@ -425,6 +512,11 @@ int main(int argc, char** argv) {
   app.add_option("--volume-weight", cfg.live.volume_weight,
                  "Volume term's share w of each tet's energy, live rig and reference alike (docs/deformation.md; default 0)")
       ->check(CLI::Range(0.0, 0.99));
+  app.add_flag("--volume-constraint", cfg.live.volume_constraint,
+               "Keep the fine mesh's enclosed volume at rest (a Lagrange multiplier), live rig and reference alike");
+  app.add_option("--volume-constraint-refresh", cfg.live.volume_constraint_refresh_frames,
+                 "Volume constraint: frames between linearizations of its gradient (default 1: every frame)")
+      ->check(CLI::Range(1, 1000));
   app.add_option("--inversion-guard", cfg.live.inversion_guard,
                  "Inversion guard's k: extra stiffness of squashed body tets, live rig and reference alike "
                  "(docs/deformation.md; default 0)")
@@ -450,6 +542,8 @@ int main(int argc, char** argv) {
                           {"reference_every", cfg.reference_every},
                           {"relax", cfg.live.rotation_relaxation},
                           {"volume_weight", cfg.live.volume_weight},
+                          {"volume_constraint", cfg.live.volume_constraint},
+                          {"volume_constraint_refresh_frames", cfg.live.volume_constraint_refresh_frames},
                           {"inversion_guard", cfg.live.inversion_guard},
                           {"inversion_guard_threshold", cfg.live.inversion_guard_threshold},
                           {"extrapolate", cfg.live.rotation_extrapolation},

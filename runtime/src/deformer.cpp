@@ -330,6 +330,11 @@ Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(s
             setup.guarded_tet_count < 0 ? tet_count_ : std::min(setup.guarded_tet_count, tet_count_));
   }
 
+  if (options_.linear_constraint) {
+    constraint_g_.assign(static_cast<size_t>(vertex_count_) * kVectorStride, 0.0);
+    constraint_z_.assign(static_cast<size_t>(vertex_count_) * kVectorStride, 0.0);
+  }
+
   vertex_targets_.resize(static_cast<size_t>(vertex_handle_count_));
   region_targets_.resize(setup.region_handles.size());
   point_targets_.resize(setup.point_handles.size());
@@ -352,6 +357,7 @@ void Deformer::reset() {
   guide_pending_ = false;
   std::copy(point_rest_.begin(), point_rest_.end(), point_targets_.begin());
   for (auto& q : interpolated_rotation_) q = Eigen::Quaterniond::Identity();
+  constraint_active_ = false;
   rememberRotations();
   rebuildDelta();
   updateConstantRhs();
@@ -504,6 +510,47 @@ void Deformer::writePositions() {
   }
 }
 
+bool Deformer::setLinearConstraint(std::span<const double> g, double c) noexcept {
+  constraint_active_ = false;
+  if (constraint_g_.empty() || g.size() != 3 * static_cast<size_t>(vertex_count_) || !std::isfinite(c)) return false;
+  double rest_dot = 0.0;
+  for (std::int32_t s = 0; s < vertex_count_; ++s) {
+    const double* gv = &g[3 * static_cast<size_t>(mesh_vertex_[static_cast<size_t>(s)])];
+    double* out = &constraint_g_[kVectorStride * static_cast<size_t>(s)];
+    for (size_t k = 0; k < 3; ++k) {
+      out[k] = gv[k];
+      rest_dot += gv[k] * rest_solver_[kVectorStride * static_cast<size_t>(s) + k];
+    }
+  }
+  const size_t free4 = static_cast<size_t>(free_count_) * kVectorStride;
+  std::copy_n(constraint_g_.data(), free4, constraint_z_.data());
+  if (free_count_ > 0) factor_.solveInPlace(constraint_z_.data());
+  double gz = 0.0;
+  for (size_t i = 0; i < free4; ++i) gz += constraint_g_[i] * constraint_z_[i];
+  // L_ff is positive definite: g_f . z > 0 unless g_f = 0 (nothing free to move), or not finite.
+  if (!(gz > 0.0) || !std::isfinite(gz) || !std::isfinite(rest_dot)) return false;
+  constraint_rest_dot_ = rest_dot;
+  constraint_rhs_ = c - rest_dot;
+  constraint_gz_ = gz;
+  constraint_active_ = true;
+  return true;
+}
+
+bool Deformer::setLinearConstraintValue(double c) noexcept {
+  if (!constraint_active_ || !std::isfinite(c)) return false;
+  constraint_rhs_ = c - constraint_rest_dot_;
+  return true;
+}
+
+void Deformer::applyLinearConstraint() {
+  // g . x = g . x_rest + g . u: the displacement part over every slot (free and handles).
+  double gu = 0.0;
+  for (size_t i = 0; i < u_.size(); ++i) gu += constraint_g_[i] * u_[i];
+  const double mu = (constraint_rhs_ - gu) / constraint_gz_;
+  const size_t free4 = static_cast<size_t>(free_count_) * kVectorStride;
+  for (size_t i = 0; i < free4; ++i) u_[i] += mu * constraint_z_[i];
+}
+
 StepStats Deformer::step(const HandleTargets& targets, const StepBudget& budget) {
   StepStats stats;
   const auto start = Clock::now();
@@ -532,6 +579,7 @@ StepStats Deformer::step(const HandleTargets& targets, const StepBudget& budget)
     const auto t0 = Clock::now();
     for (size_t i = 0; i < free4; ++i) u_[i] = delta_[i] + rhs_constant_[i];
     if (free_count_ > 0) factor_.solveInPlace(u_.data());
+    if (constraint_active_) applyLinearConstraint();
     const auto t1 = Clock::now();
     stats.solve_ns += nanosecondsBetween(t0, t1);
     ++stats.iterations;

@@ -34,6 +34,7 @@ DeformerSetup liveSetup(const Rig& rig, const LiveRigOptions& options, bool fram
   setup.options.volume_weight = options.volume_weight;
   setup.options.inversion_guard = options.inversion_guard;
   setup.options.inversion_guard_threshold = options.inversion_guard_threshold;
+  setup.options.linear_constraint = options.volume_constraint;
   setup.guarded_tet_count = rig.body_tet_count;
   return setup;
 }
@@ -142,6 +143,13 @@ LiveRig::LiveRig(const Rig& rig, const LiveRigOptions& options, const Rig* coars
   if (options.split_pose_transfer) {
     split_ = compact_b_.rows > 0 ? std::make_unique<PoseTransferSplit>(compact_b_.view())
                                  : std::make_unique<PoseTransferSplit>(rig.pose_transfer.view());
+  }
+  if (options.volume_constraint) {
+    volume_constraint_ = std::make_unique<FineVolumeConstraint>(
+        rig.pose_transfer.view(),
+        std::span<const std::int32_t>(rig.fine_triangles.data(), static_cast<std::size_t>(rig.fine_triangles.size())),
+        std::span<const double>(rig.fine_vertices.data(), static_cast<std::size_t>(rig.fine_vertices.size())));
+    constraint_gradient_.assign(3 * static_cast<std::size_t>(rig.tet_mesh.vertexCount()), 0.0);
   }
   if (const Rig* coarse = coarseRigOf(rig, options, coarse_rig)) buildCoarseLevel(*coarse);
   prediction_.resize(markers);
@@ -469,6 +477,21 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
     pose_bound_.addTarget(region_targets_[r].rotation * region_centroid_[r] + region_targets_[r].translation);
   if (pose_bound_.accepts(positions, n)) {
     std::memcpy(last_positions_.data(), positions, n * sizeof(float));
+    if (volume_constraint_) {
+      // The next frame keeps the volume: g . x = V_rest - V(x0) + g . x0 at this pose x0, with g
+      // linearized again every volume_constraint_refresh_frames frames (a stale g still keeps the
+      // measured volume; it only steers less well).
+      if (!deformer_.hasLinearConstraint() || ++frames_since_linearized_ >= options_.volume_constraint_refresh_frames) {
+        const double c = volume_constraint_->linearize(deformer_.positions(), positions, constraint_gradient_);
+        deformer_.setLinearConstraint(constraint_gradient_, c);
+        frames_since_linearized_ = 0;
+      } else {
+        const std::span<const double> x0 = deformer_.positions();
+        double g_x0 = 0.0;
+        for (std::size_t i = 0; i < x0.size(); ++i) g_x0 += constraint_gradient_[i] * x0[i];
+        deformer_.setLinearConstraintValue(volume_constraint_->restVolume() - volume_constraint_->volume(positions) + g_x0);
+      }
+    }
     if (options_.normals) {
       vertexNormals(positions, fineTriangles(), normal_sum_, last_normals_.data(), last_normals_.data());
       if (normals != nullptr) std::memcpy(normals, last_normals_.data(), n * sizeof(float));

@@ -747,7 +747,8 @@ TEST(LiveRig, TheCompactPoseTransferMatchesTheDoubleBToItsRounding) {
   RecordProperty("largest_fraction_of_bound", ::testing::PrintToString(largest_ratio));
 }
 
-// With and without the coarse level (the rig as its own coarse level) and the temporal prediction.
+// With and without the coarse level (the rig as its own coarse level), the temporal prediction and
+// the volume constraint (linearized after every accepted frame: a transposed product and a solve).
 class LiveRigAllocations : public ::testing::TestWithParam<bool> {};
 
 TEST_P(LiveRigAllocations, NonePerFrameAfterWarmUp) {
@@ -757,7 +758,10 @@ TEST_P(LiveRigAllocations, NonePerFrameAfterWarmUp) {
   LiveRigOptions options;
   options.normals = true;
   const bool coarse = GetParam();
-  if (coarse) options.rotation_extrapolation = 1.0;
+  if (coarse) {
+    options.rotation_extrapolation = 1.0;
+    options.volume_constraint = true;
+  }
   LiveRig live(rig, options, coarse ? &rig : nullptr);
   std::vector<std::string> labels = labelTable();
   labels[6] = "";  // one rig marker never named
@@ -785,6 +789,7 @@ TEST_P(LiveRigAllocations, NonePerFrameAfterWarmUp) {
   Eigen::internal::set_is_malloc_allowed(true);
   EXPECT_EQ(after - before, 0u);
   // Every path ran.
+  EXPECT_EQ(live.deformer().hasLinearConstraint(), coarse);
   EXPECT_TRUE(flags & kLivePoseHeld);
   EXPECT_TRUE(flags & kLiveMarkersPredicted);
   EXPECT_TRUE(flags & kLiveMarkersBlending);

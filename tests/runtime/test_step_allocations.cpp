@@ -72,6 +72,32 @@ TEST(StepAllocations, NoneWithTheTemporalPredictionAndTheVolumeTerm) {
   EXPECT_EQ(allocationsDuringSteps(deformer, frames, 3, nullptr), 0u);
 }
 
+// setLinearConstraint (one solve) before every step, and the constrained steps.
+TEST(StepAllocations, NoneWithALinearConstraint) {
+  const auto bar = scenes::makeBarScene(4, 4, 33);
+  DeformerSetup setup = test::endVertexHandles(bar);
+  setup.options.linear_constraint = true;
+  Deformer deformer(bar.mesh, setup);
+  std::vector<double> g(3 * static_cast<std::size_t>(bar.mesh.vertexCount()), 0.0);
+  for (std::size_t i = 0; i < g.size(); i += 3) g[i] = 1.0;  // the sum of the x coordinates
+  HandleTargets targets;
+  const auto positions = test::endTargets(bar, scenes::barBendTransform(bar, 0.3));
+  targets.vertex_positions = positions;
+  ASSERT_TRUE(deformer.setLinearConstraint(g, 0.0));
+  deformer.step(targets, StepBudget{3});  // warm-up
+  Eigen::internal::set_is_malloc_allowed(false);
+  const std::uint64_t before = ::tetrig::test::allocationCount();
+  bool all_set = true;
+  for (int f = 0; f < 5; ++f) {
+    all_set = deformer.setLinearConstraint(g, 0.1 * f) && all_set;
+    deformer.step(targets, StepBudget{3});
+  }
+  const std::uint64_t after = ::tetrig::test::allocationCount();
+  Eigen::internal::set_is_malloc_allowed(true);
+  EXPECT_TRUE(all_set);
+  EXPECT_EQ(after - before, 0u);
+}
+
 // The coarse level's frame (its own step, the rotation change, the fine deformer's frame guide) and
 // the guided fine step, with the temporal prediction on too.
 TEST(StepAllocations, NoneWithTheCoarseLevel) {

@@ -90,6 +90,8 @@ struct DeformerOptions {
                                  // volume takes up to k times more stiffness (rotation_kernel.hpp, inversion
                                  // guard); the factor is the same. 0: none
   double inversion_guard_threshold = 0.5;  // tau in (0, 1]: the volume ratio det F where the guard starts
+  bool linear_constraint = false;  // accept one linear equality constraint on the positions
+                                   // (setLinearConstraint); 64 bytes per vertex more state
 };
 
 struct DeformerSetup {
@@ -179,7 +181,22 @@ class Deformer {
   // (and keeps nothing) without the option or with the wrong size. No allocation, lock or exception.
   bool setFrameGuide(std::span<const float> wxyz_per_tet) noexcept;
 
-  // Back to the rest state: rotations I, positions at rest, handle targets at rest.
+  // A linear equality constraint on the positions, g . x = c (DeformerOptions::linear_constraint;
+  // g: #V*3 doubles in mesh vertex order, e.g. a volume's gradient, tetrig/volume_constraint.hpp),
+  // enforced by a Lagrange multiplier with the same factor: every solve is followed by
+  //   u_f += mu z,   z = L_ff^-1 g_f,   mu = (c - g . x) / (g_f . z),
+  // which makes each global step the minimum of its quadratic on the plane g . x = c, and a converged
+  // pose the constrained minimum. z is solved here, once (one solve); the constraint holds for every
+  // step until replaced or cleared. Handle components of g count in g . x but cannot move. Returns
+  // false (and clears the constraint) without the option, with the wrong size, with a non-finite g
+  // or c, or when g has no component on a free vertex. No allocation, lock or exception.
+  bool setLinearConstraint(std::span<const double> g, double c) noexcept;
+  // A new value c for the constraint's g (no solve): false, and no change, without one.
+  bool setLinearConstraintValue(double c) noexcept;
+  void clearLinearConstraint() noexcept { constraint_active_ = false; }
+  bool hasLinearConstraint() const noexcept { return constraint_active_; }
+
+  // Back to the rest state: rotations I, positions at rest, handle targets at rest, no constraint.
   void reset();
 
   std::int32_t vertexCount() const { return vertex_count_; }
@@ -262,6 +279,13 @@ class Deformer {
 
   // Rigid groups: CSR over tet slots.
   std::vector<std::int32_t> group_start_, group_slot_;
+
+  // Linear constraint (options_.linear_constraint): g and z = L_ff^-1 g_f in solver order
+  // (kVectorStride per vertex), c - g . x_rest, g_f . z.
+  AlignedVector<double> constraint_g_, constraint_z_;
+  double constraint_rhs_ = 0.0, constraint_gz_ = 0.0, constraint_rest_dot_ = 0.0;
+  bool constraint_active_ = false;
+  void applyLinearConstraint();
 };
 
 }  // namespace tetrig

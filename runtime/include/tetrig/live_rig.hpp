@@ -53,6 +53,7 @@
 #include "tetrig/pose_sensor.hpp"
 #include "tetrig/pose_transfer_split.hpp"
 #include "tetrig/rig_file.hpp"
+#include "tetrig/volume_constraint.hpp"
 
 #include <Eigen/Core>
 
@@ -92,6 +93,13 @@ struct LiveRigOptions {
   double volume_weight = 0.0;  // DeformerOptions::volume_weight (the volume term; docs/deformation.md), rig and coarse level
   double inversion_guard = 0.0;            // DeformerOptions::inversion_guard over the rig's body tets, rig and coarse level
   double inversion_guard_threshold = 0.5;  // DeformerOptions::inversion_guard_threshold
+  // Keep the fine mesh's enclosed volume at rest (FineVolumeConstraint, a Lagrange multiplier on the
+  // fine rig; linearized after each frame's pose transfer for the next frame: one transposed product
+  // of B and one solve per frame, counted in pose_transfer_ns). Off by default (docs/fidelity.md).
+  bool volume_constraint = false;
+  // Frames between two linearizations of the volume's gradient (B^T of it and the solve, the costly
+  // part); the volume itself is measured every frame and the constraint's value follows it.
+  int volume_constraint_refresh_frames = 1;
   int coarse_iterations = 5;   // with a coarse rig: its iterations per frame (CoarseLevelOptions::iterations)
   bool use_coarse_level = true;  // use the rig's own coarse level (Rig::coarse, built with build-rig
                                  // --coarse-tet-vertices) when it has one and no coarse rig is given
@@ -224,6 +232,9 @@ class LiveRig {
   MarkerPredictor predictor_;
   CompactPoseTransfer compact_b_;             // when options.compact_pose_transfer and the rig fits (else empty)
   std::unique_ptr<PoseTransferSplit> split_;  // when options.split_pose_transfer
+  std::unique_ptr<FineVolumeConstraint> volume_constraint_;  // when options.volume_constraint
+  std::vector<double> constraint_gradient_;                // its g, #tetV*3
+  int frames_since_linearized_ = 0;
   // Coarse level (with a coarse rig): its handle targets, and per coarse marker its vertex handle
   // and the rig marker that drives it.
   std::unique_ptr<CoarseLevel> coarse_;

@@ -1,0 +1,58 @@
+// The fine mesh's enclosed volume as a linear constraint on the tet-mesh positions, for
+// Deformer::setLinearConstraint (docs/deformation.md, "Volume constraint").
+//
+// The fine mesh is x_fine = B x (the pose transfer, Stoll et al. 2007, eq. 2.12) and encloses
+//   V(x_fine) = 1/6 sum_{triangles (a, b, c)} a . (b x c),   dV/da = 1/6 (b x c) (and cyclically).
+// Linearized at a pose x0 (x_fine0 = B x0), with g = B^T dV/dx_fine (x_fine0), keeping V at its
+// rest value reads
+//   g . x = V_rest - V(x_fine0) + g . x0.
+// The rotation term ||F - R||^2 has Poisson's ratio 0: it lets flexion creases lose volume, and a
+// volume term per tet converges too slowly to fix that in a frame's few iterations
+// (docs/fidelity.md); one constraint with a Lagrange multiplier costs one solve per frame.
+//
+// Threads: construct at load (allocates); linearize() from one thread at a time, no allocation,
+// lock or exception. `b` and `triangles` must outlive this object.
+#pragma once
+
+#include "tetrig/pose_transfer.hpp"
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+namespace tetrig {
+
+class FineVolumeConstraint {
+ public:
+  // b: #fine x #tetV; triangles: #F*3 fine-vertex indices, outward; rest_fine: #fine*3 rest positions.
+  // Throws std::invalid_argument on sizes that do not match or an index out of range.
+  FineVolumeConstraint(const PoseTransferView<double>& b, std::span<const std::int32_t> triangles,
+                       std::span<const double> rest_fine);
+
+  // Enclosed volume of a fine pose (#fine*3).
+  template <typename T>
+  double volume(const T* x_fine) const noexcept;
+
+  // At the pose x_tet (#tetV*3, mesh order) whose fine pose is x_fine (= B x_tet, #fine*3): writes
+  // g (#tetV*3) and returns c, so that g . x = c keeps the rest volume to first order. Returns the
+  // fine pose's volume in *volume_now when not null.
+  template <typename T>
+  double linearize(std::span<const double> x_tet, const T* x_fine, std::span<double> g, double* volume_now = nullptr) noexcept;
+
+  double restVolume() const noexcept { return rest_volume_; }
+  std::int32_t tetVertexCount() const noexcept { return b_.cols; }
+  std::int32_t fineVertexCount() const noexcept { return b_.rows; }
+
+ private:
+  PoseTransferView<double> b_;
+  // B^T as CSR (a row per tet vertex: the fine vertices it moves, float weights), built at load, so
+  // that g = B^T dV/dx_fine gathers instead of scattering (measured: the scatter over B's rows took
+  // about four times the forward pose transfer).
+  std::vector<std::int32_t> bt_offsets_, bt_rows_;
+  std::vector<float> bt_weights_;
+  std::span<const std::int32_t> triangles_;
+  double rest_volume_ = 0.0;
+  std::vector<double> fine_gradient_;  // #fine*3 scratch
+};
+
+}  // namespace tetrig

@@ -1,0 +1,105 @@
+// The fine mesh's enclosed volume as a linear constraint on the tet-mesh positions
+// (tetrig/volume_constraint.hpp has the equations).
+#include "tetrig/volume_constraint.hpp"
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+#include <algorithm>
+#include <stdexcept>
+#include <string>
+
+namespace tetrig {
+
+FineVolumeConstraint::FineVolumeConstraint(const PoseTransferView<double>& b, std::span<const std::int32_t> triangles,
+                                           std::span<const double> rest_fine)
+    : b_(b), triangles_(triangles) {
+  if (b.rows <= 0 || b.cols <= 0) throw std::invalid_argument("volume constraint: empty pose transfer");
+  if (triangles.empty() || triangles.size() % 3 != 0) throw std::invalid_argument("volume constraint: no triangles");
+  if (rest_fine.size() != 3 * static_cast<std::size_t>(b.rows))
+    throw std::invalid_argument("volume constraint: " + std::to_string(rest_fine.size() / 3) + " rest positions for " +
+                                std::to_string(b.rows) + " fine vertices");
+  for (const std::int32_t v : triangles)
+    if (v < 0 || v >= b.rows) throw std::invalid_argument("volume constraint: triangle corner " + std::to_string(v) + " out of range");
+  fine_gradient_.assign(3 * static_cast<std::size_t>(b.rows), 0.0);
+  rest_volume_ = volume(rest_fine.data());
+  // B^T: count the entries per column, then place them (rows ascending within a column).
+  bt_offsets_.assign(static_cast<std::size_t>(b.cols) + 1, 0);
+  const std::int32_t entries = b.row_offsets[b.rows];
+  for (std::int32_t k = 0; k < entries; ++k) {
+    if (b.columns[k] < 0 || b.columns[k] >= b.cols) throw std::invalid_argument("volume constraint: pose-transfer column out of range");
+    ++bt_offsets_[static_cast<std::size_t>(b.columns[k]) + 1];
+  }
+  for (std::size_t j = 0; j < static_cast<std::size_t>(b.cols); ++j) bt_offsets_[j + 1] += bt_offsets_[j];
+  bt_rows_.resize(static_cast<std::size_t>(entries));
+  bt_weights_.resize(static_cast<std::size_t>(entries));
+  std::vector<std::int32_t> next(bt_offsets_.begin(), bt_offsets_.end() - 1);
+  for (std::int32_t r = 0; r < b.rows; ++r)
+    for (std::int32_t k = b.row_offsets[r]; k < b.row_offsets[r + 1]; ++k) {
+      const auto at = static_cast<std::size_t>(next[static_cast<std::size_t>(b.columns[k])]++);
+      bt_rows_[at] = r;
+      bt_weights_[at] = static_cast<float>(b.weights[k]);
+    }
+}
+
+template <typename T>
+double FineVolumeConstraint::volume(const T* x) const noexcept {
+  double six = 0.0;
+  for (std::size_t f = 0; f < triangles_.size(); f += 3) {
+    const auto p = [&](std::size_t k) {
+      const T* q = x + 3 * static_cast<std::size_t>(triangles_[f + k]);
+      return Eigen::Vector3d(q[0], q[1], q[2]);
+    };
+    six += p(0).dot(p(1).cross(p(2)));
+  }
+  return six / 6.0;
+}
+
+template <typename T>
+double FineVolumeConstraint::linearize(std::span<const double> x_tet, const T* x_fine, std::span<double> g,
+                                       double* volume_now) noexcept {
+  // dV/dx_fine: 1/6 (b x c) at a, cyclically.
+  std::fill(fine_gradient_.begin(), fine_gradient_.end(), 0.0);
+  double six = 0.0;
+  for (std::size_t f = 0; f < triangles_.size(); f += 3) {
+    Eigen::Vector3d p[3];
+    for (std::size_t k = 0; k < 3; ++k) {
+      const T* q = x_fine + 3 * static_cast<std::size_t>(triangles_[f + k]);
+      p[k] = Eigen::Vector3d(q[0], q[1], q[2]);
+    }
+    six += p[0].dot(p[1].cross(p[2]));
+    for (std::size_t k = 0; k < 3; ++k) {
+      const Eigen::Vector3d d = p[(k + 1) % 3].cross(p[(k + 2) % 3]);
+      double* out = &fine_gradient_[3 * static_cast<std::size_t>(triangles_[f + k])];
+      for (int c = 0; c < 3; ++c) out[c] += d[c] / 6.0;
+    }
+  }
+  // g = B^T dV/dx_fine (a gather per tet vertex), and g . x0.
+  double g_x0 = 0.0;
+  for (std::int32_t j = 0; j < b_.cols; ++j) {
+    double s0 = 0.0, s1 = 0.0, s2 = 0.0;
+    for (std::int32_t k = bt_offsets_[static_cast<std::size_t>(j)]; k < bt_offsets_[static_cast<std::size_t>(j) + 1]; ++k) {
+      const double w = bt_weights_[static_cast<std::size_t>(k)];
+      const double* gf = &fine_gradient_[3 * static_cast<std::size_t>(bt_rows_[static_cast<std::size_t>(k)])];
+      s0 += w * gf[0];
+      s1 += w * gf[1];
+      s2 += w * gf[2];
+    }
+    double* out = &g[3 * static_cast<std::size_t>(j)];
+    out[0] = s0;
+    out[1] = s1;
+    out[2] = s2;
+    g_x0 += s0 * x_tet[3 * static_cast<std::size_t>(j)] + s1 * x_tet[3 * static_cast<std::size_t>(j) + 1] +
+            s2 * x_tet[3 * static_cast<std::size_t>(j) + 2];
+  }
+  const double now = six / 6.0;
+  if (volume_now != nullptr) *volume_now = now;
+  return rest_volume_ - now + g_x0;
+}
+
+template double FineVolumeConstraint::volume(const float*) const noexcept;
+template double FineVolumeConstraint::volume(const double*) const noexcept;
+template double FineVolumeConstraint::linearize(std::span<const double>, const float*, std::span<double>, double*) noexcept;
+template double FineVolumeConstraint::linearize(std::span<const double>, const double*, std::span<double>, double*) noexcept;
+
+}  // namespace tetrig
