@@ -26,7 +26,7 @@
 //   two oriented regions add to a frame.
 //   BM_LiveRigFrame/smpl_hdm05_volume_constraint: the same live path (no split) keeping the fine
 //   mesh's volume (LiveRigOptions::volume_constraint: after the pose transfer, the volume's gradient,
-//   B^T of it with the rig's double B, and one solve; counted in pose_transfer_us).
+//   B^T of it (a transposed float copy of B), and one solve; counted in pose_transfer_us).
 //   BM_PoseTransfer/smpl_hdm05/<layout>/<cache>: the pose transfer alone, from the padded positions of
 //   one posed frame into a float buffer; layout 0 = the rig's B (double weights, 32-bit columns, 12
 //   bytes per entry), 1 = the live rig's compact copy (float, 16-bit, 6 bytes: narrowPoseTransfer);

@@ -88,6 +88,21 @@ struct PoseMeasure {
   int inverted_body_tets = 0;
 };
 
+// The rig marker nearest to a rest point (its index in rig.markers), -1 without markers: a body
+// vertex's or tet's region.
+std::int32_t nearestMarker(const Rig& rig, const Eigen::RowVector3d& p) {
+  std::int32_t nearest = -1;
+  double best = std::numeric_limits<double>::infinity();
+  for (std::size_t m = 0; m < rig.markers.size(); ++m) {
+    const double d = (p - rig.tet_mesh.vertices.row(rig.markers[m].tet_vertex)).squaredNorm();
+    if (d < best) {
+      best = d;
+      nearest = static_cast<std::int32_t>(m);
+    }
+  }
+  return nearest;
+}
+
 // Where a pose loses volume and inverts tets: its body tets summed by region, a region being the
 // rig marker nearest to a tet's rest centroid (the same regions `worst_near` names, for tets).
 class RegionTally {
@@ -99,14 +114,7 @@ class RegionTally {
       body_rest_volume_ += rest_volume_[static_cast<std::size_t>(t)];
       Eigen::RowVector3d c = Eigen::RowVector3d::Zero();
       for (int k = 0; k < 4; ++k) c += 0.25 * rig.tet_mesh.vertices.row(rig.tet_mesh.tets(t, k));
-      double best = std::numeric_limits<double>::infinity();
-      for (std::size_t m = 0; m < rig.markers.size(); ++m) {
-        const double d = (c - rig.tet_mesh.vertices.row(rig.markers[m].tet_vertex)).squaredNorm();
-        if (d < best) {
-          best = d;
-          region_[static_cast<std::size_t>(t)] = static_cast<std::int32_t>(m);
-        }
-      }
+      region_[static_cast<std::size_t>(t)] = nearestMarker(rig, c);
     }
   }
 
@@ -204,16 +212,7 @@ class Measurer {
   // Enclosed volume of the fine mesh at positions p (#fine*3 floats or doubles, rig units).
   template <class T>
   double fineVolume(const T* p) const {
-    double six = 0.0;
-    const auto& tri = rig_.fine_triangles;
-    for (Eigen::Index f = 0; f < tri.rows(); ++f) {
-      const auto v = [&](int k) {
-        const auto i = static_cast<std::size_t>(tri(f, k));
-        return Eigen::Vector3d(p[3 * i], p[3 * i + 1], p[3 * i + 2]);
-      };
-      six += v(0).dot(v(1).cross(v(2)));
-    }
-    return six / 6.0;
+    return tetrig::enclosedVolume(std::span<const std::int32_t>(rig_.fine_triangles.data(), static_cast<std::size_t>(rig_.fine_triangles.size())), p);
   }
   double fineRestVolume() const { return fine_rest_volume_; }
 
@@ -295,18 +294,7 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
   std::vector<double> ref_region_share;
   // Each body vertex's region: the rig marker nearest to it at rest.
   std::vector<std::int32_t> region(static_cast<std::size_t>(rig.body_vertex_count), -1);
-  if (!rig.markers.empty()) {
-    for (std::int32_t v = 0; v < rig.body_vertex_count; ++v) {
-      double best = std::numeric_limits<double>::infinity();
-      for (std::size_t m = 0; m < rig.markers.size(); ++m) {
-        const double d = (rig.tet_mesh.vertices.row(v) - rig.tet_mesh.vertices.row(rig.markers[m].tet_vertex)).squaredNorm();
-        if (d < best) {
-          best = d;
-          region[static_cast<std::size_t>(v)] = static_cast<std::int32_t>(m);
-        }
-      }
-    }
-  }
+  for (std::int32_t v = 0; v < rig.body_vertex_count; ++v) region[static_cast<std::size_t>(v)] = nearestMarker(rig, rig.tet_mesh.vertices.row(v));
   std::vector<double> region_sum2(rig.markers.size());
   int inverted_budget_max = 0, inverted_conv_max = 0;
   std::size_t inverted_budget_max_frame = 0, inverted_budget_frames = 0;

@@ -486,10 +486,7 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
         deformer_.setLinearConstraint(constraint_gradient_, c);
         frames_since_linearized_ = 0;
       } else {
-        const std::span<const double> x0 = deformer_.positions();
-        double g_x0 = 0.0;
-        for (std::size_t i = 0; i < x0.size(); ++i) g_x0 += constraint_gradient_[i] * x0[i];
-        deformer_.setLinearConstraintValue(volume_constraint_->restVolume() - volume_constraint_->volume(positions) + g_x0);
+        deformer_.setLinearConstraintValue(volume_constraint_->value(deformer_.positions(), positions, constraint_gradient_));
       }
     }
     if (options_.normals) {

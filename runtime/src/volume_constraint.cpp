@@ -13,7 +13,7 @@ namespace tetrig {
 
 FineVolumeConstraint::FineVolumeConstraint(const PoseTransferView<double>& b, std::span<const std::int32_t> triangles,
                                            std::span<const double> rest_fine)
-    : b_(b), triangles_(triangles) {
+    : tet_vertices_(b.cols), fine_vertices_(b.rows), triangles_(triangles) {
   if (b.rows <= 0 || b.cols <= 0) throw std::invalid_argument("volume constraint: empty pose transfer");
   if (triangles.empty() || triangles.size() % 3 != 0) throw std::invalid_argument("volume constraint: no triangles");
   if (rest_fine.size() != 3 * static_cast<std::size_t>(b.rows))
@@ -43,16 +43,23 @@ FineVolumeConstraint::FineVolumeConstraint(const PoseTransferView<double>& b, st
 }
 
 template <typename T>
-double FineVolumeConstraint::volume(const T* x) const noexcept {
+double enclosedVolume(std::span<const std::int32_t> triangles, const T* x) noexcept {
   double six = 0.0;
-  for (std::size_t f = 0; f < triangles_.size(); f += 3) {
+  for (std::size_t f = 0; f + 2 < triangles.size(); f += 3) {
     const auto p = [&](std::size_t k) {
-      const T* q = x + 3 * static_cast<std::size_t>(triangles_[f + k]);
+      const T* q = x + 3 * static_cast<std::size_t>(triangles[f + k]);
       return Eigen::Vector3d(q[0], q[1], q[2]);
     };
     six += p(0).dot(p(1).cross(p(2)));
   }
   return six / 6.0;
+}
+
+template <typename T>
+double FineVolumeConstraint::value(std::span<const double> x_tet, const T* x_fine, std::span<const double> g) const noexcept {
+  double g_x = 0.0;
+  for (std::size_t i = 0; i < x_tet.size(); ++i) g_x += g[i] * x_tet[i];
+  return rest_volume_ - volume(x_fine) + g_x;
 }
 
 template <typename T>
@@ -76,7 +83,7 @@ double FineVolumeConstraint::linearize(std::span<const double> x_tet, const T* x
   }
   // g = B^T dV/dx_fine (a gather per tet vertex), and g . x0.
   double g_x0 = 0.0;
-  for (std::int32_t j = 0; j < b_.cols; ++j) {
+  for (std::int32_t j = 0; j < tet_vertices_; ++j) {
     double s0 = 0.0, s1 = 0.0, s2 = 0.0;
     for (std::int32_t k = bt_offsets_[static_cast<std::size_t>(j)]; k < bt_offsets_[static_cast<std::size_t>(j) + 1]; ++k) {
       const double w = bt_weights_[static_cast<std::size_t>(k)];
@@ -97,8 +104,9 @@ double FineVolumeConstraint::linearize(std::span<const double> x_tet, const T* x
   return rest_volume_ - now + g_x0;
 }
 
-template double FineVolumeConstraint::volume(const float*) const noexcept;
-template double FineVolumeConstraint::volume(const double*) const noexcept;
+template double enclosedVolume(std::span<const std::int32_t>, const float*) noexcept;
+template double enclosedVolume(std::span<const std::int32_t>, const double*) noexcept;
+template double FineVolumeConstraint::value(std::span<const double>, const float*, std::span<const double>) const noexcept;
 template double FineVolumeConstraint::linearize(std::span<const double>, const float*, std::span<double>, double*) noexcept;
 template double FineVolumeConstraint::linearize(std::span<const double>, const double*, std::span<double>, double*) noexcept;
 

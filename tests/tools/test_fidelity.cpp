@@ -87,10 +87,8 @@ class FidelityTool : public ::testing::Test {
     in.description = rigbuild::readRigDescription(std::filesystem::path(TETRIG_SOURCE_DIR) / "assets" / description);
     return rigbuild::buildRig(in);
   }
-  static std::string common() {
-    return "--rig '" + rig_->string() + "' --c3d '" + clip_->string() + "' --frames 240 --reference-every 20 -q ";
-  }
   static std::string common_all() { return "--rig '" + rig_->string() + "' --c3d '" + clip_->string() + "' -q "; }
+  static std::string common() { return common_all() + "--frames 240 --reference-every 20 "; }
   static inline TempDir* dir_ = nullptr;
   static inline std::filesystem::path* rig_ = nullptr;
   static inline std::filesystem::path* clip_ = nullptr;

@@ -10,8 +10,8 @@
 // volume term per tet converges too slowly to fix that in a frame's few iterations
 // (docs/fidelity.md); one constraint with a Lagrange multiplier costs one solve per frame.
 //
-// Threads: construct at load (allocates); linearize() from one thread at a time, no allocation,
-// lock or exception. `b` and `triangles` must outlive this object.
+// Threads: construct at load (allocates; B is copied, transposed); linearize() from one thread at a
+// time, no allocation, lock or exception. `triangles` must outlive this object.
 #pragma once
 
 #include "tetrig/pose_transfer.hpp"
@@ -22,6 +22,11 @@
 
 namespace tetrig {
 
+// Volume enclosed by a closed triangle mesh (divergence theorem): triangles #F*3 vertex indices,
+// x #V*3 positions; negative when the faces point inward.
+template <typename T>
+double enclosedVolume(std::span<const std::int32_t> triangles, const T* x) noexcept;
+
 class FineVolumeConstraint {
  public:
   // b: #fine x #tetV; triangles: #F*3 fine-vertex indices, outward; rest_fine: #fine*3 rest positions.
@@ -31,7 +36,9 @@ class FineVolumeConstraint {
 
   // Enclosed volume of a fine pose (#fine*3).
   template <typename T>
-  double volume(const T* x_fine) const noexcept;
+  double volume(const T* x_fine) const noexcept {
+    return enclosedVolume(triangles_, x_fine);
+  }
 
   // At the pose x_tet (#tetV*3, mesh order) whose fine pose is x_fine (= B x_tet, #fine*3): writes
   // g (#tetV*3) and returns c, so that g . x = c keeps the rest volume to first order. Returns the
@@ -39,12 +46,17 @@ class FineVolumeConstraint {
   template <typename T>
   double linearize(std::span<const double> x_tet, const T* x_fine, std::span<double> g, double* volume_now = nullptr) noexcept;
 
+  // The c of a g from an earlier linearize() at a new pose (x_tet, x_fine = B x_tet): the measured
+  // volume sets it, V_rest - V(x_fine) + g . x_tet, without building g again.
+  template <typename T>
+  double value(std::span<const double> x_tet, const T* x_fine, std::span<const double> g) const noexcept;
+
   double restVolume() const noexcept { return rest_volume_; }
-  std::int32_t tetVertexCount() const noexcept { return b_.cols; }
-  std::int32_t fineVertexCount() const noexcept { return b_.rows; }
+  std::int32_t tetVertexCount() const noexcept { return tet_vertices_; }
+  std::int32_t fineVertexCount() const noexcept { return fine_vertices_; }
 
  private:
-  PoseTransferView<double> b_;
+  std::int32_t tet_vertices_ = 0, fine_vertices_ = 0;  // B's columns and rows
   // B^T as CSR (a row per tet vertex: the fine vertices it moves, float weights), built at load, so
   // that g = B^T dV/dx_fine gathers instead of scattering (measured: the scatter over B's rows took
   // about four times the forward pose transfer).
