@@ -57,14 +57,15 @@ class FineVolumeConstraint {
 
  private:
   std::int32_t tet_vertices_ = 0, fine_vertices_ = 0;  // B's columns and rows
-  // B^T as CSR (a row per tet vertex: the fine vertices it moves, float weights), built at load, so
-  // that g = B^T dV/dx_fine gathers instead of scattering (measured: the scatter over B's rows took
-  // about four times the forward pose transfer).
-  std::vector<std::int32_t> bt_offsets_, bt_rows_;
-  std::vector<float> bt_weights_;
+  // B^T (a row per tet vertex: the fine vertices it moves), built at load, so that g = B^T dV/dx_fine
+  // gathers instead of scattering (the scatter over B's rows took about four times the forward pose
+  // transfer), with the pose transfer's own padded kernel: float weights, and 16-bit columns when
+  // there are at most 65536 fine vertices (bt_compact_), else 32-bit (bt_wide_); the other is empty.
+  CompactPoseTransfer bt_compact_;
+  PoseTransferCsr<float> bt_wide_;
   std::span<const std::int32_t> triangles_;
   double rest_volume_ = 0.0;
-  std::vector<double> fine_gradient_;  // #fine*3 scratch
+  std::vector<double> fine_gradient4_;  // #fine*4 scratch: dV/dx_fine, padded (x, y, z, 0)
 };
 
 }  // namespace tetrig
