@@ -358,7 +358,6 @@ void Deformer::reset() {
   std::copy(point_rest_.begin(), point_rest_.end(), point_targets_.begin());
   for (auto& q : interpolated_rotation_) q = Eigen::Quaterniond::Identity();
   constraint_active_ = false;
-  constraint_z_solved_ = false;
   rememberRotations();
   rebuildDelta();
   updateConstantRhs();
@@ -511,7 +510,9 @@ void Deformer::writePositions() {
   }
 }
 
-double Deformer::loadConstraintGradient(std::span<const double> g) noexcept {
+bool Deformer::setLinearConstraint(std::span<const double> g, double c) noexcept {
+  constraint_active_ = false;
+  if (constraint_g_.empty() || g.size() != 3 * static_cast<size_t>(vertex_count_) || !std::isfinite(c)) return false;
   double rest_dot = 0.0;
   for (std::int32_t s = 0; s < vertex_count_; ++s) {
     const double* gv = &g[3 * static_cast<size_t>(mesh_vertex_[static_cast<size_t>(s)])];
@@ -521,40 +522,18 @@ double Deformer::loadConstraintGradient(std::span<const double> g) noexcept {
       rest_dot += gv[k] * rest_solver_[kVectorStride * static_cast<size_t>(s) + k];
     }
   }
-  return rest_dot;
-}
-
-bool Deformer::acceptConstraint(double rest_dot, double c) noexcept {
   const size_t free4 = static_cast<size_t>(free_count_) * kVectorStride;
+  std::copy_n(constraint_g_.data(), free4, constraint_z_.data());
+  if (free_count_ > 0) factor_.solveInPlace(constraint_z_.data());
   double gz = 0.0;
   for (size_t i = 0; i < free4; ++i) gz += constraint_g_[i] * constraint_z_[i];
-  // L_ff is positive definite: g_f . z > 0 unless g_f = 0 (nothing free to move), or not finite. A
-  // kept z (updateLinearConstraint) must still point along g_f.
+  // L_ff is positive definite: g_f . z > 0 unless g_f = 0 (nothing free to move), or not finite.
   if (!(gz > 0.0) || !std::isfinite(gz) || !std::isfinite(rest_dot)) return false;
   constraint_rest_dot_ = rest_dot;
   constraint_rhs_ = c - rest_dot;
   constraint_gz_ = gz;
   constraint_active_ = true;
   return true;
-}
-
-bool Deformer::setLinearConstraint(std::span<const double> g, double c) noexcept {
-  constraint_active_ = false;
-  constraint_z_solved_ = false;
-  if (constraint_g_.empty() || g.size() != 3 * static_cast<size_t>(vertex_count_) || !std::isfinite(c)) return false;
-  const double rest_dot = loadConstraintGradient(g);
-  const size_t free4 = static_cast<size_t>(free_count_) * kVectorStride;
-  std::copy_n(constraint_g_.data(), free4, constraint_z_.data());
-  if (free_count_ > 0) factor_.solveInPlace(constraint_z_.data());
-  constraint_z_solved_ = acceptConstraint(rest_dot, c);
-  return constraint_z_solved_;
-}
-
-bool Deformer::updateLinearConstraint(std::span<const double> g, double c) noexcept {
-  if (!constraint_z_solved_) return false;
-  constraint_active_ = false;
-  if (g.size() != 3 * static_cast<size_t>(vertex_count_) || !std::isfinite(c)) return false;
-  return acceptConstraint(loadConstraintGradient(g), c);
 }
 
 bool Deformer::setLinearConstraintValue(double c) noexcept {

@@ -148,7 +148,8 @@ LiveRig::LiveRig(const Rig& rig, const LiveRigOptions& options, const Rig* coars
     volume_constraint_ = std::make_unique<FineVolumeConstraint>(
         rig.pose_transfer.view(),
         std::span<const std::int32_t>(rig.fine_triangles.data(), static_cast<std::size_t>(rig.fine_triangles.size())),
-        std::span<const double>(rig.fine_vertices.data(), static_cast<std::size_t>(rig.fine_vertices.size())));
+        std::span<const double>(rig.fine_vertices.data(), static_cast<std::size_t>(rig.fine_vertices.size())),
+        options.volume_constraint_gradient_entries);
     constraint_gradient_.assign(3 * static_cast<std::size_t>(rig.tet_mesh.vertexCount()), 0.0);
     constraint_scratch_.assign(3 * static_cast<std::size_t>(rig.fine_vertices.rows()), 0.0f);
   }
@@ -453,7 +454,7 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
         transferPose(constraint_scratch_.data());
         const double c = volume_constraint_->linearize(deformer_.positions(), constraint_scratch_.data(), constraint_gradient_);
         deformer_.setLinearConstraint(constraint_gradient_, c);
-        frames_since_linearized_ = frames_since_solved_ = 0;
+        frames_since_linearized_ = 0;
       }
       StepBudget rest = budget;
       rest.max_iterations = cold_constraint ? 1 : left;
@@ -491,22 +492,12 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
   if (pose_bound_.accepts(positions, n)) {
     std::memcpy(last_positions_.data(), positions, n * sizeof(float));
     if (volume_constraint_) {
-      // The next frame keeps the volume: g . x = V_rest - V(x0) + g . x0 at this pose x0. g is
+      // The next frame keeps the volume: g . x = V_rest - V(x0) + g . x0 at this pose x0, with g
       // linearized again every volume_constraint_refresh_frames frames (a stale g still keeps the
-      // measured volume; it only steers less well) and z = L_ff^-1 g_f solved every
-      // volume_constraint_solve_frames frames (between solves a new g keeps the last z).
-      ++frames_since_linearized_;
-      ++frames_since_solved_;
-      if (!deformer_.hasLinearConstraint() || frames_since_solved_ >= options_.volume_constraint_solve_frames) {
+      // measured volume; it only steers less well).
+      if (!deformer_.hasLinearConstraint() || ++frames_since_linearized_ >= options_.volume_constraint_refresh_frames) {
         const double c = volume_constraint_->linearize(deformer_.positions(), positions, constraint_gradient_);
         deformer_.setLinearConstraint(constraint_gradient_, c);
-        frames_since_linearized_ = frames_since_solved_ = 0;
-      } else if (frames_since_linearized_ >= options_.volume_constraint_refresh_frames) {
-        const double c = volume_constraint_->linearize(deformer_.positions(), positions, constraint_gradient_);
-        if (!deformer_.updateLinearConstraint(constraint_gradient_, c)) {
-          deformer_.setLinearConstraint(constraint_gradient_, c);  // the kept z no longer points along g
-          frames_since_solved_ = 0;
-        }
         frames_since_linearized_ = 0;
       } else {
         deformer_.setLinearConstraintValue(volume_constraint_->value(deformer_.positions(), positions, constraint_gradient_));

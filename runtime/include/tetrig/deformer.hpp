@@ -193,16 +193,7 @@ class Deformer {
   bool setLinearConstraint(std::span<const double> g, double c) noexcept;
   // A new value c for the constraint's g (no solve): false, and no change, without one.
   bool setLinearConstraintValue(double c) noexcept;
-  // A new g and c that keep the direction z of the last setLinearConstraint (no solve): every step
-  // still lands on the new plane g . x = c (u_f += mu z, mu = (c - g . x) / (g_f . z)), but is the
-  // plane's minimum only as far as z is still L_ff^-1 g_f. For a g that changes little between
-  // solves (a volume's gradient from frame to frame). Returns false (and clears the constraint)
-  // without a solved z, with the wrong size, non-finite values, or when g_f . z <= 0.
-  bool updateLinearConstraint(std::span<const double> g, double c) noexcept;
-  void clearLinearConstraint() noexcept {
-    constraint_active_ = false;
-    constraint_z_solved_ = false;
-  }
+  void clearLinearConstraint() noexcept { constraint_active_ = false; }
   bool hasLinearConstraint() const noexcept { return constraint_active_; }
 
   // Back to the rest state: rotations I, positions at rest, handle targets at rest, no constraint.
@@ -294,10 +285,7 @@ class Deformer {
   AlignedVector<double> constraint_g_, constraint_z_;
   double constraint_rhs_ = 0.0, constraint_gz_ = 0.0, constraint_rest_dot_ = 0.0;
   bool constraint_active_ = false;
-  bool constraint_z_solved_ = false;  // z was solved by setLinearConstraint (for updateLinearConstraint)
   void applyLinearConstraint();
-  double loadConstraintGradient(std::span<const double> g) noexcept;  // g into constraint_g_; returns g . x_rest
-  bool acceptConstraint(double rest_dot, double c) noexcept;          // g_f . z checked, the constraint set
 };
 
 }  // namespace tetrig

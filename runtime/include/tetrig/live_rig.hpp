@@ -101,9 +101,9 @@ struct LiveRigOptions {
   // Frames between two linearizations of the volume's gradient (B^T of it and the solve, the costly
   // part); the volume itself is measured every frame and the constraint's value follows it.
   int volume_constraint_refresh_frames = 1;
-  // Frames between two solves of the constraint's direction z = L_ff^-1 g_f (one solve, a quarter of
-  // a 3-iteration step); a g linearized in between keeps the last z (Deformer::updateLinearConstraint).
-  int volume_constraint_solve_frames = 1;
+  // Entries of each row of B the constraint's gradient B^T dV/dx_fine uses (the largest, rescaled to
+  // the row's sum; FineVolumeConstraint): 0 = all.
+  int volume_constraint_gradient_entries = 0;
   int coarse_iterations = 5;   // with a coarse rig: its iterations per frame (CoarseLevelOptions::iterations)
   bool use_coarse_level = true;  // use the rig's own coarse level (Rig::coarse, built with build-rig
                                  // --coarse-tet-vertices) when it has one and no coarse rig is given
@@ -240,7 +240,7 @@ class LiveRig {
   std::unique_ptr<FineVolumeConstraint> volume_constraint_;  // when options.volume_constraint
   std::vector<double> constraint_gradient_;                // its g, #tetV*3
   std::vector<float> constraint_scratch_;                  // a first iteration's fine pose (#fine*3), on a cold frame
-  int frames_since_linearized_ = 0, frames_since_solved_ = 0;
+  int frames_since_linearized_ = 0;
   // Coarse level (with a coarse rig): its handle targets, and per coarse marker its vertex handle
   // and the rig marker that drives it.
   std::unique_ptr<CoarseLevel> coarse_;

@@ -30,9 +30,13 @@ double enclosedVolume(std::span<const std::int32_t> triangles, const T* x) noexc
 class FineVolumeConstraint {
  public:
   // b: #fine x #tetV; triangles: #F*3 fine-vertex indices, outward; rest_fine: #fine*3 rest positions.
+  // gradient_entries > 0 builds g from B with each row cut to its gradient_entries largest weights,
+  // rescaled to the row's sum (g is then a direction near the exact one, far cheaper to gather: the
+  // constraint's value c still comes from the measured volume, so it holds the volume to first
+  // order in the frame's own motion; docs/deformation.md). 0: the exact B^T.
   // Throws std::invalid_argument on sizes that do not match or an index out of range.
   FineVolumeConstraint(const PoseTransferView<double>& b, std::span<const std::int32_t> triangles,
-                       std::span<const double> rest_fine);
+                       std::span<const double> rest_fine, std::int32_t gradient_entries = 0);
 
   // Enclosed volume of a fine pose (#fine*3).
   template <typename T>
