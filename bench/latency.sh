@@ -3,8 +3,10 @@
 # builds the SMPL rig from ../shared/data once (human_man.obj bound to the 41 markers of the HDM05
 # clip, the BM_RigFrame/smpl_hdm05 rig), then runs the clip at its own 120 Hz pace through
 # `tetrig run` (driver thread -> mailbox -> solver thread -> shared memory) with `tetrig-shm-cat`
-# reading the segment in another process. Writes build/release/latency.json (the keys of
-# `tetrig run --stats-json`, plus "consumer") and prints the table.
+# reading the segment in another process. Before that, tetrig_host_probe (10 s) measures what the
+# host gives a 120 Hz loop doing fixed work (bench/tools/host_probe.cpp). Writes
+# build/release/latency.json (the keys of `tetrig run --stats-json`, plus "consumer" and
+# "host_probe") and prints the table.
 #
 #   bash bench/latency.sh                 # SMPL + HDM05 (the figure of record)
 #   bash bench/latency.sh --synthetic     # the same rig driven by the synthetic source (10 s)
@@ -32,9 +34,9 @@ clip="$data/mocap/hdm05/HDM_mm_01-02_03_120.c3d"
 for f in "$clip" "$data/meshes/odedstein-meshes/human_man.obj"; do
   [ -f "$f" ] || { echo "latency.sh: $f not found (place ../shared/data beside the checkout or set TETRIG_DATA_DIR)" >&2; exit 1; }
 done
-if [ ! -x build/release/tetrig ] || [ ! -x build/release/tetrig-shm-cat ] || [ "${LATENCY_REBUILD:-1}" = 1 ]; then
+if [ ! -x build/release/tetrig ] || [ ! -x build/release/tetrig-shm-cat ] || [ ! -x build/release/tetrig_host_probe ] || [ "${LATENCY_REBUILD:-1}" = 1 ]; then
   cmake --preset release >/dev/null
-  cmake --build --preset release --target tetrig tetrig-shm-cat tetrig_pose_cap_error >/dev/null
+  cmake --build --preset release --target tetrig tetrig-shm-cat tetrig_pose_cap_error tetrig_host_probe >/dev/null
 fi
 out=build/release
 case "$mode" in
@@ -62,7 +64,9 @@ source="c3d:$clip"
 frames=()
 if [ "$mode" = synthetic ]; then source=synthetic; frames=(--frames 1200); fi
 name="tetrig-latency-$$"
-rm -f "$out/latency_producer.json" "$out/latency_consumer.json"
+rm -f "$out/latency_producer.json" "$out/latency_consumer.json" "$out/latency_host.json"
+# First what the host itself gives a 120 Hz loop (10 s): the same fixed work at p50 and p99.
+build/release/tetrig_host_probe --frames 1200 --rate 120 --work-us 700 --json "$out/latency_host.json"
 build/release/tetrig-shm-cat "$name" --quiet --timeout-ms 20000 --json "$out/latency_consumer.json" &
 consumer=$!
 build/release/tetrig run --rig "$rig" --source "$source" --publish "$name" --iterations 3 \
@@ -72,11 +76,12 @@ if [ "$cap" != 0 ]; then
   echo "accuracy of the capped B against the full one (metres):"
   build/release/tetrig_pose_cap_error "$full" "$rig" "$clip"
 fi
-python3 - "$out/latency_producer.json" "$out/latency_consumer.json" "$out/latency.json" "$mode" <<'PY'
+python3 - "$out/latency_producer.json" "$out/latency_consumer.json" "$out/latency.json" "$mode" "$out/latency_host.json" <<'PY'
 import json, sys
-producer, consumer, out, mode = sys.argv[1:5]
-p = json.load(open(producer)); c = json.load(open(consumer))
+producer, consumer, out, mode, host = sys.argv[1:6]
+p = json.load(open(producer)); c = json.load(open(consumer)); h = json.load(open(host))
 p["consumer"] = c
+p["host_probe"] = h
 p["harness"] = mode
 json.dump(p, open(out, "w"), indent=2)
 lat = p["latency_us"]
@@ -95,5 +100,8 @@ for name, r in rows: print(f"| {name} | {r['p50']:.1f} | {r['p99']:.1f} | {r['ma
 print(f"\nbudget misses {p['budget_misses']} (budget {p['budget_ms']:.2f} ms), frames dropped {p['dropped_frames']}, "
       f"consumer saw {c.get('frames_seen', '?')} frames, missed {c.get('frames_missed', '?')}")
 print(f"solver thread: {p['solver_thread']}")
+hw = h["workload_us"]
+print(f"host probe: a fixed {h['work_us']} us workload at {h['rate_hz']} Hz took p50 / p99 / max {hw['p50']:.0f} / {hw['p99']:.0f} / {hw['max']:.0f} us "
+      f"(wake-up lateness p99 {h['wake_lateness_us']['p99']:.0f} us): a p99 far above the p50 is the host, not tetrig")
 print(f"wrote {out}")
 PY

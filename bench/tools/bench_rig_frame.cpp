@@ -24,9 +24,10 @@
 //   assets/human_man_feet.json (each foot a region driven by its TOE/HEE/MT5 markers; issue #12),
 //   against BM_LiveRigFrame/smpl_hdm05/0: what the marker fits and the rotation interpolation of
 //   two oriented regions add to a frame.
-//   BM_LiveRigFrame/smpl_hdm05_volume_constraint: the same live path (no split) keeping the fine
-//   mesh's volume (LiveRigOptions::volume_constraint: after the pose transfer, the volume's gradient,
-//   B^T of it (a transposed float copy of B), and one solve; counted in pose_transfer_us).
+//   BM_LiveRigFrame/smpl_hdm05_volume_constraint/<entries>: the same live path (no split) keeping
+//   the fine mesh's volume (LiveRigOptions::volume_constraint: after the pose transfer, the volume's
+//   gradient, B^T of it (a transposed compact copy of B, the pose transfer's padded kernel; each row
+//   of B cut to its <entries> largest weights, 0 = all), and one solve; counted in pose_transfer_us).
 //   BM_PoseTransfer/smpl_hdm05/<layout>/<cache>: the pose transfer alone, from the padded positions of
 //   one posed frame into a float buffer; layout 0 = the rig's B (double weights, 32-bit columns, 12
 //   bytes per entry), 1 = the live rig's compact copy (float, 16-bit, 6 bytes: narrowPoseTransfer);
@@ -234,8 +235,12 @@ void liveRigFrame(benchmark::State& state, bool feet, bool volume_constraint = f
   const RigScene* scene = sceneOrSkip(state, feet);
   if (scene == nullptr) return;
   tetrig::LiveRigOptions live_options;
-  live_options.split_pose_transfer = state.range(0) != 0;
   live_options.volume_constraint = volume_constraint;
+  if (volume_constraint) {
+    live_options.volume_constraint_gradient_entries = static_cast<int>(state.range(0));
+  } else {
+    live_options.split_pose_transfer = state.range(0) != 0;
+  }
   tetrig::LiveRig live(scene->rig, live_options);
   tetrig::drivers::C3DPlaybackOptions options;
   options.pacing = tetrig::drivers::Pacing::kAsFastAsPossible;
@@ -267,7 +272,8 @@ void liveRigFrame(benchmark::State& state, bool feet, bool volume_constraint = f
 void BM_LiveRigFrame(benchmark::State& state) { liveRigFrame(state, false); }
 void BM_LiveRigFrameFeet(benchmark::State& state) { liveRigFrame(state, true); }
 void BM_LiveRigFrameVolumeConstraint(benchmark::State& state) { liveRigFrame(state, false, true); }
-BENCHMARK(BM_LiveRigFrameVolumeConstraint)->Name("BM_LiveRigFrame/smpl_hdm05_volume_constraint")->Arg(0)->Unit(benchmark::kMicrosecond);
+// Argument: entries of each row of B the constraint's gradient uses (0 = all).
+BENCHMARK(BM_LiveRigFrameVolumeConstraint)->Name("BM_LiveRigFrame/smpl_hdm05_volume_constraint")->Arg(0)->Arg(8)->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_LiveRigFrameFeet)->Name("BM_LiveRigFrame/smpl_hdm05_feet")->Arg(0)->Unit(benchmark::kMicrosecond);
 // Argument: 0 = pose transfer on the calling thread, 1 = split with one worker (PoseTransferSplit).
 BENCHMARK(BM_LiveRigFrame)->Name("BM_LiveRigFrame/smpl_hdm05")->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);

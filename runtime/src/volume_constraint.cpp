@@ -8,12 +8,14 @@
 #include <algorithm>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 namespace tetrig {
 
 FineVolumeConstraint::FineVolumeConstraint(const PoseTransferView<double>& b, std::span<const std::int32_t> triangles,
-                                           std::span<const double> rest_fine)
+                                           std::span<const double> rest_fine, std::int32_t gradient_entries)
     : tet_vertices_(b.cols), fine_vertices_(b.rows), triangles_(triangles) {
+  if (gradient_entries < 0) throw std::invalid_argument("volume constraint: a negative number of gradient entries per row");
   if (b.rows <= 0 || b.cols <= 0) throw std::invalid_argument("volume constraint: empty pose transfer");
   if (triangles.empty() || triangles.size() % 3 != 0) throw std::invalid_argument("volume constraint: no triangles");
   if (rest_fine.size() != 3 * static_cast<std::size_t>(b.rows))
@@ -21,25 +23,60 @@ FineVolumeConstraint::FineVolumeConstraint(const PoseTransferView<double>& b, st
                                 std::to_string(b.rows) + " fine vertices");
   for (const std::int32_t v : triangles)
     if (v < 0 || v >= b.rows) throw std::invalid_argument("volume constraint: triangle corner " + std::to_string(v) + " out of range");
-  fine_gradient_.assign(3 * static_cast<std::size_t>(b.rows), 0.0);
+  fine_gradient4_.assign(4 * static_cast<std::size_t>(b.rows), 0.0);
   rest_volume_ = volume(rest_fine.data());
-  // B^T: count the entries per column, then place them (rows ascending within a column).
-  bt_offsets_.assign(static_cast<std::size_t>(b.cols) + 1, 0);
-  const std::int32_t entries = b.row_offsets[b.rows];
-  for (std::int32_t k = 0; k < entries; ++k) {
-    if (b.columns[k] < 0 || b.columns[k] >= b.cols) throw std::invalid_argument("volume constraint: pose-transfer column out of range");
-    ++bt_offsets_[static_cast<std::size_t>(b.columns[k]) + 1];
-  }
-  for (std::size_t j = 0; j < static_cast<std::size_t>(b.cols); ++j) bt_offsets_[j + 1] += bt_offsets_[j];
-  bt_rows_.resize(static_cast<std::size_t>(entries));
-  bt_weights_.resize(static_cast<std::size_t>(entries));
-  std::vector<std::int32_t> next(bt_offsets_.begin(), bt_offsets_.end() - 1);
-  for (std::int32_t r = 0; r < b.rows; ++r)
-    for (std::int32_t k = b.row_offsets[r]; k < b.row_offsets[r + 1]; ++k) {
-      const auto at = static_cast<std::size_t>(next[static_cast<std::size_t>(b.columns[k])]++);
-      bt_rows_[at] = r;
-      bt_weights_[at] = static_cast<float>(b.weights[k]);
+  // The entries of B that g uses: all, or per row the gradient_entries largest weights rescaled to
+  // the row's sum.
+  std::vector<std::int32_t> kept_offsets(static_cast<std::size_t>(b.rows) + 1, 0), kept_columns;
+  std::vector<double> kept_weights;
+  std::vector<std::int32_t> order;
+  for (std::int32_t r = 0; r < b.rows; ++r) {
+    const std::int32_t begin = b.row_offsets[r], end = b.row_offsets[r + 1];
+    order.resize(static_cast<std::size_t>(end - begin));
+    for (std::int32_t k = begin; k < end; ++k) {
+      if (b.columns[k] < 0 || b.columns[k] >= b.cols) throw std::invalid_argument("volume constraint: pose-transfer column out of range");
+      order[static_cast<std::size_t>(k - begin)] = k;
     }
+    double row_sum = 0.0, kept_sum = 0.0;
+    for (std::int32_t k = begin; k < end; ++k) row_sum += b.weights[k];
+    if (gradient_entries > 0 && static_cast<std::int32_t>(order.size()) > gradient_entries) {
+      std::partial_sort(order.begin(), order.begin() + gradient_entries, order.end(),
+                        [&](std::int32_t x, std::int32_t y) { return b.weights[x] > b.weights[y]; });
+      order.resize(static_cast<std::size_t>(gradient_entries));
+    }
+    for (const std::int32_t k : order) kept_sum += b.weights[k];
+    const double scale = kept_sum != 0.0 ? row_sum / kept_sum : 1.0;
+    for (const std::int32_t k : order) {
+      kept_columns.push_back(b.columns[k]);
+      kept_weights.push_back(b.weights[k] * scale);
+    }
+    kept_offsets[static_cast<std::size_t>(r) + 1] = static_cast<std::int32_t>(kept_columns.size());
+  }
+  // Their transpose: count the entries per column, then place them (rows ascending within a column).
+  PoseTransferCsr<double> bt;
+  bt.rows = b.cols;
+  bt.cols = b.rows;
+  bt.row_offsets.assign(static_cast<std::size_t>(b.cols) + 1, 0);
+  for (const std::int32_t c : kept_columns) ++bt.row_offsets[static_cast<std::size_t>(c) + 1];
+  for (std::size_t j = 0; j < static_cast<std::size_t>(b.cols); ++j) bt.row_offsets[j + 1] += bt.row_offsets[j];
+  bt.columns.resize(kept_columns.size());
+  bt.weights.resize(kept_columns.size());
+  std::vector<std::int32_t> next(bt.row_offsets.begin(), bt.row_offsets.end() - 1);
+  for (std::int32_t r = 0; r < b.rows; ++r)
+    for (std::int32_t k = kept_offsets[static_cast<std::size_t>(r)]; k < kept_offsets[static_cast<std::size_t>(r) + 1]; ++k) {
+      const auto at = static_cast<std::size_t>(next[static_cast<std::size_t>(kept_columns[static_cast<std::size_t>(k)])]++);
+      bt.columns[at] = r;
+      bt.weights[at] = kept_weights[static_cast<std::size_t>(k)];
+    }
+  if (fitsCompactPoseTransfer(bt.cols)) {
+    bt_compact_ = narrowPoseTransfer(bt);
+  } else {
+    bt_wide_.rows = bt.rows;
+    bt_wide_.cols = bt.cols;
+    bt_wide_.row_offsets = std::move(bt.row_offsets);
+    bt_wide_.columns = std::move(bt.columns);
+    bt_wide_.weights.assign(bt.weights.begin(), bt.weights.end());
+  }
 }
 
 template <typename T>
@@ -65,8 +102,8 @@ double FineVolumeConstraint::value(std::span<const double> x_tet, const T* x_fin
 template <typename T>
 double FineVolumeConstraint::linearize(std::span<const double> x_tet, const T* x_fine, std::span<double> g,
                                        double* volume_now) noexcept {
-  // dV/dx_fine: 1/6 (b x c) at a, cyclically.
-  std::fill(fine_gradient_.begin(), fine_gradient_.end(), 0.0);
+  // dV/dx_fine: 1/6 (b x c) at a, cyclically (no division per triangle: 9 divides were its cost).
+  std::fill(fine_gradient4_.begin(), fine_gradient4_.end(), 0.0);
   double six = 0.0;
   for (std::size_t f = 0; f < triangles_.size(); f += 3) {
     Eigen::Vector3d p[3];
@@ -75,29 +112,22 @@ double FineVolumeConstraint::linearize(std::span<const double> x_tet, const T* x
       p[k] = Eigen::Vector3d(q[0], q[1], q[2]);
     }
     six += p[0].dot(p[1].cross(p[2]));
+    const Eigen::Vector3d d[3] = {p[1].cross(p[2]), p[2].cross(p[0]), p[0].cross(p[1])};
     for (std::size_t k = 0; k < 3; ++k) {
-      const Eigen::Vector3d d = p[(k + 1) % 3].cross(p[(k + 2) % 3]);
-      double* out = &fine_gradient_[3 * static_cast<std::size_t>(triangles_[f + k])];
-      for (int c = 0; c < 3; ++c) out[c] += d[c] / 6.0;
+      double* out = &fine_gradient4_[4 * static_cast<std::size_t>(triangles_[f + k])];
+      for (int c = 0; c < 3; ++c) out[c] += d[k][c];  // 6 dV/da; the 1/6 is applied to g
     }
   }
-  // g = B^T dV/dx_fine (a gather per tet vertex), and g . x0.
+  // g = B^T dV/dx_fine (a gather per tet vertex: the pose transfer's padded kernel), and g . x0.
+  if (bt_compact_.rows > 0) {
+    applyPoseTransferPadded(bt_compact_.view(), fine_gradient4_.data(), g.data());
+  } else {
+    applyPoseTransferPadded(bt_wide_.view(), fine_gradient4_.data(), g.data());
+  }
   double g_x0 = 0.0;
-  for (std::int32_t j = 0; j < tet_vertices_; ++j) {
-    double s0 = 0.0, s1 = 0.0, s2 = 0.0;
-    for (std::int32_t k = bt_offsets_[static_cast<std::size_t>(j)]; k < bt_offsets_[static_cast<std::size_t>(j) + 1]; ++k) {
-      const double w = bt_weights_[static_cast<std::size_t>(k)];
-      const double* gf = &fine_gradient_[3 * static_cast<std::size_t>(bt_rows_[static_cast<std::size_t>(k)])];
-      s0 += w * gf[0];
-      s1 += w * gf[1];
-      s2 += w * gf[2];
-    }
-    double* out = &g[3 * static_cast<std::size_t>(j)];
-    out[0] = s0;
-    out[1] = s1;
-    out[2] = s2;
-    g_x0 += s0 * x_tet[3 * static_cast<std::size_t>(j)] + s1 * x_tet[3 * static_cast<std::size_t>(j) + 1] +
-            s2 * x_tet[3 * static_cast<std::size_t>(j) + 2];
+  for (std::size_t i = 0; i < x_tet.size(); ++i) {
+    g[i] *= 1.0 / 6.0;
+    g_x0 += g[i] * x_tet[i];
   }
   const double now = six / 6.0;
   if (volume_now != nullptr) *volume_now = now;

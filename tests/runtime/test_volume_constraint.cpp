@@ -83,6 +83,60 @@ TEST(FineVolumeConstraint, TheCubesVolumeAndAnExactLinearization) {
   EXPECT_NEAR(c, 8.0 - now + gx, 1e-12);
 }
 
+// gradient_entries: g = B'^T dV/dx_fine at the true fine pose B x, where B' keeps each row's
+// largest weights rescaled to the row's sum. Checked against dV/dx_fine by central differences on
+// the fine positions and B' made here; as many entries as a row has give the exact g.
+TEST(FineVolumeConstraint, ACutGradientUsesEachRowsLargestWeightsRescaled) {
+  std::mt19937 rng(11);
+  const Blend b = randomBlend(rng);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  std::vector<double> x(15);
+  for (double& v : x) v = u(rng);
+  const std::vector<double> fine = fineOf(b, x);
+  FineVolumeConstraint exact(b.view(), kCubeTriangles, cube(2.0));
+  FineVolumeConstraint cut(b.view(), kCubeTriangles, cube(2.0), 2);
+  FineVolumeConstraint all(b.view(), kCubeTriangles, cube(2.0), 3);
+  std::vector<double> g_exact(15), g_cut(15), g_all(15);
+  const double c_exact = exact.linearize(x, fine.data(), g_exact);
+  const double c_cut = cut.linearize(x, fine.data(), g_cut);
+  all.linearize(x, fine.data(), g_all);
+  // dV/dx_fine by central differences.
+  const double h = 1e-5;
+  std::vector<double> d(24);
+  for (std::size_t i = 0; i < 24; ++i) {
+    std::vector<double> up = fine, down = fine;
+    up[i] += h;
+    down[i] -= h;
+    d[i] = (exact.volume(up.data()) - exact.volume(down.data())) / (2 * h);
+  }
+  std::vector<double> expected(15, 0.0);
+  double differs = 0.0;
+  for (int r = 0; r < 8; ++r) {
+    const int begin = b.offsets[r];
+    int smallest = begin;  // of 3 entries, the cut drops the smallest
+    for (int k = begin; k < begin + 3; ++k) smallest = b.weights[k] < b.weights[smallest] ? k : smallest;
+    const double kept = 1.0 - b.weights[smallest];  // rows sum to 1
+    for (int k = begin; k < begin + 3; ++k) {
+      if (k == smallest) continue;
+      for (int c = 0; c < 3; ++c) expected[3 * b.columns[k] + c] += b.weights[k] / kept * d[3 * r + c];
+    }
+  }
+  for (std::size_t i = 0; i < 15; ++i) {
+    EXPECT_NEAR(g_cut[i], expected[i], 1e-6 * (1.0 + std::abs(expected[i]))) << "component " << i;  // float weights
+    EXPECT_EQ(g_all[i], g_exact[i]) << "component " << i;
+    differs = std::max(differs, std::abs(g_cut[i] - g_exact[i]));
+  }
+  EXPECT_GT(differs, 1e-3) << "the cut must change g for the test to mean anything";
+  // c still comes from the measured volume: V_rest - V(x0) + g . x0 with this g.
+  double gx_cut = 0.0, gx_exact = 0.0;
+  for (std::size_t i = 0; i < 15; ++i) {
+    gx_cut += g_cut[i] * x[i];
+    gx_exact += g_exact[i] * x[i];
+  }
+  EXPECT_NEAR(c_cut - gx_cut, c_exact - gx_exact, 1e-12);
+  EXPECT_THROW(FineVolumeConstraint(b.view(), kCubeTriangles, cube(2.0), -1), std::invalid_argument);
+}
+
 TEST(FineVolumeConstraint, RefusesWhatDoesNotMatch) {
   std::mt19937 rng(1);
   const Blend b = randomBlend(rng);

@@ -95,11 +95,15 @@ struct LiveRigOptions {
   double inversion_guard_threshold = 0.5;  // DeformerOptions::inversion_guard_threshold
   // Keep the fine mesh's enclosed volume at rest (FineVolumeConstraint, a Lagrange multiplier on the
   // fine rig; linearized after each frame's pose transfer for the next frame: one transposed product
-  // of B and one solve per frame, counted in pose_transfer_ns). Off by default (docs/fidelity.md).
+  // of B and one solve per frame, counted in pose_transfer_ns; the first frame, and the first after a
+  // reset, set it after their first iteration). Off by default (docs/fidelity.md).
   bool volume_constraint = false;
   // Frames between two linearizations of the volume's gradient (B^T of it and the solve, the costly
   // part); the volume itself is measured every frame and the constraint's value follows it.
   int volume_constraint_refresh_frames = 1;
+  // Entries of each row of B the constraint's gradient B^T dV/dx_fine uses (the largest, rescaled to
+  // the row's sum; FineVolumeConstraint): 0 = all.
+  int volume_constraint_gradient_entries = 0;
   int coarse_iterations = 5;   // with a coarse rig: its iterations per frame (CoarseLevelOptions::iterations)
   bool use_coarse_level = true;  // use the rig's own coarse level (Rig::coarse, built with build-rig
                                  // --coarse-tet-vertices) when it has one and no coarse rig is given
@@ -224,6 +228,7 @@ class LiveRig {
   double blendWeight(std::int64_t since_ns) const noexcept;  // s((now - event) / T)
   double dropoutWeight(const Track& track) const noexcept;   // 1 - s((now - t0) / T)
   void refreshPredictions() noexcept;                         // prediction_ from the deformer's pose
+  void transferPose(float* positions) const noexcept;         // B x_tet of the deformer's pose
   std::uint32_t updateTargets() noexcept;                     // targets from the states; returns the blending count
 
   const Rig* rig_ = nullptr;
@@ -234,6 +239,7 @@ class LiveRig {
   std::unique_ptr<PoseTransferSplit> split_;  // when options.split_pose_transfer
   std::unique_ptr<FineVolumeConstraint> volume_constraint_;  // when options.volume_constraint
   std::vector<double> constraint_gradient_;                // its g, #tetV*3
+  std::vector<float> constraint_scratch_;                  // a first iteration's fine pose (#fine*3), on a cold frame
   int frames_since_linearized_ = 0;
   // Coarse level (with a coarse rig): its handle targets, and per coarse marker its vertex handle
   // and the rig marker that drives it.

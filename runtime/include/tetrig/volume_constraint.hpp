@@ -30,9 +30,13 @@ double enclosedVolume(std::span<const std::int32_t> triangles, const T* x) noexc
 class FineVolumeConstraint {
  public:
   // b: #fine x #tetV; triangles: #F*3 fine-vertex indices, outward; rest_fine: #fine*3 rest positions.
+  // gradient_entries > 0 builds g from B with each row cut to its gradient_entries largest weights,
+  // rescaled to the row's sum (g is then a direction near the exact one, far cheaper to gather: the
+  // constraint's value c still comes from the measured volume, so it holds the volume to first
+  // order in the frame's own motion; docs/deformation.md). 0: the exact B^T.
   // Throws std::invalid_argument on sizes that do not match or an index out of range.
   FineVolumeConstraint(const PoseTransferView<double>& b, std::span<const std::int32_t> triangles,
-                       std::span<const double> rest_fine);
+                       std::span<const double> rest_fine, std::int32_t gradient_entries = 0);
 
   // Enclosed volume of a fine pose (#fine*3).
   template <typename T>
@@ -57,14 +61,15 @@ class FineVolumeConstraint {
 
  private:
   std::int32_t tet_vertices_ = 0, fine_vertices_ = 0;  // B's columns and rows
-  // B^T as CSR (a row per tet vertex: the fine vertices it moves, float weights), built at load, so
-  // that g = B^T dV/dx_fine gathers instead of scattering (measured: the scatter over B's rows took
-  // about four times the forward pose transfer).
-  std::vector<std::int32_t> bt_offsets_, bt_rows_;
-  std::vector<float> bt_weights_;
+  // B^T (a row per tet vertex: the fine vertices it moves), built at load, so that g = B^T dV/dx_fine
+  // gathers instead of scattering (the scatter over B's rows took about four times the forward pose
+  // transfer), with the pose transfer's own padded kernel: float weights, and 16-bit columns when
+  // there are at most 65536 fine vertices (bt_compact_), else 32-bit (bt_wide_); the other is empty.
+  CompactPoseTransfer bt_compact_;
+  PoseTransferCsr<float> bt_wide_;
   std::span<const std::int32_t> triangles_;
   double rest_volume_ = 0.0;
-  std::vector<double> fine_gradient_;  // #fine*3 scratch
+  std::vector<double> fine_gradient4_;  // #fine*4 scratch: dV/dx_fine, padded (x, y, z, 0)
 };
 
 }  // namespace tetrig
