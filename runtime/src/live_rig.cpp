@@ -428,10 +428,11 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
     const StepStats cs = coarse_->guide(coarse_targets, deformer_);
     stats.coarse_ns = cs.total_ns;
   }
-  // A frame without the volume constraint yet (the first, or the first after a reset) sets it after
-  // its first iteration, at the pose that iteration reached: set only after the frame, it left that
-  // frame unconstrained (CMU 85_02's cold start lost 8 % of the fine volume), and linearized at rest
-  // it is far off for a first pose far from rest (HDM05 frame 1600: +6 %; docs/fidelity.md).
+  // A frame without the volume constraint yet (the first, or the first after a reset) runs its first
+  // iteration free and linearizes the constraint before each further one, at the pose reached: set
+  // only after the frame, it left that frame unconstrained (CMU 85_02's cold start lost 8 % of the
+  // fine volume), and linearized at rest it is far off for a first pose far from rest (HDM05 frame
+  // 1600: +6 %; docs/fidelity.md).
   const bool cold_constraint = volume_constraint_ && !deformer_.hasLinearConstraint() && budget.max_iterations >= 2;
   if (!refresh && !cold_constraint) {
     stats.step = deformer_.step(targets, budget);
