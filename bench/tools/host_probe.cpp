@@ -8,6 +8,7 @@
 //
 //   build/release/tetrig_host_probe [--frames 1200] [--rate 120] [--work-us 700] [--json FILE]
 #include "tetrig/clock.hpp"
+#include "tetrig/latency_histogram.hpp"
 
 #include <algorithm>
 #include <array>
@@ -19,7 +20,6 @@
 #include <ctime>
 #include <string>
 #include <string_view>
-#include <vector>
 
 namespace {
 
@@ -32,13 +32,14 @@ float workload(const std::array<float, 4096>& a, int repeats) {
 }
 
 struct Percentiles {
-  double p50, p99, max;
+  double p50, p99, max;  // microseconds
 };
 
-Percentiles percentiles(std::vector<std::int64_t> ns) {
-  std::sort(ns.begin(), ns.end());
-  const auto at = [&](double q) { return static_cast<double>(ns[static_cast<std::size_t>(q * static_cast<double>(ns.size() - 1))]) / 1e3; };
-  return {at(0.5), at(0.99), static_cast<double>(ns.back()) / 1e3};
+// The same histogram as `tetrig run`'s latencies, so the probe and the harness's table compare
+// like with like (a percentile within 3.1 % above the true value).
+Percentiles percentiles(const tetrig::LatencyHistogram& h) {
+  return {static_cast<double>(h.percentileNs(0.5)) / 1e3, static_cast<double>(h.percentileNs(0.99)) / 1e3,
+          static_cast<double>(h.maxNs()) / 1e3};
 }
 
 bool parseInt(std::string_view text, int lo, int hi, int& out) {
@@ -87,7 +88,7 @@ int main(int argc, char** argv) {
   }
   const int repeats = std::max(1, static_cast<int>(static_cast<std::int64_t>(work_us) * 1000 / std::max<std::int64_t>(one, 1)));
 
-  std::vector<std::int64_t> late(static_cast<std::size_t>(frames)), took(static_cast<std::size_t>(frames));
+  tetrig::LatencyHistogram late, took;
   const std::int64_t start = tetrig::monotonicNowNs() + period_ns;
   for (int f = 0; f < frames; ++f) {
     const std::int64_t tick = start + static_cast<std::int64_t>(f) * period_ns;
@@ -97,8 +98,8 @@ int main(int argc, char** argv) {
     const std::int64_t woke = tetrig::monotonicNowNs();
     sink = sink + workload(a, repeats);
     const std::int64_t done = tetrig::monotonicNowNs();
-    late[static_cast<std::size_t>(f)] = std::max<std::int64_t>(0, woke - tick);
-    took[static_cast<std::size_t>(f)] = done - woke;
+    late.record(woke - tick);  // negative (early) counts as 0
+    took.record(done - woke);
   }
   const Percentiles w = percentiles(late), t = percentiles(took);
   std::printf("host probe: %d frames at %d Hz, a fixed workload of ~%d us (calibrated), microseconds p50 / p99 / max:\n"

@@ -453,9 +453,7 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
     while (left > 0 && !(stats.step.flags & kStepDeadlineHit)) {
       if (cold_constraint) {
         transferPose(constraint_scratch_.data());
-        const double c = volume_constraint_->linearize(deformer_.positions(), constraint_scratch_.data(), constraint_gradient_);
-        deformer_.setLinearConstraint(constraint_gradient_, c);
-        frames_since_linearized_ = 0;
+        linearizeVolumeConstraint(constraint_scratch_.data());
       }
       StepBudget rest = budget;
       rest.max_iterations = cold_constraint ? 1 : left;
@@ -497,9 +495,7 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
       // linearized again every volume_constraint_refresh_frames frames (a stale g still keeps the
       // measured volume; it only steers less well).
       if (!deformer_.hasLinearConstraint() || ++frames_since_linearized_ >= options_.volume_constraint_refresh_frames) {
-        const double c = volume_constraint_->linearize(deformer_.positions(), positions, constraint_gradient_);
-        deformer_.setLinearConstraint(constraint_gradient_, c);
-        frames_since_linearized_ = 0;
+        linearizeVolumeConstraint(positions);
       } else {
         deformer_.setLinearConstraintValue(volume_constraint_->value(deformer_.positions(), positions, constraint_gradient_));
       }
@@ -517,6 +513,12 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
   }
   stats.pose_transfer_ns = monotonicNowNs() - t0;
   return stats;
+}
+
+void LiveRig::linearizeVolumeConstraint(const float* fine) noexcept {
+  const double c = volume_constraint_->linearize(deformer_.positions(), fine, constraint_gradient_);
+  deformer_.setLinearConstraint(constraint_gradient_, c);
+  frames_since_linearized_ = 0;
 }
 
 void LiveRig::transferPose(float* positions) const noexcept {

@@ -111,8 +111,8 @@ double FineVolumeConstraint::linearize(std::span<const double> x_tet, const T* x
       const T* q = x_fine + 3 * static_cast<std::size_t>(triangles_[f + k]);
       p[k] = Eigen::Vector3d(q[0], q[1], q[2]);
     }
-    six += p[0].dot(p[1].cross(p[2]));
     const Eigen::Vector3d d[3] = {p[1].cross(p[2]), p[2].cross(p[0]), p[0].cross(p[1])};
+    six += p[0].dot(d[0]);
     for (std::size_t k = 0; k < 3; ++k) {
       double* out = &fine_gradient4_[4 * static_cast<std::size_t>(triangles_[f + k])];
       for (int c = 0; c < 3; ++c) out[c] += d[k][c];  // 6 dV/da; the 1/6 is applied to g

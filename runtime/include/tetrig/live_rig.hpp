@@ -229,6 +229,7 @@ class LiveRig {
   double dropoutWeight(const Track& track) const noexcept;   // 1 - s((now - t0) / T)
   void refreshPredictions() noexcept;                         // prediction_ from the deformer's pose
   void transferPose(float* positions) const noexcept;         // B x_tet of the deformer's pose
+  void linearizeVolumeConstraint(const float* fine) noexcept; // the constraint at the deformer's pose (fine = B x_tet)
   std::uint32_t updateTargets() noexcept;                     // targets from the states; returns the blending count
 
   const Rig* rig_ = nullptr;
