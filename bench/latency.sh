@@ -13,7 +13,7 @@
 #   bash bench/latency.sh --armadillo     # the Stanford Armadillo rig driven by the HDM05 clip
 #   bash bench/latency.sh --cap 48        # the SMPL rig with B capped at 48 entries per row (whole
 #                                         # tets, renormalised; accuracy cost in docs/live.md)
-#   extra arguments after -- go to `tetrig run` (e.g. -- --cpu 1 --fifo)
+#   extra arguments after -- go to `tetrig run` (e.g. -- --cpu 1 --fifo, or -- --keep-volume)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 data="${TETRIG_DATA_DIR:-../shared/data}"
@@ -93,6 +93,8 @@ seen = c.get("latency_us", {}).get("receive_to_seen")
 if seen: rows.append(("receive -> seen by the consumer", seen))
 rows += [("step (3 iterations)", lat["step"]), ("pose transfer", lat["pose_transfer"]),
          ("overhead (published - step - pose)", lat["overhead"])]
+after = lat.get("prepare_next")
+if after and after["count"]: rows.append(("after publishing (--keep-volume's linearization)", after))
 print(f"\nlatency harness ({mode}): {p['frames']} frames of {p['source']['description']}")
 print(f"rig: {p['rig']['name']}: {p['rig']['tet_vertices']} tet vertices, {p['rig']['tets']} tets, {p['rig']['fine_vertices']} fine vertices")
 print("| phase | p50 (us) | p99 (us) | max (us) |\n|---|---|---|---|")

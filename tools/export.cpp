@@ -334,6 +334,7 @@ ExportReport exportClip(const ExportOptions& o) {
   // (one call per frame) it is used as in `tetrig run`; iterating to convergence calls processFrame
   // again on the same frame, where it would start the frame again, so it is off.
   live_options.use_coarse_level = o.iterations > 0;
+  live_options.volume_constraint = o.keep_volume;
   LiveRig live(rig, live_options);
   std::vector<std::string> labels;
   {

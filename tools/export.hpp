@@ -54,6 +54,7 @@ struct ExportOptions {
                                         // of the rest mesh's bounding-box diagonal in the last chunk
   int max_iterations = 300;             // converge: at most this many iterations per frame
   double occlusion_blend_ms = 150;      // as `tetrig run --occlusion-blend-ms`
+  bool keep_volume = false;             // as `tetrig run --keep-volume` (LiveRigOptions::volume_constraint)
   double rate_hz = 0;                   // > 0: overrides the clip's frame rate (needed for glTF without one)
   bool keep_zero_markers = false;       // as `tetrig run --keep-zero-markers`: samples at x = y = z = 0 with
                                         // residual 0 stay valid (default: gaps)

@@ -88,6 +88,7 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
   live_options.compact_pose_transfer = !options.double_pose_transfer;
   live_options.use_coarse_level = !options.no_coarse;
   if (options.predict) live_options.rotation_extrapolation = 1.0;
+  live_options.volume_constraint = options.keep_volume;
   std::optional<Rig> coarse;
   if (!options.coarse_rig_path.empty()) coarse = loadRigFile(options.coarse_rig_path);
   LiveRig live(rig, live_options, coarse ? &*coarse : nullptr);
@@ -139,6 +140,7 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
       std::printf("  coarse level: %d tets, %d iterations per frame\n", live.coarseLevel()->deformer().tetCount(),
                   live.coarseLevel()->options().iterations);
     if (options.predict) std::printf("  temporal prediction of each frame's start: on\n");
+    if (options.keep_volume) std::printf("  fine-mesh volume kept at rest: on (its linearization runs after each publish)\n");
     if (!binding.missing.empty())
       std::printf("  note: %zu rig markers the source never names are treated as occluded: %s\n", binding.missing.size(),
                   joinLabels(binding.missing).c_str());
@@ -261,9 +263,10 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
     std::printf("  latency (us)            p50      p99      max\n");
     const std::pair<const char*, const LatencyHistogram*> rows[] = {
         {"receive -> taken", &l.receive_to_taken}, {"step", &l.step}, {"pose transfer", &l.pose_transfer},
-        {"receive -> published", &l.receive_to_published}, {"overhead", &l.overhead}};
+        {"receive -> published", &l.receive_to_published}, {"overhead", &l.overhead}, {"after publishing", &l.prepare_next}};
     for (const auto& [name, h] : rows)
-      std::printf("  %-20s %8.1f %8.1f %8.1f\n", name, us(h->percentileNs(0.5)), us(h->percentileNs(0.99)), us(h->maxNs()));
+      if (h->count() > 0 || h != &l.prepare_next)
+        std::printf("  %-20s %8.1f %8.1f %8.1f\n", name, us(h->percentileNs(0.5)), us(h->percentileNs(0.99)), us(h->maxNs()));
     std::printf("  budget misses %llu, deadline hits %llu, frames dropped in the mailbox %llu, held poses %llu, stale periods %llu, "
                 "frames received before the solver started %llu (not in the latencies)\n",
                 static_cast<unsigned long long>(c.budget_misses), static_cast<unsigned long long>(c.deadline_hits),
@@ -324,7 +327,8 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
                        {"receive_to_step_done", phaseJson(l.receive_to_step_done)},
                        {"receive_to_pose_done", phaseJson(l.receive_to_pose_done)},
                        {"receive_to_published", phaseJson(l.receive_to_published)},
-                       {"overhead", phaseJson(l.overhead)}};
+                       {"overhead", phaseJson(l.overhead)},
+                       {"prepare_next", phaseJson(l.prepare_next)}};
     if (!options.stats_json.empty()) {
       // Text from the rig and the source may hold bytes that are not UTF-8: replaced, not a failed run.
       const std::string text = j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";

@@ -25,9 +25,11 @@
 //   against BM_LiveRigFrame/smpl_hdm05/0: what the marker fits and the rotation interpolation of
 //   two oriented regions add to a frame.
 //   BM_LiveRigFrame/smpl_hdm05_volume_constraint/<entries>: the same live path (no split) keeping
-//   the fine mesh's volume (LiveRigOptions::volume_constraint: after the pose transfer, the volume's
+//   the fine mesh's volume (LiveRigOptions::volume_constraint: at the published pose, the volume's
 //   gradient, B^T of it (a transposed compact copy of B, the pose transfer's padded kernel; each row
-//   of B cut to its <entries> largest weights, 0 = all), and one solve; counted in pose_transfer_us).
+//   of B cut to its <entries> largest weights, 0 = all), and one solve; LiveRig::prepareNextFrame,
+//   which `tetrig run` calls after publishing and this loop leaves to the next processFrame: in the
+//   frame's time, and apart as prepare_us).
 //   BM_PoseTransfer/smpl_hdm05/<layout>/<cache>: the pose transfer alone, from the padded positions of
 //   one posed frame into a float buffer; layout 0 = the rig's B (double weights, 32-bit columns, 12
 //   bytes per entry), 1 = the live rig's compact copy (float, 16-bit, 6 bytes: narrowPoseTransfer);
@@ -253,7 +255,7 @@ void liveRigFrame(benchmark::State& state, bool feet, bool volume_constraint = f
   const std::size_t frames = scene->clip.frameCount();
   std::size_t f = 0;
   std::uint64_t counter = 0;
-  std::int64_t step_ns = 0, pose_ns = 0, iterations = 0;
+  std::int64_t step_ns = 0, pose_ns = 0, prepare_ns = 0, iterations = 0;
   for (auto _ : state) {
     playback.fillFrame(f, counter++, *frame);
     const tetrig::LiveFrameStats s = live.processFrame(*frame, tetrig::StepBudget{3}, fine.data(), nullptr);
@@ -261,12 +263,14 @@ void liveRigFrame(benchmark::State& state, bool feet, bool volume_constraint = f
     benchmark::ClobberMemory();
     step_ns += s.step.total_ns;
     pose_ns += s.pose_transfer_ns;
+    prepare_ns += s.prepare_ns;
     iterations += s.step.iterations;
     f = (f + 1) % frames;
   }
   const auto n = static_cast<double>(state.iterations());
   state.counters["step_us"] = static_cast<double>(step_ns) / n * 1e-3;
   state.counters["pose_transfer_us"] = static_cast<double>(pose_ns) / n * 1e-3;
+  if (volume_constraint) state.counters["prepare_us"] = static_cast<double>(prepare_ns) / n * 1e-3;
   state.counters["iterations"] = static_cast<double>(iterations) / n;
 }
 void BM_LiveRigFrame(benchmark::State& state) { liveRigFrame(state, false); }

@@ -229,6 +229,9 @@ void FrameLoop::run() noexcept {
     if (miss) info.flags |= kShmFrameBudgetMiss;
     publisher_.commit(info);
     const std::int64_t published_ns = monotonicNowNs();
+    // What the next frame needs from this one (the volume constraint's linearization), now that the
+    // consumers have the pose: off the receive -> published path.
+    const std::int64_t prepare_ns = live_.prepareNextFrame();
 
     // Counters (solver thread only; no allocation).
     pose_estimate_ns = pose_estimate_ns == 0 ? stats.pose_transfer_ns
@@ -255,6 +258,7 @@ void FrameLoop::run() noexcept {
       latency_.receive_to_pose_done.record(pose_done_ns - receive_ns);
       latency_.receive_to_published.record(total);
       latency_.overhead.record(total - step_ns - stats.pose_transfer_ns);
+      if (prepare_ns > 0) latency_.prepare_next.record(prepare_ns);
       if (frame_deadline != 0 && published_ns > frame_deadline) budget_misses_.fetch_add(1, std::memory_order_relaxed);
       last_latency_ns_.store(total, std::memory_order_relaxed);
       recent[static_cast<std::size_t>(recent_count % kRecentWindow)] = total;

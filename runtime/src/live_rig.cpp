@@ -299,6 +299,7 @@ double LiveRig::blendWeight(std::int64_t since_ns) const noexcept {
 
 LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget& budget, float* positions, float* normals) noexcept {
   LiveFrameStats stats;
+  stats.prepare_ns = prepareNextFrame();
   const Rig& rig = *rig_;
   const std::size_t markers = rig.markers.size();
 
@@ -490,16 +491,7 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
     pose_bound_.addTarget(region_targets_[r].rotation * region_centroid_[r] + region_targets_[r].translation);
   if (pose_bound_.accepts(positions, n)) {
     std::memcpy(last_positions_.data(), positions, n * sizeof(float));
-    if (volume_constraint_) {
-      // The next frame keeps the volume: g . x = V_rest - V(x0) + g . x0 at this pose x0, with g
-      // linearized again every volume_constraint_refresh_frames frames (a stale g still keeps the
-      // measured volume; it only steers less well).
-      if (!deformer_.hasLinearConstraint() || ++frames_since_linearized_ >= options_.volume_constraint_refresh_frames) {
-        linearizeVolumeConstraint(positions);
-      } else {
-        deformer_.setLinearConstraintValue(volume_constraint_->value(deformer_.positions(), positions, constraint_gradient_));
-      }
-    }
+    constraint_pending_ = volume_constraint_ != nullptr;  // linearized at this pose by prepareNextFrame()
     if (options_.normals) {
       vertexNormals(positions, fineTriangles(), normal_sum_, last_normals_.data(), last_normals_.data());
       if (normals != nullptr) std::memcpy(normals, last_normals_.data(), n * sizeof(float));
@@ -507,12 +499,29 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
   } else {
     stats.flags |= kLivePoseRejected;
     writeLastPose(positions, normals);
+    constraint_pending_ = false;
     deformer_.reset();
     predictor_.reset();
     if (coarse_) coarse_->reset();
   }
   stats.pose_transfer_ns = monotonicNowNs() - t0;
   return stats;
+}
+
+std::int64_t LiveRig::prepareNextFrame() noexcept {
+  if (!constraint_pending_) return 0;
+  constraint_pending_ = false;
+  const std::int64_t t0 = monotonicNowNs();
+  // The next frame keeps the volume: g . x = V_rest - V(x0) + g . x0 at the last published pose x0
+  // (last_positions_ = B x0, x0 the deformer's positions: neither changes until the next step), with
+  // g linearized again every volume_constraint_refresh_frames frames (a stale g still keeps the
+  // measured volume; it only steers less well).
+  if (!deformer_.hasLinearConstraint() || ++frames_since_linearized_ >= options_.volume_constraint_refresh_frames) {
+    linearizeVolumeConstraint(last_positions_.data());
+  } else {
+    deformer_.setLinearConstraintValue(volume_constraint_->value(deformer_.positions(), last_positions_.data(), constraint_gradient_));
+  }
+  return std::max<std::int64_t>(1, monotonicNowNs() - t0);
 }
 
 void LiveRig::linearizeVolumeConstraint(const float* fine) noexcept {

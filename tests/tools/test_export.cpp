@@ -58,13 +58,13 @@ const Scene& scene() {
 }
 
 // Reference: a LiveRig fed clip frames [first, end) with `iterations` per frame.
-std::vector<std::vector<float>> liveRigFrames(std::size_t first, std::size_t end, int iterations) {
+std::vector<std::vector<float>> liveRigFrames(std::size_t first, std::size_t end, int iterations, const LiveRigOptions& live_options = {}) {
   const Scene& sc = scene();
   const drivers::C3DClip clip = drivers::C3DClip::load(sc.clip_path);
   drivers::C3DPlaybackOptions po;
   po.pacing = drivers::Pacing::kAsFastAsPossible;
   const drivers::C3DPlayback playback(clip, po);
-  LiveRig live(sc.rig);
+  LiveRig live(sc.rig, live_options);
   EXPECT_EQ(live.bindLabels(clip.labels()).matched, 5);
   std::vector<std::vector<float>> out;
   MarkerFrame frame{};
@@ -320,6 +320,42 @@ TEST(Export, TheCoarseLevelIsUsedWithIterationsAndNotWhenConverging) {
   double differ = 0;
   for (std::size_t f = 0; f < guided.size(); ++f) differ = std::max(differ, maxDifference(guided[f], plain[f]));
   EXPECT_GT(differ, 1e-6);
+}
+
+// --keep-volume: with --iterations N the frames are the LiveRig's with the volume constraint, bit
+// for bit; iterating to convergence (each chunk linearizes the constraint again) every frame ends
+// at the rest volume, where the plain export does not.
+TEST(Export, KeepVolumeIsTheLiveRigsVolumeConstraint) {
+  const TempDir out;
+  auto fixed = options(out.path() / "fixed.pc2", 3);
+  fixed.keep_volume = true;
+  auto converge = options(out.path() / "converge.pc2", 0);
+  converge.keep_volume = true;
+  (void)tools::exportClip(fixed);
+  (void)tools::exportClip(converge);
+  (void)tools::exportClip(options(out.path() / "plain_converge.pc2", 0));
+  LiveRigOptions keep;
+  keep.volume_constraint = true;
+  const auto reference = liveRigFrames(0, kFrames, 3, keep);
+  const auto got = readPc2(out.path() / "fixed.pc2").frames;
+  ASSERT_EQ(got.size(), kFrames);
+  for (std::size_t f = 0; f < kFrames; ++f) EXPECT_EQ(got[f], reference[f]) << "frame " << f;
+  EXPECT_NE(got, liveRigFrames(0, kFrames, 3));
+  const std::vector<std::int32_t> triangles = rigTriangles();
+  const double rest = enclosedVolume(triangles, rigRest().data());
+  ASSERT_GT(rest, 0.0);
+  const auto kept = readPc2(out.path() / "converge.pc2").frames, plain = readPc2(out.path() / "plain_converge.pc2").frames;
+  ASSERT_EQ(kept.size(), kFrames);
+  ASSERT_EQ(plain.size(), kFrames);
+  double kept_worst = 0.0, plain_worst = 0.0;
+  for (std::size_t f = 0; f < kFrames; ++f) {
+    kept_worst = std::max(kept_worst, std::abs(enclosedVolume(triangles, kept[f].data()) / rest - 1.0));
+    plain_worst = std::max(plain_worst, std::abs(enclosedVolume(triangles, plain[f].data()) / rest - 1.0));
+  }
+  RecordProperty("kept_volume_change", ::testing::PrintToString(kept_worst));
+  RecordProperty("plain_volume_change", ::testing::PrintToString(plain_worst));
+  EXPECT_LT(kept_worst, 1e-4);
+  EXPECT_GT(plain_worst, 10 * kept_worst);
 }
 
 // Samples at exactly (0, 0, 0) with residual 0 are gaps (predicted), as in `tetrig run`, unless

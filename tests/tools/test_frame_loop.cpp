@@ -94,12 +94,17 @@ struct Harness {
   std::unique_ptr<FrameLoop> loop;
 };
 
-TEST(FrameLoop, EveryPublishedFrameEqualsAnOfflineRunBitForBit) {
+// Parameter: with the volume constraint, whose linearization the loop runs after publishing
+// (LiveRig::prepareNextFrame) while the offline rig runs it first thing in the next processFrame.
+class FrameLoopBitExact : public ::testing::TestWithParam<bool> {};
+
+TEST_P(FrameLoopBitExact, EveryPublishedFrameEqualsAnOfflineRunBitForBit) {
   FrameLoopOptions options;
   options.budget_ns = 0;  // no deadline: the iteration count alone decides
   options.lock_memory = false;
   LiveRigOptions live_options;
   live_options.normals = true;
+  live_options.volume_constraint = GetParam();
   LiveRigOptions split_options = live_options;
   split_options.split_pose_transfer = true;  // the live side on two threads, the offline side on one
   Harness h("bitexact", options, split_options);
@@ -115,7 +120,7 @@ TEST(FrameLoop, EveryPublishedFrameEqualsAnOfflineRunBitForBit) {
   LiveRig offline(demoRig(), live_options);
   offline.bindLabels(rigLabels(demoRig()));
   auto frame = std::make_unique<MarkerFrame>();
-  int predicted_frames = 0;
+  int predicted_frames = 0, held_frames = 0;
   int state_counts[4] = {0, 0, 0, 0};
   for (std::uint64_t k = 0; k < 240; ++k) {
     source->fillFrame(k, *frame);
@@ -134,6 +139,7 @@ TEST(FrameLoop, EveryPublishedFrameEqualsAnOfflineRunBitForBit) {
     if (info.flags & TETRIG_SHM_FRAME_MARKERS_PREDICTED) ++predicted_frames;
     const LiveFrameStats s = offline.processFrame(*frame, StepBudget{info.iterations}, want.data(), want_normals.data());
     EXPECT_EQ(s.occluded_markers, info.occluded_markers);
+    if (s.flags & kLivePoseHeld) ++held_frames;
     ASSERT_EQ(std::memcmp(got.data(), want.data(), n * sizeof(float)), 0) << "positions differ at frame " << k;
     ASSERT_EQ(std::memcmp(got_normals.data(), want_normals.data(), n * sizeof(float)), 0) << "normals differ at frame " << k;
     // the marker block: the offline rig's targets (as floats) and states, marker by marker
@@ -167,10 +173,16 @@ TEST(FrameLoop, EveryPublishedFrameEqualsAnOfflineRunBitForBit) {
   EXPECT_EQ(c.budget_misses, 0u);
   EXPECT_EQ(h.loop->latency().receive_to_published.count(), 240u);
   EXPECT_GE(h.loop->latency().receive_to_published.percentileNs(0.5), h.loop->latency().step.percentileNs(0.5) / 2);
+  // The loop linearized the constraint after publishing each stepped frame, and only then.
+  EXPECT_EQ(h.loop->latency().prepare_next.count(), GetParam() ? 240u - static_cast<std::uint64_t>(held_frames) : 0u);
+  EXPECT_EQ(h.live.deformer().hasLinearConstraint(), GetParam());
   // The pose moved: the last frame is not the rest pose.
   const auto rest = h.live.restPositions();
   EXPECT_NE(std::memcmp(got.data(), rest.data(), n * sizeof(float)), 0);
 }
+
+INSTANTIATE_TEST_SUITE_P(VolumeConstraint, FrameLoopBitExact, ::testing::Bool(),
+                         [](const ::testing::TestParamInfo<bool>& i) { return i.param ? "KeepingTheVolume" : "Plain"; });
 
 TEST(FrameLoop, AStaleSourceIsReportedInTheSegmentAndClearsWithTheNextFrame) {
   FrameLoopOptions options;

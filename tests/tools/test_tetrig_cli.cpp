@@ -140,6 +140,22 @@ TEST(TetrigCli, RunPlaysAClipAndRefusesBadInput) {
     EXPECT_LE(p["p99"].get<double>(), p["max"].get<double>()) << phase;
   }
   EXPECT_FALSE(std::filesystem::exists("/dev/shm/" + name)) << "a clean end unlinks the segment";
+  // Without --keep-volume nothing runs after publishing; with it, the constraint's linearization does
+  // after every solved frame (announced, a row of the table, "prepare_next" in the JSON).
+  EXPECT_EQ(j["latency_us"]["prepare_next"]["count"].get<int>(), 0);
+  EXPECT_EQ(ok.out.find("after publishing"), std::string::npos);
+  EXPECT_EQ(ok.out.find("volume kept"), std::string::npos);
+  const std::string kept_stats = (dir.path() / "kept.json").string();
+  const CliRun kept = run("run --rig '" + rig + "' --keep-volume --source 'c3d:" + clip.string() + "' --publish " + name + " --stats-json '" +
+                              kept_stats + "'",
+                          dir);
+  ASSERT_EQ(kept.status, 0) << kept.err;
+  EXPECT_CONTAINS(kept.out, "fine-mesh volume kept at rest: on");
+  EXPECT_CONTAINS(kept.out, "after publishing");
+  const nlohmann::json jk = nlohmann::json::parse(std::ifstream(kept_stats));
+  EXPECT_EQ(jk["latency_us"]["prepare_next"]["count"].get<int>(),
+            jk["frames"].get<int>() - jk["held_frames"].get<int>() - jk["frames_before_start"].get<int>());
+  EXPECT_GE(jk["latency_us"]["prepare_next"]["count"].get<int>(), 1);
 
   auto one_line_error = [](const CliRun& r, const char* needle) {
     EXPECT_NE(r.status, 0) << r.out;

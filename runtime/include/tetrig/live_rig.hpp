@@ -94,9 +94,9 @@ struct LiveRigOptions {
   double inversion_guard = 0.0;            // DeformerOptions::inversion_guard over the rig's body tets, rig and coarse level
   double inversion_guard_threshold = 0.5;  // DeformerOptions::inversion_guard_threshold
   // Keep the fine mesh's enclosed volume at rest (FineVolumeConstraint, a Lagrange multiplier on the
-  // fine rig; linearized after each frame's pose transfer for the next frame: one transposed product
-  // of B and one solve per frame, counted in pose_transfer_ns; the first frame, and the first after a
-  // reset, set it after their first iteration). Off by default (docs/fidelity.md).
+  // fine rig; linearized at each frame's published pose for the next frame by prepareNextFrame(): one
+  // transposed product of B and one solve per frame; the first frame, and the first after a reset,
+  // set it after their first iteration). Off by default (docs/fidelity.md; `tetrig run --keep-volume`).
   bool volume_constraint = false;
   // Frames between two linearizations of the volume's gradient (B^T of it and the solve, the costly
   // part); the volume itself is measured every frame and the constraint's value follows it.
@@ -124,6 +124,8 @@ struct LiveFrameStats {
   StepStats step;                    // the deformer's own stats (iterations, energy, flags, phase times); zero when held
   std::int64_t pose_transfer_ns = 0; // x_fine = B x_tet (+ normals), or the copy of the last pose when held
   std::int64_t coarse_ns = 0;        // the coarse level's step (with a coarse rig), also counted in step.total_ns
+  std::int64_t prepare_ns = 0;       // prepareNextFrame() work the caller left to this frame (run first; 0 when it
+                                     // called prepareNextFrame() after the last frame, or had nothing to prepare)
   std::uint16_t measured_markers = 0;   // rig markers measured in this frame (blending back ones included)
   std::uint16_t occluded_markers = 0;   // rig markers driven by their prediction (unbound ones included)
   std::uint16_t blending_markers = 0;   // rig markers in a dropout fade or a return blend
@@ -175,6 +177,15 @@ class LiveRig {
   // normals: fineVertexCount()*3 floats (unit vectors) or nullptr (ignored unless
   // LiveRigOptions::normals). Never writes a non-finite value. No allocation, lock, exception, I/O.
   LiveFrameStats processFrame(const MarkerFrame& frame, const StepBudget& budget, float* positions, float* normals) noexcept;
+
+  // Work a frame leaves for the next one, done now: with LiveRigOptions::volume_constraint, the
+  // constraint's linearization at the pose just published (the fine volume's gradient, B^T of it and
+  // one solve: 0.6-0.9x a plain frame's cost). Call it after publishing processFrame's buffers, so
+  // that this work stays off the receive -> published path (FrameLoop does); a processFrame that
+  // finds it still pending runs it first (LiveFrameStats::prepare_ns). Either way the poses are bit
+  // for bit the same. Returns the nanoseconds it took (at least 1), or 0 when nothing was pending. No allocation, lock,
+  // exception or I/O; same thread as processFrame.
+  std::int64_t prepareNextFrame() noexcept;
 
   // The last pose again (the rest pose before the first frame): for a stale source or a held pose.
   // Same buffers as processFrame (normals written only with LiveRigOptions::normals). No allocation.
@@ -242,6 +253,7 @@ class LiveRig {
   std::vector<double> constraint_gradient_;                // its g, #tetV*3
   std::vector<float> constraint_scratch_;                  // a first iteration's fine pose (#fine*3), on a cold frame
   int frames_since_linearized_ = 0;
+  bool constraint_pending_ = false;  // the last frame's pose awaits linearizing (prepareNextFrame)
   // Coarse level (with a coarse rig): its handle targets, and per coarse marker its vertex handle
   // and the rig marker that drives it.
   std::unique_ptr<CoarseLevel> coarse_;
