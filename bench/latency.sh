@@ -94,7 +94,7 @@ if seen: rows.append(("receive -> seen by the consumer", seen))
 rows += [("step (3 iterations)", lat["step"]), ("pose transfer", lat["pose_transfer"]),
          ("overhead (published - step - pose)", lat["overhead"])]
 after = lat.get("prepare_next")
-if after and after["count"]: rows.append(("after publishing (--keep-volume's linearization)", after))
+if after and after["count"]: rows.append(("after publishing (prepareNextFrame: --keep-volume, --after-publish-iterations)", after))
 print(f"\nlatency harness ({mode}): {p['frames']} frames of {p['source']['description']}")
 print(f"rig: {p['rig']['name']}: {p['rig']['tet_vertices']} tet vertices, {p['rig']['tets']} tets, {p['rig']['fine_vertices']} fine vertices")
 print("| phase | p50 (us) | p99 (us) | max (us) |\n|---|---|---|---|")

@@ -297,6 +297,9 @@ ExportReport exportClip(const ExportOptions& o) {
   if (o.iterations == 0 && (!(o.tolerance > 0.0) || !std::isfinite(o.tolerance)))
     throw std::invalid_argument("--tolerance must be a positive number");
   if (o.iterations == 0 && o.max_iterations < 1) throw std::invalid_argument("--max-iterations must be at least 1");
+  if (o.after_publish_iterations < 0) throw std::invalid_argument("--after-publish-iterations must be >= 0");
+  if (o.after_publish_iterations > 0 && o.iterations == 0)
+    throw std::invalid_argument("--after-publish-iterations needs --iterations N: a frame solved to convergence has nothing left to refine");
   ExportReport report;
   report.target = parseExportTarget(o.out);
   const ExportTarget& target = report.target;
@@ -335,6 +338,7 @@ ExportReport exportClip(const ExportOptions& o) {
   // again on the same frame, where it would start the frame again, so it is off.
   live_options.use_coarse_level = o.iterations > 0;
   live_options.volume_constraint = o.keep_volume;
+  live_options.after_publish_iterations = o.after_publish_iterations;
   LiveRig live(rig, live_options);
   std::vector<std::string> labels;
   {

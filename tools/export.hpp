@@ -55,6 +55,7 @@ struct ExportOptions {
   int max_iterations = 300;             // converge: at most this many iterations per frame
   double occlusion_blend_ms = 150;      // as `tetrig run --occlusion-blend-ms`
   bool keep_volume = false;             // as `tetrig run --keep-volume` (LiveRigOptions::volume_constraint)
+  int after_publish_iterations = 0;     // as `tetrig run --after-publish-iterations` (needs iterations > 0)
   double rate_hz = 0;                   // > 0: overrides the clip's frame rate (needed for glTF without one)
   bool keep_zero_markers = false;       // as `tetrig run --keep-zero-markers`: samples at x = y = z = 0 with
                                         // residual 0 stay valid (default: gaps)

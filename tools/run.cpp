@@ -89,6 +89,8 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
   live_options.use_coarse_level = !options.no_coarse;
   if (options.predict) live_options.rotation_extrapolation = 1.0;
   live_options.volume_constraint = options.keep_volume;
+  if (options.after_publish_iterations < 0) throw std::invalid_argument("--after-publish-iterations must be >= 0");
+  live_options.after_publish_iterations = options.after_publish_iterations;
   std::optional<Rig> coarse;
   if (!options.coarse_rig_path.empty()) coarse = loadRigFile(options.coarse_rig_path);
   LiveRig live(rig, live_options, coarse ? &*coarse : nullptr);
@@ -141,6 +143,8 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
                   live.coarseLevel()->options().iterations);
     if (options.predict) std::printf("  temporal prediction of each frame's start: on\n");
     if (options.keep_volume) std::printf("  fine-mesh volume kept at rest: on (its linearization runs after each publish)\n");
+    if (options.after_publish_iterations > 0)
+      std::printf("  %d iterations after each publish (on that frame's targets, within its budget)\n", options.after_publish_iterations);
     if (!binding.missing.empty())
       std::printf("  note: %zu rig markers the source never names are treated as occluded: %s\n", binding.missing.size(),
                   joinLabels(binding.missing).c_str());

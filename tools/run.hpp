@@ -24,6 +24,7 @@ struct RunOptions {
   bool no_coarse = false;               // ignore the rig's own coarse level (Rig::coarse)
   bool predict = false;                 // temporal prediction of the warm start (LiveRigOptions::rotation_extrapolation = 1)
   bool keep_volume = false;             // keep the fine mesh's enclosed volume (LiveRigOptions::volume_constraint)
+  int after_publish_iterations = 0;     // LiveRigOptions::after_publish_iterations
   std::optional<tetrig::Rig> rig;       // an already built rig (tetrig demo)
   std::string source = "synthetic";     // c3d:PATH, replay:PATH, synthetic[:N], hid:VID:PID, usb:VID:PID, hydra[:SERIAL]
   std::string publish = "tetrig";       // shared-memory segment name (without the leading '/')

@@ -182,6 +182,11 @@ int main(int argc, char** argv) {
   run_cmd->add_flag("--keep-volume", run.keep_volume,
                     "Keep the fine mesh's enclosed volume at its rest value (a Lagrange multiplier; docs/fidelity.md): "
                     "creases lose no volume; its per-frame linearization runs after each publish");
+  run_cmd->add_option("--after-publish-iterations", run.after_publish_iterations,
+                      "Iterations on each frame's targets after its pose is published, within its budget: the next frame "
+                      "starts nearer the converged pose (docs/fidelity.md)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 100));
   run_cmd->add_flag("--no-coarse", run.no_coarse, "Do not use the rig's own coarse level (built with --coarse-tet-vertices)");
   run_cmd->add_option("--coarse-rig", run.coarse_rig_path,
                       "Coarse level: the same mesh and markers built with fewer --tet-vertices (e.g. 300), solved first every "
@@ -250,6 +255,9 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::Range(0.0, 10000.0));
   export_cmd->add_flag("--keep-volume", exp.keep_volume, "Keep the fine mesh's enclosed volume at its rest value (as tetrig run)");
+  export_cmd->add_option("--after-publish-iterations", exp.after_publish_iterations,
+                         "With --iterations N: iterations on each frame's targets after it is written (as tetrig run)")
+      ->check(CLI::Range(0, 100));
   export_cmd->add_flag("--keep-zero-markers", exp.keep_zero_markers,
                        "Samples at x = y = z = 0 with residual 0 are valid points, not gaps (as tetrig run)");
   export_cmd->add_option("--rate", exp.rate_hz, "Frame rate in Hz instead of the clip's (glTF sample times)")->check(CLI::Range(0.001, 100000.0));

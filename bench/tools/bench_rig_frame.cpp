@@ -30,6 +30,9 @@
 //   of B cut to its <entries> largest weights, 0 = all), and one solve; LiveRig::prepareNextFrame,
 //   which `tetrig run` calls after publishing and this loop leaves to the next processFrame: in the
 //   frame's time, and apart as prepare_us).
+//   BM_LiveRigFrame/smpl_hdm05_after_publish/<k>: the same live path (no split) with k iterations on
+//   each frame's targets after its pose (LiveRigOptions::after_publish_iterations; prepareNextFrame,
+//   left here to the next processFrame: in the frame's time, and apart as prepare_us).
 //   BM_PoseTransfer/smpl_hdm05/<layout>/<cache>: the pose transfer alone, from the padded positions of
 //   one posed frame into a float buffer; layout 0 = the rig's B (double weights, 32-bit columns, 12
 //   bytes per entry), 1 = the live rig's compact copy (float, 16-bit, 6 bytes: narrowPoseTransfer);
@@ -233,13 +236,15 @@ BENCHMARK(BM_RigFrameCoarseRelaxed)->Name("BM_RigFrame/smpl_hdm05_coarse_relaxed
 void BM_RigFrameCoarsePredictedRelaxed(benchmark::State& state) { rigFrame(state, 1.0, 1.8, true); }
 BENCHMARK(BM_RigFrameCoarsePredictedRelaxed)->Name("BM_RigFrame/smpl_hdm05_coarse_predicted_relaxed")->Unit(benchmark::kMicrosecond);
 
-void liveRigFrame(benchmark::State& state, bool feet, bool volume_constraint = false) {
+void liveRigFrame(benchmark::State& state, bool feet, bool volume_constraint = false, bool after_publish = false) {
   const RigScene* scene = sceneOrSkip(state, feet);
   if (scene == nullptr) return;
   tetrig::LiveRigOptions live_options;
   live_options.volume_constraint = volume_constraint;
   if (volume_constraint) {
     live_options.volume_constraint_gradient_entries = static_cast<int>(state.range(0));
+  } else if (after_publish) {
+    live_options.after_publish_iterations = static_cast<int>(state.range(0));
   } else {
     live_options.split_pose_transfer = state.range(0) != 0;
   }
@@ -270,12 +275,15 @@ void liveRigFrame(benchmark::State& state, bool feet, bool volume_constraint = f
   const auto n = static_cast<double>(state.iterations());
   state.counters["step_us"] = static_cast<double>(step_ns) / n * 1e-3;
   state.counters["pose_transfer_us"] = static_cast<double>(pose_ns) / n * 1e-3;
-  if (volume_constraint) state.counters["prepare_us"] = static_cast<double>(prepare_ns) / n * 1e-3;
+  if (volume_constraint || after_publish) state.counters["prepare_us"] = static_cast<double>(prepare_ns) / n * 1e-3;
   state.counters["iterations"] = static_cast<double>(iterations) / n;
 }
 void BM_LiveRigFrame(benchmark::State& state) { liveRigFrame(state, false); }
 void BM_LiveRigFrameFeet(benchmark::State& state) { liveRigFrame(state, true); }
 void BM_LiveRigFrameVolumeConstraint(benchmark::State& state) { liveRigFrame(state, false, true); }
+void BM_LiveRigFrameAfterPublish(benchmark::State& state) { liveRigFrame(state, false, false, true); }
+// Argument: iterations after publishing (LiveRigOptions::after_publish_iterations).
+BENCHMARK(BM_LiveRigFrameAfterPublish)->Name("BM_LiveRigFrame/smpl_hdm05_after_publish")->Arg(1)->Arg(2)->Unit(benchmark::kMicrosecond);
 // Argument: entries of each row of B the constraint's gradient uses (0 = all).
 BENCHMARK(BM_LiveRigFrameVolumeConstraint)->Name("BM_LiveRigFrame/smpl_hdm05_volume_constraint")->Arg(0)->Arg(8)->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_LiveRigFrameFeet)->Name("BM_LiveRigFrame/smpl_hdm05_feet")->Arg(0)->Unit(benchmark::kMicrosecond);

@@ -505,6 +505,9 @@ int main(int argc, char** argv) {
   app.add_option("--volume-constraint-refresh", cfg.live.volume_constraint_refresh_frames,
                  "Volume constraint: frames between linearizations of its gradient (default 1: every frame)")
       ->check(CLI::Range(1, 1000));
+  app.add_option("--after-publish-iterations", cfg.live.after_publish_iterations,
+                 "Live rig: iterations on each frame's targets after its pose is taken (LiveRigOptions::after_publish_iterations)")
+      ->check(CLI::Range(0, 1000));
   app.add_option("--volume-constraint-gradient-entries", cfg.live.volume_constraint_gradient_entries,
                  "Volume constraint: entries of each row of B its gradient uses (the largest, rescaled; default 0: all)")
       ->check(CLI::Range(0, 100000));
@@ -536,6 +539,7 @@ int main(int argc, char** argv) {
                           {"volume_constraint", cfg.live.volume_constraint},
                           {"volume_constraint_refresh_frames", cfg.live.volume_constraint_refresh_frames},
                           {"volume_constraint_gradient_entries", cfg.live.volume_constraint_gradient_entries},
+                          {"after_publish_iterations", cfg.live.after_publish_iterations},
                           {"inversion_guard", cfg.live.inversion_guard},
                           {"inversion_guard_threshold", cfg.live.inversion_guard_threshold},
                           {"extrapolate", cfg.live.rotation_extrapolation},

@@ -229,9 +229,11 @@ void FrameLoop::run() noexcept {
     if (miss) info.flags |= kShmFrameBudgetMiss;
     publisher_.commit(info);
     const std::int64_t published_ns = monotonicNowNs();
-    // What the next frame needs from this one (the volume constraint's linearization), now that the
-    // consumers have the pose: off the receive -> published path.
-    const std::int64_t prepare_ns = live_.prepareNextFrame();
+    // What the next frame needs from this one (the volume constraint's linearization, iterations
+    // after publishing), now that the consumers have the pose: off the receive -> published path.
+    // The iterations stop at this frame's deadline, before the next frame is due.
+    const std::int64_t prepare_ns =
+        live_.prepareNextFrame(frame_deadline != 0 ? steadyAt(frame_deadline) : std::chrono::steady_clock::time_point::max());
 
     // Counters (solver thread only; no allocation).
     pose_estimate_ns = pose_estimate_ns == 0 ? stats.pose_transfer_ns

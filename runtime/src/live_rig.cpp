@@ -492,6 +492,7 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
   if (pose_bound_.accepts(positions, n)) {
     std::memcpy(last_positions_.data(), positions, n * sizeof(float));
     constraint_pending_ = volume_constraint_ != nullptr;  // linearized at this pose by prepareNextFrame()
+    refine_pending_ = options_.after_publish_iterations > 0;
     if (options_.normals) {
       vertexNormals(positions, fineTriangles(), normal_sum_, last_normals_.data(), last_normals_.data());
       if (normals != nullptr) std::memcpy(normals, last_normals_.data(), n * sizeof(float));
@@ -500,6 +501,7 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
     stats.flags |= kLivePoseRejected;
     writeLastPose(positions, normals);
     constraint_pending_ = false;
+    refine_pending_ = false;
     deformer_.reset();
     predictor_.reset();
     if (coarse_) coarse_->reset();
@@ -508,19 +510,36 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
   return stats;
 }
 
-std::int64_t LiveRig::prepareNextFrame() noexcept {
-  if (!constraint_pending_) return 0;
-  constraint_pending_ = false;
+std::int64_t LiveRig::prepareNextFrame(std::chrono::steady_clock::time_point deadline) noexcept {
+  if (!constraint_pending_ && !refine_pending_) return 0;
   const std::int64_t t0 = monotonicNowNs();
-  // The next frame keeps the volume: g . x = V_rest - V(x0) + g . x0 at the last published pose x0
-  // (last_positions_ = B x0, x0 the deformer's positions: neither changes until the next step), with
-  // g linearized again every volume_constraint_refresh_frames frames (a stale g still keeps the
-  // measured volume; it only steers less well).
-  if (!deformer_.hasLinearConstraint() || ++frames_since_linearized_ >= options_.volume_constraint_refresh_frames) {
-    linearizeVolumeConstraint(last_positions_.data());
-  } else {
-    deformer_.setLinearConstraintValue(volume_constraint_->value(deformer_.positions(), last_positions_.data(), constraint_gradient_));
+  if (constraint_pending_) {
+    constraint_pending_ = false;
+    // The next frame keeps the volume: g . x = V_rest - V(x0) + g . x0 at the published pose x0
+    // (last_positions_ = B x0, x0 the deformer's positions: neither has changed since), with g
+    // linearized again every volume_constraint_refresh_frames frames (a stale g still keeps the
+    // measured volume; it only steers less well).
+    if (!deformer_.hasLinearConstraint() || ++frames_since_linearized_ >= options_.volume_constraint_refresh_frames) {
+      linearizeVolumeConstraint(last_positions_.data());
+    } else {
+      deformer_.setLinearConstraintValue(volume_constraint_->value(deformer_.positions(), last_positions_.data(), constraint_gradient_));
+    }
   }
+  if (refine_pending_ && std::chrono::steady_clock::now() < deadline) {
+    // More iterations on the published frame's own targets (under the constraint just set): the
+    // next frame starts nearer this frame's converged pose. Not published: the next frame's step
+    // starts from here, and a held frame republishes last_positions_.
+    HandleTargets targets;
+    targets.vertex_positions = vertex_targets_;
+    targets.region_transforms = region_targets_;
+    targets.point_positions = point_targets_;
+    StepBudget more;
+    more.max_iterations = options_.after_publish_iterations;
+    more.deadline = deadline;
+    more.continues_frame = true;
+    (void)deformer_.step(targets, more);
+  }
+  refine_pending_ = false;  // (past the deadline: skipped)
   return std::max<std::int64_t>(1, monotonicNowNs() - t0);
 }
 

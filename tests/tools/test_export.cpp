@@ -358,6 +358,27 @@ TEST(Export, KeepVolumeIsTheLiveRigsVolumeConstraint) {
   EXPECT_GT(plain_worst, 10 * kept_worst);
 }
 
+// --after-publish-iterations N with --iterations 3: the LiveRig's frames with
+// LiveRigOptions::after_publish_iterations, bit for bit (each frame written, then refined); without
+// --iterations (convergence) it is refused before anything is written.
+TEST(Export, AfterPublishIterationsAreTheLiveRigs) {
+  const TempDir out;
+  auto refined = options(out.path() / "refined.pc2", 3);
+  refined.after_publish_iterations = 2;
+  (void)tools::exportClip(refined);
+  LiveRigOptions after;
+  after.after_publish_iterations = 2;
+  const auto reference = liveRigFrames(0, kFrames, 3, after);
+  const auto got = readPc2(out.path() / "refined.pc2").frames;
+  ASSERT_EQ(got.size(), kFrames);
+  for (std::size_t f = 0; f < kFrames; ++f) EXPECT_EQ(got[f], reference[f]) << "frame " << f;
+  EXPECT_NE(got, liveRigFrames(0, kFrames, 3));
+  auto converging = options(out.path() / "converging.pc2", 0);
+  converging.after_publish_iterations = 2;
+  EXPECT_THROW_CONTAINS(tools::exportClip(converging), "--after-publish-iterations needs --iterations N");
+  EXPECT_FALSE(std::filesystem::exists(out.path() / "converging.pc2"));
+}
+
 // Samples at exactly (0, 0, 0) with residual 0 are gaps (predicted), as in `tetrig run`, unless
 // keep_zero_markers (then measured there).
 TEST(Export, ZeroSamplesAreGapsUnlessKept) {

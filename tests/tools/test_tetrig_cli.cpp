@@ -156,6 +156,11 @@ TEST(TetrigCli, RunPlaysAClipAndRefusesBadInput) {
   EXPECT_EQ(jk["latency_us"]["prepare_next"]["count"].get<int>(),
             jk["frames"].get<int>() - jk["held_frames"].get<int>() - jk["frames_before_start"].get<int>());
   EXPECT_GE(jk["latency_us"]["prepare_next"]["count"].get<int>(), 1);
+  EXPECT_EQ(kept.out.find("iterations after each publish"), std::string::npos);
+  const CliRun refined = run("run --rig '" + rig + "' --after-publish-iterations 2 --source 'c3d:" + clip.string() + "' --publish " + name, dir);
+  ASSERT_EQ(refined.status, 0) << refined.err;
+  EXPECT_CONTAINS(refined.out, "2 iterations after each publish");
+  EXPECT_CONTAINS(refined.out, "after publishing");
 
   auto one_line_error = [](const CliRun& r, const char* needle) {
     EXPECT_NE(r.status, 0) << r.out;

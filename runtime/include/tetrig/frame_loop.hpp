@@ -97,7 +97,7 @@ struct FrameLoopLatency {
   LatencyHistogram receive_to_published;  // the whole live path on this machine
   LatencyHistogram overhead;              // receive_to_published - step - pose_transfer
   LatencyHistogram prepare_next;          // after publishing: LiveRig::prepareNextFrame (the volume constraint's
-                                          // linearization; only frames that had any)
+                                          // linearization, iterations after publishing; only frames that had any)
 };
 
 struct FrameLoopCounters {

@@ -57,6 +57,7 @@
 
 #include <Eigen/Core>
 
+#include <chrono>
 #include <cstdint>
 #include <memory>
 #include <span>
@@ -104,6 +105,11 @@ struct LiveRigOptions {
   // Entries of each row of B the constraint's gradient B^T dV/dx_fine uses (the largest, rescaled to
   // the row's sum; FineVolumeConstraint): 0 = all.
   int volume_constraint_gradient_entries = 0;
+  // Iterations on each frame's own targets after its pose is published (prepareNextFrame, bounded
+  // by its deadline): the next frame starts nearer this frame's converged pose, which removes most
+  // of the lag that builds up over frames (docs/fidelity.md, "Iterations after publishing"). Each
+  // costs about a sixth of a plain frame, off the receive -> published path. 0: none.
+  int after_publish_iterations = 0;
   int coarse_iterations = 5;   // with a coarse rig: its iterations per frame (CoarseLevelOptions::iterations)
   bool use_coarse_level = true;  // use the rig's own coarse level (Rig::coarse, built with build-rig
                                  // --coarse-tet-vertices) when it has one and no coarse rig is given
@@ -180,12 +186,15 @@ class LiveRig {
 
   // Work a frame leaves for the next one, done now: with LiveRigOptions::volume_constraint, the
   // constraint's linearization at the pose just published (the fine volume's gradient, B^T of it and
-  // one solve: 0.6-0.9x a plain frame's cost). Call it after publishing processFrame's buffers, so
-  // that this work stays off the receive -> published path (FrameLoop does); a processFrame that
-  // finds it still pending runs it first (LiveFrameStats::prepare_ns). Either way the poses are bit
-  // for bit the same. Returns the nanoseconds it took (at least 1), or 0 when nothing was pending. No allocation, lock,
+  // one solve: 0.6-0.9x a plain frame's cost); then LiveRigOptions::after_publish_iterations more
+  // iterations on that frame's targets, stopped at `deadline` (the linearization is not). Call it
+  // after publishing processFrame's buffers, so that this work stays off the receive -> published
+  // path (FrameLoop does, with the frame's deadline); a processFrame that finds it still pending runs
+  // it first, without a deadline (LiveFrameStats::prepare_ns). Either way the poses are bit for bit
+  // the same when no deadline cuts the iterations. Returns the nanoseconds it took (at least 1), or 0
+  // when nothing was pending. No allocation, lock,
   // exception or I/O; same thread as processFrame.
-  std::int64_t prepareNextFrame() noexcept;
+  std::int64_t prepareNextFrame(std::chrono::steady_clock::time_point deadline = std::chrono::steady_clock::time_point::max()) noexcept;
 
   // The last pose again (the rest pose before the first frame): for a stale source or a held pose.
   // Same buffers as processFrame (normals written only with LiveRigOptions::normals). No allocation.
@@ -254,6 +263,7 @@ class LiveRig {
   std::vector<float> constraint_scratch_;                  // a first iteration's fine pose (#fine*3), on a cold frame
   int frames_since_linearized_ = 0;
   bool constraint_pending_ = false;  // the last frame's pose awaits linearizing (prepareNextFrame)
+  bool refine_pending_ = false;      // the last frame awaits its after-publish iterations
   // Coarse level (with a coarse rig): its handle targets, and per coarse marker its vertex handle
   // and the rig marker that drives it.
   std::unique_ptr<CoarseLevel> coarse_;
