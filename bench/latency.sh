@@ -13,20 +13,23 @@
 #   bash bench/latency.sh --armadillo     # the Stanford Armadillo rig driven by the HDM05 clip
 #   bash bench/latency.sh --cap 48        # the SMPL rig with B capped at 48 entries per row (whole
 #                                         # tets, renormalised; accuracy cost in docs/live.md)
+#   bash bench/latency.sh --iterations 1  # iterations per frame (default 3)
 #   extra arguments after -- go to `tetrig run` (e.g. -- --cpu 1 --fifo, or -- --keep-volume)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 data="${TETRIG_DATA_DIR:-../shared/data}"
 mode=smpl
 cap=0
+iterations=3
 extra=()
 while [ $# -gt 0 ]; do
   case "$1" in
     --synthetic) mode=synthetic ;;
     --armadillo) mode=armadillo ;;
     --cap) shift; cap="${1:?--cap needs a number}" ;;
+    --iterations) shift; iterations="${1:?--iterations needs a number}" ;;
     --) shift; extra=("$@"); break ;;
-    *) echo "latency.sh: unknown argument $1 (use --synthetic, --armadillo, or -- ARGS for tetrig run)" >&2; exit 2 ;;
+    *) echo "latency.sh: unknown argument $1 (use --synthetic, --armadillo, --cap N, --iterations N, or -- ARGS for tetrig run)" >&2; exit 2 ;;
   esac
   shift
 done
@@ -69,16 +72,16 @@ rm -f "$out/latency_producer.json" "$out/latency_consumer.json" "$out/latency_ho
 build/release/tetrig_host_probe --frames 1200 --rate 120 --work-us 700 --json "$out/latency_host.json"
 build/release/tetrig-shm-cat "$name" --quiet --timeout-ms 20000 --json "$out/latency_consumer.json" &
 consumer=$!
-build/release/tetrig run --rig "$rig" --source "$source" --publish "$name" --iterations 3 \
+build/release/tetrig run --rig "$rig" --source "$source" --publish "$name" --iterations "$iterations" \
   --stats-json "$out/latency_producer.json" "${frames[@]}" "${extra[@]}"
 wait "$consumer" || { echo "latency.sh: the consumer failed" >&2; exit 1; }
 if [ "$cap" != 0 ]; then
   echo "accuracy of the capped B against the full one (metres):"
   build/release/tetrig_pose_cap_error "$full" "$rig" "$clip"
 fi
-python3 - "$out/latency_producer.json" "$out/latency_consumer.json" "$out/latency.json" "$mode" "$out/latency_host.json" <<'PY'
+python3 - "$out/latency_producer.json" "$out/latency_consumer.json" "$out/latency.json" "$mode" "$out/latency_host.json" "$iterations" <<'PY'
 import json, sys
-producer, consumer, out, mode, host = sys.argv[1:6]
+producer, consumer, out, mode, host, iterations = sys.argv[1:7]
 p = json.load(open(producer)); c = json.load(open(consumer)); h = json.load(open(host))
 p["consumer"] = c
 p["host_probe"] = h
@@ -91,7 +94,7 @@ rows = [("receive -> taken by the solver", lat["receive_to_taken"]),
         ("receive -> published", lat["receive_to_published"])]
 seen = c.get("latency_us", {}).get("receive_to_seen")
 if seen: rows.append(("receive -> seen by the consumer", seen))
-rows += [("step (3 iterations)", lat["step"]), ("pose transfer", lat["pose_transfer"]),
+rows += [(f"step ({iterations} iterations)", lat["step"]), ("pose transfer", lat["pose_transfer"]),
          ("overhead (published - step - pose)", lat["overhead"])]
 after = lat.get("prepare_next")
 if after and after["count"]: rows.append(("after publishing (prepareNextFrame: --keep-volume, --after-publish-iterations)", after))
