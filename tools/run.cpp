@@ -310,6 +310,14 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
     j["occluded_marker_frames"] = c.occluded_marker_frames;
     j["unknown_marker_frames"] = c.unknown_marker_frames;
     j["held_frames"] = c.held_frames;
+    // What each frame ran, so that a stats file says which configuration its latencies belong to.
+    j["solver"] = {{"iterations", options.iterations},
+                   {"after_publish_iterations", options.after_publish_iterations},
+                   {"keep_volume", options.keep_volume},
+                   {"predict", options.predict},
+                   {"coarse_level", live.coarseLevel() != nullptr},
+                   {"pose_threads", pose_threads},
+                   {"compact_pose_transfer", !options.double_pose_transfer}};
     j["rejected_target_frames"] = c.rejected_target_frames;
     j["rejected_poses"] = c.rejected_poses;
     j["stale_periods"] = c.stale_periods;

@@ -156,11 +156,24 @@ TEST(TetrigCli, RunPlaysAClipAndRefusesBadInput) {
   EXPECT_EQ(jk["latency_us"]["prepare_next"]["count"].get<int>(),
             jk["frames"].get<int>() - jk["held_frames"].get<int>() - jk["frames_before_start"].get<int>());
   EXPECT_GE(jk["latency_us"]["prepare_next"]["count"].get<int>(), 1);
+  // The stats say which configuration ran.
+  EXPECT_TRUE(jk["solver"]["keep_volume"].get<bool>());
+  EXPECT_FALSE(j["solver"]["keep_volume"].get<bool>());
+  EXPECT_EQ(j["solver"]["iterations"].get<int>(), 3);
+  EXPECT_EQ(j["solver"]["after_publish_iterations"].get<int>(), 0);
+  EXPECT_EQ(j["solver"]["pose_threads"].get<int>(), 1);
   EXPECT_EQ(kept.out.find("iterations after each publish"), std::string::npos);
-  const CliRun refined = run("run --rig '" + rig + "' --after-publish-iterations 2 --source 'c3d:" + clip.string() + "' --publish " + name, dir);
+  const std::string refined_stats = (dir.path() / "refined.json").string();
+  const CliRun refined = run("run --rig '" + rig + "' --after-publish-iterations 2 --iterations 1 --source 'c3d:" + clip.string() + "' --publish " +
+                                 name + " --stats-json '" + refined_stats + "'",
+                             dir);
   ASSERT_EQ(refined.status, 0) << refined.err;
   EXPECT_CONTAINS(refined.out, "2 iterations after each publish");
   EXPECT_CONTAINS(refined.out, "after publishing");
+  const nlohmann::json jr = nlohmann::json::parse(std::ifstream(refined_stats));
+  EXPECT_EQ(jr["solver"]["after_publish_iterations"].get<int>(), 2);
+  EXPECT_EQ(jr["solver"]["iterations"].get<int>(), 1);
+  EXPECT_FALSE(jr["solver"]["keep_volume"].get<bool>());
 
   auto one_line_error = [](const CliRun& r, const char* needle) {
     EXPECT_NE(r.status, 0) << r.out;
