@@ -406,10 +406,7 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
   }
 
   // 6. The step.
-  HandleTargets targets;
-  targets.vertex_positions = vertex_targets_;
-  targets.region_transforms = region_targets_;
-  targets.point_positions = point_targets_;
+  const HandleTargets targets = frameTargets();
   // Refresh only when some marker is fully measured: that is what moves the body in the first
   // iteration. With every marker predicted or blending (e.g. all returning after a held pose) the
   // predictions would only chase the body they drive.
@@ -491,8 +488,8 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
     pose_bound_.addTarget(region_targets_[r].rotation * region_centroid_[r] + region_targets_[r].translation);
   if (pose_bound_.accepts(positions, n)) {
     std::memcpy(last_positions_.data(), positions, n * sizeof(float));
-    constraint_pending_ = volume_constraint_ != nullptr;  // linearized at this pose by prepareNextFrame()
-    refine_pending_ = options_.after_publish_iterations > 0;
+    // The constraint linearized at this pose, then the after-publish iterations: prepareNextFrame().
+    next_frame_pending_ = volume_constraint_ != nullptr || options_.after_publish_iterations > 0;
     if (options_.normals) {
       vertexNormals(positions, fineTriangles(), normal_sum_, last_normals_.data(), last_normals_.data());
       if (normals != nullptr) std::memcpy(normals, last_normals_.data(), n * sizeof(float));
@@ -500,8 +497,7 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
   } else {
     stats.flags |= kLivePoseRejected;
     writeLastPose(positions, normals);
-    constraint_pending_ = false;
-    refine_pending_ = false;
+    next_frame_pending_ = false;
     deformer_.reset();
     predictor_.reset();
     if (coarse_) coarse_->reset();
@@ -511,10 +507,10 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
 }
 
 std::int64_t LiveRig::prepareNextFrame(std::chrono::steady_clock::time_point deadline) noexcept {
-  if (!constraint_pending_ && !refine_pending_) return 0;
+  if (!next_frame_pending_) return 0;
+  next_frame_pending_ = false;
   const std::int64_t t0 = monotonicNowNs();
-  if (constraint_pending_) {
-    constraint_pending_ = false;
+  if (volume_constraint_) {
     // The next frame keeps the volume: g . x = V_rest - V(x0) + g . x0 at the published pose x0
     // (last_positions_ = B x0, x0 the deformer's positions: neither has changed since), with g
     // linearized again every volume_constraint_refresh_frames frames (a stale g still keeps the
@@ -525,22 +521,25 @@ std::int64_t LiveRig::prepareNextFrame(std::chrono::steady_clock::time_point dea
       deformer_.setLinearConstraintValue(volume_constraint_->value(deformer_.positions(), last_positions_.data(), constraint_gradient_));
     }
   }
-  if (refine_pending_ && std::chrono::steady_clock::now() < deadline) {
+  if (options_.after_publish_iterations > 0 && std::chrono::steady_clock::now() < deadline) {
     // More iterations on the published frame's own targets (under the constraint just set): the
     // next frame starts nearer this frame's converged pose. Not published: the next frame's step
     // starts from here, and a held frame republishes last_positions_.
-    HandleTargets targets;
-    targets.vertex_positions = vertex_targets_;
-    targets.region_transforms = region_targets_;
-    targets.point_positions = point_targets_;
     StepBudget more;
     more.max_iterations = options_.after_publish_iterations;
     more.deadline = deadline;
     more.continues_frame = true;
-    (void)deformer_.step(targets, more);
+    (void)deformer_.step(frameTargets(), more);
   }
-  refine_pending_ = false;  // (past the deadline: skipped)
   return std::max<std::int64_t>(1, monotonicNowNs() - t0);
+}
+
+HandleTargets LiveRig::frameTargets() const noexcept {
+  HandleTargets targets;
+  targets.vertex_positions = vertex_targets_;
+  targets.region_transforms = region_targets_;
+  targets.point_positions = point_targets_;
+  return targets;
 }
 
 void LiveRig::linearizeVolumeConstraint(const float* fine) noexcept {

@@ -192,8 +192,7 @@ class LiveRig {
   // path (FrameLoop does, with the frame's deadline); a processFrame that finds it still pending runs
   // it first, without a deadline (LiveFrameStats::prepare_ns). Either way the poses are bit for bit
   // the same when no deadline cuts the iterations. Returns the nanoseconds it took (at least 1), or 0
-  // when nothing was pending. No allocation, lock,
-  // exception or I/O; same thread as processFrame.
+  // when nothing was pending. No allocation, lock, exception or I/O; same thread as processFrame.
   std::int64_t prepareNextFrame(std::chrono::steady_clock::time_point deadline = std::chrono::steady_clock::time_point::max()) noexcept;
 
   // The last pose again (the rest pose before the first frame): for a stale source or a held pose.
@@ -250,6 +249,7 @@ class LiveRig {
   void refreshPredictions() noexcept;                         // prediction_ from the deformer's pose
   void transferPose(float* positions) const noexcept;         // B x_tet of the deformer's pose
   void linearizeVolumeConstraint(const float* fine) noexcept; // the constraint at the deformer's pose (fine = B x_tet)
+  HandleTargets frameTargets() const noexcept;                // the last frame's vertex, region and point targets
   std::uint32_t updateTargets() noexcept;                     // targets from the states; returns the blending count
 
   const Rig* rig_ = nullptr;
@@ -262,8 +262,7 @@ class LiveRig {
   std::vector<double> constraint_gradient_;                // its g, #tetV*3
   std::vector<float> constraint_scratch_;                  // a first iteration's fine pose (#fine*3), on a cold frame
   int frames_since_linearized_ = 0;
-  bool constraint_pending_ = false;  // the last frame's pose awaits linearizing (prepareNextFrame)
-  bool refine_pending_ = false;      // the last frame awaits its after-publish iterations
+  bool next_frame_pending_ = false;  // the last accepted frame awaits prepareNextFrame()
   // Coarse level (with a coarse rig): its handle targets, and per coarse marker its vertex handle
   // and the rig marker that drives it.
   std::unique_ptr<CoarseLevel> coarse_;
