@@ -360,6 +360,17 @@ TEST(Export, KeepVolumeIsTheLiveRigsVolumeConstraint) {
   EXPECT_GT(plain_worst, 10 * kept_worst);
 }
 
+// The export at `path` is, frame for frame and bit for bit, a LiveRig with `live` fed the same clip
+// frames with `iterations` per frame, and differs from a default LiveRig's (so the options reached it).
+void expectTheLiveRigsFrames(const std::filesystem::path& path, int iterations, const LiveRigOptions& live,
+                             const std::filesystem::path& clip = {}) {
+  const auto got = readPc2(path).frames;
+  const auto reference = liveRigFrames(0, kFrames, iterations, live, clip);
+  ASSERT_EQ(got.size(), kFrames) << path;
+  for (std::size_t f = 0; f < kFrames; ++f) EXPECT_EQ(got[f], reference[f]) << path << " frame " << f;
+  EXPECT_NE(got, liveRigFrames(0, kFrames, iterations, {}, clip)) << path;
+}
+
 // --after-publish-iterations N with --iterations 3: the LiveRig's frames with
 // LiveRigOptions::after_publish_iterations, bit for bit (each frame written, then refined); without
 // --iterations (convergence) it is refused before anything is written.
@@ -370,11 +381,7 @@ TEST(Export, AfterPublishIterationsAreTheLiveRigs) {
   (void)tools::exportClip(refined);
   LiveRigOptions after;
   after.after_publish_iterations = 2;
-  const auto reference = liveRigFrames(0, kFrames, 3, after);
-  const auto got = readPc2(out.path() / "refined.pc2").frames;
-  ASSERT_EQ(got.size(), kFrames);
-  for (std::size_t f = 0; f < kFrames; ++f) EXPECT_EQ(got[f], reference[f]) << "frame " << f;
-  EXPECT_NE(got, liveRigFrames(0, kFrames, 3));
+  expectTheLiveRigsFrames(out.path() / "refined.pc2", 3, after);
   auto converging = options(out.path() / "converging.pc2", 0);
   converging.after_publish_iterations = 2;
   EXPECT_THROW_CONTAINS(tools::exportClip(converging), "--after-publish-iterations needs --iterations N");
@@ -394,11 +401,7 @@ TEST(Export, PredictRelaxAndTheGuardAreTheLiveRigs) {
   live.rotation_extrapolation = 1.0;
   live.rotation_relaxation = 1.9;
   live.inversion_guard = 1.0;
-  const auto reference = liveRigFrames(0, kFrames, 3, live);
-  const auto got = readPc2(out.path() / "tuned.pc2").frames;
-  ASSERT_EQ(got.size(), kFrames);
-  for (std::size_t f = 0; f < kFrames; ++f) EXPECT_EQ(got[f], reference[f]) << "frame " << f;
-  EXPECT_NE(got, liveRigFrames(0, kFrames, 3));
+  expectTheLiveRigsFrames(out.path() / "tuned.pc2", 3, live);
   // Each option on its own changes the frames (so none of them is dropped on the way).
   constexpr int kGuardIterations = 200;
   for (int which = 0; which < 3; ++which) {
@@ -441,9 +444,7 @@ TEST(Export, PredictRelaxAndTheGuardAreTheLiveRigs) {
       o.inversion_guard = 1.0;
     }
     (void)tools::exportClip(one);
-    const auto frames = readPc2(out.path() / ("one" + std::to_string(which) + ".pc2")).frames;
-    EXPECT_EQ(frames, liveRigFrames(0, kFrames, one.iterations, o, clip)) << which;
-    EXPECT_NE(frames, liveRigFrames(0, kFrames, one.iterations, {}, clip)) << which;
+    expectTheLiveRigsFrames(one.out, one.iterations, o, clip);
   }
   auto converging = options(out.path() / "converging.pc2", 0);
   converging.predict = true;
