@@ -300,6 +300,11 @@ ExportReport exportClip(const ExportOptions& o) {
   if (o.after_publish_iterations < 0) throw std::invalid_argument("--after-publish-iterations must be >= 0");
   if (o.after_publish_iterations > 0 && o.iterations == 0)
     throw std::invalid_argument("--after-publish-iterations needs --iterations N: a frame solved to convergence has nothing left to refine");
+  if (o.predict && o.iterations == 0)
+    throw std::invalid_argument("--predict needs --iterations N: it predicts where a frame starts, and a frame solved to convergence "
+                                "lands where it lands from any start");
+  if (!(o.relax >= 1.0 && o.relax < 2.0)) throw std::invalid_argument("--relax must be in [1, 2)");
+  if (!(o.inversion_guard >= 0.0 && o.inversion_guard <= 1.0)) throw std::invalid_argument("--inversion-guard must be in [0, 1]");
   ExportReport report;
   report.target = parseExportTarget(o.out);
   const ExportTarget& target = report.target;
@@ -339,6 +344,9 @@ ExportReport exportClip(const ExportOptions& o) {
   live_options.use_coarse_level = o.iterations > 0;
   live_options.volume_constraint = o.keep_volume;
   live_options.after_publish_iterations = o.after_publish_iterations;
+  if (o.predict) live_options.rotation_extrapolation = 1.0;
+  live_options.rotation_relaxation = o.relax;
+  live_options.inversion_guard = o.inversion_guard;
   LiveRig live(rig, live_options);
   std::vector<std::string> labels;
   {

@@ -56,6 +56,9 @@ struct ExportOptions {
   double occlusion_blend_ms = 150;      // as `tetrig run --occlusion-blend-ms`
   bool keep_volume = false;             // as `tetrig run --keep-volume` (LiveRigOptions::volume_constraint)
   int after_publish_iterations = 0;     // as `tetrig run --after-publish-iterations` (needs iterations > 0)
+  bool predict = false;                 // as `tetrig run --predict` (needs iterations > 0)
+  double relax = 1.8;                   // as `tetrig run --relax`
+  double inversion_guard = 0.0;         // as `tetrig run --inversion-guard`
   double rate_hz = 0;                   // > 0: overrides the clip's frame rate (needed for glTF without one)
   bool keep_zero_markers = false;       // as `tetrig run --keep-zero-markers`: samples at x = y = z = 0 with
                                         // residual 0 stay valid (default: gaps)

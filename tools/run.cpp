@@ -91,6 +91,11 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
   live_options.volume_constraint = options.keep_volume;
   if (options.after_publish_iterations < 0) throw std::invalid_argument("--after-publish-iterations must be >= 0");
   live_options.after_publish_iterations = options.after_publish_iterations;
+  if (!(options.relax >= 1.0 && options.relax < 2.0)) throw std::invalid_argument("--relax must be in [1, 2)");
+  live_options.rotation_relaxation = options.relax;
+  if (!(options.inversion_guard >= 0.0 && options.inversion_guard <= 1.0))
+    throw std::invalid_argument("--inversion-guard must be in [0, 1]");
+  live_options.inversion_guard = options.inversion_guard;
   std::optional<Rig> coarse;
   if (!options.coarse_rig_path.empty()) coarse = loadRigFile(options.coarse_rig_path);
   LiveRig live(rig, live_options, coarse ? &*coarse : nullptr);
@@ -145,6 +150,10 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
     if (options.keep_volume) std::printf("  fine-mesh volume kept at rest: on (its linearization runs after each publish)\n");
     if (options.after_publish_iterations > 0)
       std::printf("  %d iterations after each publish (on that frame's targets, within its budget)\n", options.after_publish_iterations);
+    if (options.relax != LiveRigOptions{}.rotation_relaxation)
+      std::printf("  over-relaxation of the rotation update: omega %.3g\n", options.relax);
+    if (options.inversion_guard > 0.0)
+      std::printf("  inversion guard: squashed body tets up to %.3g times stiffer\n", 1.0 + options.inversion_guard);
     if (!binding.missing.empty())
       std::printf("  note: %zu rig markers the source never names are treated as occluded: %s\n", binding.missing.size(),
                   joinLabels(binding.missing).c_str());
@@ -315,6 +324,8 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
                    {"after_publish_iterations", options.after_publish_iterations},
                    {"keep_volume", options.keep_volume},
                    {"predict", options.predict},
+                   {"relax", options.relax},
+                   {"inversion_guard", options.inversion_guard},
                    {"coarse_level", live.coarseLevel() != nullptr},
                    {"pose_threads", pose_threads},
                    {"compact_pose_transfer", !options.double_pose_transfer}};

@@ -187,6 +187,16 @@ int main(int argc, char** argv) {
                       "starts nearer the converged pose (docs/fidelity.md)")
       ->capture_default_str()
       ->check(CLI::Range(0, 100));
+  run_cmd->add_option("--relax", run.relax,
+                      "Over-relaxation omega of each iteration's rotation update (docs/fidelity.md): 1 plain; 1.9 with --predict "
+                      "and a coarse level lands nearest the converged pose")
+      ->capture_default_str()
+      ->check(CLI::Range(1.0, 1.999));
+  run_cmd->add_option("--inversion-guard", run.inversion_guard,
+                      "Body tets squashed below half their volume take up to 1 + K times their stiffness (docs/deformation.md): "
+                      "fewer inverted tets where the markers bend the body far")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1.0));
   run_cmd->add_flag("--no-coarse", run.no_coarse, "Do not use the rig's own coarse level (built with --coarse-tet-vertices)");
   run_cmd->add_option("--coarse-rig", run.coarse_rig_path,
                       "Coarse level: the same mesh and markers built with fewer --tet-vertices (e.g. 300), solved first every "
@@ -258,6 +268,13 @@ int main(int argc, char** argv) {
   export_cmd->add_option("--after-publish-iterations", exp.after_publish_iterations,
                          "With --iterations N: iterations on each frame's targets after it is written (as tetrig run)")
       ->check(CLI::Range(0, 100));
+  export_cmd->add_flag("--predict", exp.predict, "With --iterations N: temporal prediction of each frame's start (as tetrig run)");
+  export_cmd->add_option("--relax", exp.relax, "Over-relaxation omega of the rotation update (as tetrig run)")
+      ->capture_default_str()
+      ->check(CLI::Range(1.0, 1.999));
+  export_cmd->add_option("--inversion-guard", exp.inversion_guard, "Extra stiffness K of squashed body tets (as tetrig run)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1.0));
   export_cmd->add_flag("--keep-zero-markers", exp.keep_zero_markers,
                        "Samples at x = y = z = 0 with residual 0 are valid points, not gaps (as tetrig run)");
   export_cmd->add_option("--rate", exp.rate_hz, "Frame rate in Hz instead of the clip's (glTF sample times)")->check(CLI::Range(0.001, 100000.0));

@@ -33,9 +33,13 @@
 //   BM_LiveRigFrame/smpl_hdm05_after_publish/<k>: the same live path (no split) with k iterations on
 //   each frame's targets after its pose (LiveRigOptions::after_publish_iterations; prepareNextFrame,
 //   left here to the next processFrame: in the frame's time, and apart as prepare_us).
+//   BM_LiveRigFrame/smpl_hdm05_landing/<k>: the same live path with everything issue #12 adds to a
+//   frame (docs/fidelity.md): the 150-vertex coarse level, the temporal prediction, omega 1.9, the
+//   inversion guard, and k iterations after publishing (in the frame's time, and apart as prepare_us).
 //   BM_PoseTransfer/smpl_hdm05/<layout>/<cache>: the pose transfer alone, from the padded positions of
 //   one posed frame into a float buffer; layout 0 = the rig's B (double weights, 32-bit columns, 12
-//   bytes per entry), 1 = the live rig's compact copy (float, 16-bit, 6 bytes: narrowPoseTransfer);
+//   bytes per entry), 1 = the compact copy (float, 16-bit, 6 bytes: narrowPoseTransfer) from double
+//   positions, 2 = the compact copy from float positions (its float kernel, as the live rig runs it);
 //   cache 0 = back to back (B stays in the caches), 1 = a 64 MB buffer written between calls
 //   (untimed), as between two frames of a live run 8 ms apart on a shared machine.
 #include "bench_data.hpp"
@@ -236,19 +240,27 @@ BENCHMARK(BM_RigFrameCoarseRelaxed)->Name("BM_RigFrame/smpl_hdm05_coarse_relaxed
 void BM_RigFrameCoarsePredictedRelaxed(benchmark::State& state) { rigFrame(state, 1.0, 1.8, true); }
 BENCHMARK(BM_RigFrameCoarsePredictedRelaxed)->Name("BM_RigFrame/smpl_hdm05_coarse_predicted_relaxed")->Unit(benchmark::kMicrosecond);
 
-void liveRigFrame(benchmark::State& state, bool feet, bool volume_constraint = false, bool after_publish = false) {
+void liveRigFrame(benchmark::State& state, bool feet, bool volume_constraint = false, bool after_publish = false,
+                  bool landing = false) {
   const RigScene* scene = sceneOrSkip(state, feet);
   if (scene == nullptr) return;
   tetrig::LiveRigOptions live_options;
   live_options.volume_constraint = volume_constraint;
-  if (volume_constraint) {
+  if (landing) {
+    // Everything issue #12 adds to a frame, as docs/fidelity.md measures it: the coarse level, the
+    // temporal prediction, omega 1.9, the inversion guard, and k iterations after publishing.
+    live_options.rotation_extrapolation = 1.0;
+    live_options.rotation_relaxation = 1.9;
+    live_options.inversion_guard = 1.0;
+    live_options.after_publish_iterations = static_cast<int>(state.range(0));
+  } else if (volume_constraint) {
     live_options.volume_constraint_gradient_entries = static_cast<int>(state.range(0));
   } else if (after_publish) {
     live_options.after_publish_iterations = static_cast<int>(state.range(0));
   } else {
     live_options.split_pose_transfer = state.range(0) != 0;
   }
-  tetrig::LiveRig live(scene->rig, live_options);
+  tetrig::LiveRig live(scene->rig, live_options, landing ? &scene->coarse : nullptr);
   tetrig::drivers::C3DPlaybackOptions options;
   options.pacing = tetrig::drivers::Pacing::kAsFastAsPossible;
   const tetrig::drivers::C3DPlayback playback(scene->clip, options);
@@ -275,13 +287,16 @@ void liveRigFrame(benchmark::State& state, bool feet, bool volume_constraint = f
   const auto n = static_cast<double>(state.iterations());
   state.counters["step_us"] = static_cast<double>(step_ns) / n * 1e-3;
   state.counters["pose_transfer_us"] = static_cast<double>(pose_ns) / n * 1e-3;
-  if (volume_constraint || after_publish) state.counters["prepare_us"] = static_cast<double>(prepare_ns) / n * 1e-3;
+  if (volume_constraint || after_publish || landing) state.counters["prepare_us"] = static_cast<double>(prepare_ns) / n * 1e-3;
   state.counters["iterations"] = static_cast<double>(iterations) / n;
 }
 void BM_LiveRigFrame(benchmark::State& state) { liveRigFrame(state, false); }
 void BM_LiveRigFrameFeet(benchmark::State& state) { liveRigFrame(state, true); }
 void BM_LiveRigFrameVolumeConstraint(benchmark::State& state) { liveRigFrame(state, false, true); }
 void BM_LiveRigFrameAfterPublish(benchmark::State& state) { liveRigFrame(state, false, false, true); }
+void BM_LiveRigFrameLanding(benchmark::State& state) { liveRigFrame(state, false, false, false, true); }
+// Argument: iterations after publishing, on top of the coarse level, the prediction, omega 1.9 and the guard.
+BENCHMARK(BM_LiveRigFrameLanding)->Name("BM_LiveRigFrame/smpl_hdm05_landing")->DenseRange(0, 3)->Unit(benchmark::kMicrosecond);
 // Argument: iterations after publishing (LiveRigOptions::after_publish_iterations).
 BENCHMARK(BM_LiveRigFrameAfterPublish)->Name("BM_LiveRigFrame/smpl_hdm05_after_publish")->Arg(1)->Arg(2)->Unit(benchmark::kMicrosecond);
 // Argument: entries of each row of B the constraint's gradient uses (0 = all).
@@ -313,13 +328,16 @@ void BM_PoseTransfer(benchmark::State& state) {
   std::vector<unsigned char> evict(cold ? std::size_t{64} << 20 : 0);
   const double* x4 = deformer.paddedPositions().data();
   unsigned char fill = 0;
+  std::vector<float> x4f(deformer.paddedPositions().begin(), deformer.paddedPositions().end());
   for (auto _ : state) {
     if (cold) {
       std::memset(evict.data(), ++fill, evict.size());
       benchmark::ClobberMemory();
     }
     const auto t0 = std::chrono::steady_clock::now();
-    if (compact) {
+    if (state.range(0) == 2) {
+      tetrig::applyPoseTransferPadded(narrow.view(), x4f.data(), fine.data());
+    } else if (compact) {
       tetrig::applyPoseTransferPadded(narrow.view(), x4, fine.data());
     } else {
       tetrig::applyPoseTransferPadded(rig.pose_transfer.view(), x4, fine.data());
@@ -332,7 +350,7 @@ void BM_PoseTransfer(benchmark::State& state) {
 }
 BENCHMARK(BM_PoseTransfer)
     ->Name("BM_PoseTransfer/smpl_hdm05")
-    ->ArgsProduct({{0, 1}, {0, 1}})
+    ->ArgsProduct({{0, 1, 2}, {0, 1}})
     ->UseManualTime()
     ->Unit(benchmark::kMicrosecond);
 

@@ -33,6 +33,7 @@
 #include "tetrig/rotation_kernel.hpp"
 #include "tetrig/tet_mesh.hpp"
 #include "tetrig/volume_constraint.hpp"
+#include "tetrig/rigbuild/tet_quality.hpp"
 #include "tetrig/rigbuild/write_file_atomic.hpp"
 
 #include <CLI/CLI.hpp>
@@ -120,10 +121,13 @@ class RegionTally {
 
   // x: tet-mesh positions (#V*3 doubles). {"volume_change_near": the `top` regions whose body tets
   // lost the most volume, each {label, change: their volume change over the whole body's rest
-  // volume}, most lost first; "inverted_near": {label: inverted body tets}}. Empty without markers.
+  // volume}, most lost first; "inverted_near": {label: inverted body tets}; "inverted_tets": each
+  // inverted body tet, {tet, volume_ratio: det F, rest_radius_ratio: 3 r / R at rest, near: its
+  // region's label, corners: its four tet vertices}}. Regions are empty without markers.
   nlohmann::json tally(std::span<const double> x, std::size_t top) const {
     std::vector<double> change(rig_.markers.size(), 0.0);
     std::vector<int> inverted(rig_.markers.size(), 0);
+    nlohmann::json inverted_tets = nlohmann::json::array();
     for (std::int32_t t = 0; t < rig_.body_tet_count; ++t) {
       const std::int32_t r = region_[static_cast<std::size_t>(t)];
       if (r < 0) continue;
@@ -134,6 +138,14 @@ class RegionTally {
       const Eigen::Vector3d a = p(0);
       const double volume = (p(1) - a).dot((p(2) - a).cross(p(3) - a)) / 6.0;  // as tetrig::signedVolume
       const double rest = rest_volume_[static_cast<std::size_t>(t)];
+      if (volume * rest <= 0.0) {
+        const auto c = rig_.tet_mesh.tets.row(t);
+        inverted_tets.push_back({{"tet", t},
+                                 {"volume_ratio", volume / rest},
+                                 {"rest_radius_ratio", tetrig::rigbuild::tetRadiusRatio(rig_.tet_mesh, t)},
+                                 {"near", r >= 0 ? rig_.markers[static_cast<std::size_t>(r)].label : std::string()},
+                                 {"corners", {c[0], c[1], c[2], c[3]}}});
+      }
       change[static_cast<std::size_t>(r)] += volume - rest;
       if (volume * rest <= 0.0) ++inverted[static_cast<std::size_t>(r)];
     }
@@ -146,7 +158,7 @@ class RegionTally {
     nlohmann::json inv = nlohmann::json::object();
     for (std::size_t m = 0; m < inverted.size(); ++m)
       if (inverted[m] > 0) inv[rig_.markers[m].label] = inverted[m];
-    return {{"volume_change_near", std::move(lost)}, {"inverted_near", std::move(inv)}};
+    return {{"volume_change_near", std::move(lost)}, {"inverted_near", std::move(inv)}, {"inverted_tets", std::move(inverted_tets)}};
   }
 
  private:

@@ -180,6 +180,7 @@ Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(s
   rhs_constant_.assign(static_cast<size_t>(free_count_) * kVectorStride, 0.0);
   positions_.assign(n3, 0.0);
   if (options_.padded_positions) padded_positions_.assign(n4, 0.0);
+  if (options_.padded_float_positions) padded_float_positions_.assign(n4, 0.0f);
 
   // --- Coupling -L_fh as CSR over free rows in solver order. ---
   {
@@ -502,11 +503,19 @@ void Deformer::writePositions() {
     double* out = &positions_[3 * static_cast<size_t>(mesh_vertex_[static_cast<size_t>(s)])];
     for (size_t c = 0; c < 3; ++c) out[c] = rest_solver_[i + c] + u_[i + c];
   }
-  if (padded_positions_.empty()) return;
-  for (std::int32_t v = 0; v < vertex_count_; ++v) {
-    const double* out = &positions_[3 * static_cast<size_t>(v)];
-    double* padded = &padded_positions_[kVectorStride * static_cast<size_t>(v)];
-    for (int c = 0; c < 3; ++c) padded[c] = out[c];
+  if (!padded_positions_.empty()) {
+    for (std::int32_t v = 0; v < vertex_count_; ++v) {
+      const double* out = &positions_[3 * static_cast<size_t>(v)];
+      double* padded = &padded_positions_[kVectorStride * static_cast<size_t>(v)];
+      for (int c = 0; c < 3; ++c) padded[c] = out[c];
+    }
+  }
+  if (!padded_float_positions_.empty()) {
+    for (std::int32_t v = 0; v < vertex_count_; ++v) {
+      const double* out = &positions_[3 * static_cast<size_t>(v)];
+      float* padded = &padded_float_positions_[kVectorStride * static_cast<size_t>(v)];
+      for (int c = 0; c < 3; ++c) padded[c] = static_cast<float>(out[c]);
+    }
   }
 }
 

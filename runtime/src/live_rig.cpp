@@ -27,7 +27,10 @@ const Rig& validated(const Rig& rig) {
 DeformerSetup liveSetup(const Rig& rig, const LiveRigOptions& options, bool frame_guide) {
   DeformerSetup setup = rig.setup;
   setup.options.frame_guide = frame_guide;
-  setup.options.padded_positions = true;  // the input of applyPoseTransferPadded
+  // The input of the pose transfer: float positions for B's compact copy (its float kernel), else doubles.
+  const bool compact = options.compact_pose_transfer && fitsCompactPoseTransfer(rig.pose_transfer.cols);
+  setup.options.padded_positions = !compact;
+  setup.options.padded_float_positions = compact;
   setup.options.rotation_extrapolation = options.rotation_extrapolation;
   setup.options.rotation_extrapolation_max_deg = options.rotation_extrapolation_max_deg;
   setup.options.rotation_relaxation = options.rotation_relaxation;
@@ -201,6 +204,7 @@ void LiveRig::buildCoarseLevel(const Rig& coarse) {
   coarse_region_targets_.assign(cs.region_handles.size(), RigidTransform{});
   DeformerSetup setup = cs;
   setup.options.padded_positions = false;
+  setup.options.padded_float_positions = false;
   setup.options.rotation_extrapolation = 0.0;  // measured: no gain on the coarse chain (docs/fidelity.md)
   setup.options.rotation_relaxation = options_.rotation_relaxation;
   setup.options.volume_weight = options_.volume_weight;
@@ -549,10 +553,12 @@ void LiveRig::linearizeVolumeConstraint(const float* fine) noexcept {
 }
 
 void LiveRig::transferPose(float* positions) const noexcept {
-  if (split_) {
+  if (split_ && compact_b_.rows > 0) {
+    split_->apply(deformer_.paddedFloatPositions().data(), positions);
+  } else if (split_) {
     split_->apply(deformer_.paddedPositions().data(), positions);
   } else if (compact_b_.rows > 0) {
-    applyPoseTransferPadded(compact_b_.view(), deformer_.paddedPositions().data(), positions);
+    applyPoseTransferPadded(compact_b_.view(), deformer_.paddedFloatPositions().data(), positions);
   } else {
     applyPoseTransferPadded(rig_->pose_transfer.view(), deformer_.paddedPositions().data(), positions);
   }

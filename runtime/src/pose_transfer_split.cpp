@@ -45,18 +45,26 @@ void PoseTransferSplit::runChunks(bool worker) noexcept {
        c = next_chunk_.fetch_add(1, std::memory_order_acq_rel)) {
     const std::int32_t begin = static_cast<std::int32_t>(c) * chunk_rows_;
     const std::int32_t end = std::min(rows_, begin + chunk_rows_);
-    const double* x = x_.load(std::memory_order_acquire);
+    const void* x = x_.load(std::memory_order_acquire);
     float* out = out_.load(std::memory_order_acquire);
     if (compact_.rows > 0) {
-      applyPoseTransferPaddedRows(compact_, x, out, begin, end);
+      applyPoseTransferPaddedRows(compact_, static_cast<const float*>(x), out, begin, end);
     } else {
-      applyPoseTransferPaddedRows(b_, x, out, begin, end);
+      applyPoseTransferPaddedRows(b_, static_cast<const double*>(x), out, begin, end);
     }
     if (worker) worker_chunks_.fetch_add(1, std::memory_order_relaxed);
   }
 }
 
 void PoseTransferSplit::apply(const double* x_tet4, float* x_fine) noexcept {
+  if (compact_.rows == 0) run(x_tet4, x_fine);
+}
+
+void PoseTransferSplit::apply(const float* x_tet4, float* x_fine) noexcept {
+  if (compact_.rows > 0) run(x_tet4, x_fine);
+}
+
+void PoseTransferSplit::run(const void* x_tet4, float* x_fine) noexcept {
   x_.store(x_tet4, std::memory_order_release);
   out_.store(x_fine, std::memory_order_release);
   next_chunk_.store(0, std::memory_order_seq_cst);

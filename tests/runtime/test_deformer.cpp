@@ -57,8 +57,10 @@ Vertices bendBar(const scenes::BarScene& bar, DeformerOptions options, int frame
 TEST(Deformer, PaddedPositionsMirrorPositionsAfterEveryStep) {
   const auto bar = scenes::makeBarScene(3, 3, 12);
   EXPECT_TRUE(Deformer(bar.mesh, test::endVertexHandles(bar)).paddedPositions().empty()) << "off by default";
+  EXPECT_TRUE(Deformer(bar.mesh, test::endVertexHandles(bar)).paddedFloatPositions().empty()) << "off by default";
   DeformerSetup setup = test::endVertexHandles(bar);
   setup.options.padded_positions = true;
+  setup.options.padded_float_positions = true;
   Deformer deformer(bar.mesh, setup);
   for (int f = 1; f <= 3; ++f) {
     const auto targets = test::endTargets(bar, scenes::barBendTransform(bar, 0.3 * f));
@@ -70,6 +72,9 @@ TEST(Deformer, PaddedPositionsMirrorPositionsAfterEveryStep) {
     for (size_t v = 0; v < x.size() / 3; ++v) {
       for (size_t c = 0; c < 3; ++c) ASSERT_EQ(x4[4 * v + c], x[3 * v + c]) << "frame " << f << " vertex " << v;
       ASSERT_EQ(x4[4 * v + 3], 0.0);
+      for (size_t c = 0; c < 3; ++c)
+        ASSERT_EQ(deformer.paddedFloatPositions()[4 * v + c], static_cast<float>(x[3 * v + c])) << "frame " << f << " vertex " << v;
+      ASSERT_EQ(deformer.paddedFloatPositions()[4 * v + 3], 0.0f);
     }
     // The frame actually moved the bar (so the equality above is not rest against rest).
     EXPECT_GT(std::abs(x[x.size() - 1] - bar.mesh.vertices(bar.mesh.vertexCount() - 1, 2)), 1e-3);

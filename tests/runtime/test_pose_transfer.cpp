@@ -6,6 +6,8 @@
 
 #include <Eigen/Dense>
 
+#include <algorithm>
+#include <array>
 #include <atomic>
 #include <cstring>
 #include <memory>
@@ -136,11 +138,13 @@ TEST(PoseTransfer, ApplyDoesNotAllocate) {
   std::vector<float> out(900);
   const auto view = bf.view();
   std::vector<double> x4(200, 1.0);
+  std::vector<float> x4f(200, 1.0f);
   const std::uint64_t before = ::tetrig::test::allocationCount();
   for (int frame = 0; frame < 10; ++frame) {
     applyPoseTransfer(view, x.data(), out.data());
     applyPoseTransferPadded(view, x4.data(), out.data());
     applyPoseTransferPadded(compact.view(), x4.data(), out.data());
+    applyPoseTransferPadded(compact.view(), x4f.data(), out.data());
   }
   EXPECT_EQ(::tetrig::test::allocationCount(), before);
 }
@@ -204,6 +208,66 @@ TEST(PoseTransfer, CompactCopyIsWithinTheWeightsRoundingOfTheDoubleProduct) {
   EXPECT_GT(rounded_rows, 100);  // the float weights do round: the bound is not vacuous
 }
 
+// The compact copy's float kernel (float tet positions, float sums in four partial sums per row):
+// each fine coordinate within its stated bound of the exact product of the double positions,
+// |dx_ic| <= (n_i/4 + 5) 2^-24 sum_k |B_ik| |x_kc| (n_i: the row's entries; sums, weights and
+// positions rounded), on rows of 0-60 entries (the four-sum loop and every remainder length), with
+// the pad lane holding a huge value that must not reach the result. A wrong column or weight
+// misses the bound by orders of magnitude.
+TEST(PoseTransfer, FloatKernelIsWithinItsRoundingBoundOfTheDoubleProduct) {
+  const int rows = 2000;
+  const int cols = 3000;
+  std::mt19937 rng(29);
+  std::uniform_int_distribution<int> count(0, 60), col(0, cols - 1);
+  std::uniform_real_distribution<double> value(-0.3, 1.0);
+  std::vector<Eigen::Triplet<double>> t;
+  for (int i = 0; i < rows; ++i) {
+    const int n = count(rng);
+    for (int k = 0; k < n; ++k) t.emplace_back(i, col(rng), value(rng));
+  }
+  Eigen::SparseMatrix<double, Eigen::RowMajor> b(rows, cols);
+  b.setFromTriplets(t.begin(), t.end());
+  const Positions x = 1.5 * Positions::Random(cols, 3);
+  const Positions expected = b * x;
+  const CompactPoseTransfer compact = narrowPoseTransfer(makePoseTransferCsr<double>(b));
+  std::vector<float> x4(static_cast<size_t>(cols) * 4);
+  for (int v = 0; v < cols; ++v) {
+    for (int c = 0; c < 3; ++c) x4[4 * static_cast<size_t>(v) + static_cast<size_t>(c)] = static_cast<float>(x(v, c));
+    x4[4 * static_cast<size_t>(v) + 3] = 1e30f;  // summed in the pad lane, never written out
+  }
+  std::vector<float> out(static_cast<size_t>(rows) * 3, -7.0f);
+  applyPoseTransferPadded(compact.view(), x4.data(), out.data());
+  std::array<int, 4> remainders{};
+  double largest_ratio = 0.0;
+  int rounded = 0;
+  for (int i = 0; i < rows; ++i) {
+    const int n = static_cast<int>(b.outerIndexPtr()[i + 1] - b.outerIndexPtr()[i]);
+    if (n >= 4) ++remainders[static_cast<size_t>(n % 4)];
+    for (int c = 0; c < 3; ++c) {
+      double magnitude = 0.0;
+      for (Eigen::SparseMatrix<double, Eigen::RowMajor>::InnerIterator it(b, i); it; ++it)
+        magnitude += std::abs(it.value()) * std::abs(x(it.col(), c));
+      const double bound = (n / 4.0 + 5.0) * 0x1p-24 * magnitude;
+      const double error = std::abs(static_cast<double>(out[3 * static_cast<size_t>(i) + static_cast<size_t>(c)]) - expected(i, c));
+      ASSERT_LE(error, bound) << "row " << i << " (" << n << " entries) coordinate " << c;
+      if (bound > 0.0) largest_ratio = std::max(largest_ratio, error / bound);
+      rounded += error > 1e-12;
+    }
+  }
+  for (int r = 0; r < 4; ++r) EXPECT_GT(remainders[static_cast<size_t>(r)], 50) << "rows with " << r << " left over";
+  EXPECT_GT(rounded, 1000);  // the float sums do round: the bound is not vacuous
+  RecordProperty("largest_fraction_of_bound", ::testing::PrintToString(largest_ratio));
+
+  // Row ranges write only their rows.
+  std::vector<float> part(out.size(), 42.0f);
+  applyPoseTransferPaddedRows(compact.view(), x4.data(), part.data(), 100, 201);
+  for (int i = 0; i < rows; ++i)
+    for (int c = 0; c < 3; ++c) {
+      const size_t k = 3 * static_cast<size_t>(i) + static_cast<size_t>(c);
+      ASSERT_EQ(part[k], i >= 100 && i < 201 ? out[k] : 42.0f) << i;
+    }
+}
+
 TEST(PoseTransfer, CompactCopyRefusesTooManyColumnsAndBrokenMatrices) {
   PoseTransferCsr<double> wide = makePoseTransferCsr<double>(randomB(10, 65537, 3));
   EXPECT_FALSE(fitsCompactPoseTransfer(wide.cols));
@@ -249,20 +313,21 @@ TEST(PoseTransferSplit, BitIdenticalToOneThreadAndTheWorkerTakesChunks) {
   EXPECT_GT(worker->workerChunks(), 0u) << "the worker thread never computed a chunk";
 }
 
-// The same with the compact copy, as the live rig runs it.
+// The same with the compact copy and float positions (its float kernel), as the live rig runs it.
+// Double positions are not its input: that overload writes nothing.
 TEST(PoseTransferSplit, CompactCopyBitIdenticalToOneThread) {
   const int rows = 3001;
   const int cols = 200;
   const auto [b, x, expected] = randomProduct(rows, cols, 23);
   const CompactPoseTransfer compact = narrowPoseTransfer(makePoseTransferCsr<double>(b));
-  std::vector<double> x4(static_cast<size_t>(cols) * 4, 0.0);
+  std::vector<float> x4(static_cast<size_t>(cols) * 4, 0.0f);
   std::vector<float> single(static_cast<size_t>(rows) * 3), split(static_cast<size_t>(rows) * 3);
   auto worker = std::make_unique<PoseTransferSplit>(compact.view(), 64);
   std::mt19937 rng(9);
-  std::uniform_real_distribution<double> u(-2.0, 2.0);
+  std::uniform_real_distribution<float> u(-2.0f, 2.0f);
   int mismatches = 0;
   for (int call = 0; call < 300 || (worker->workerChunks() == 0 && call < 20000); ++call) {
-    for (double& v : x4) v = u(rng);
+    for (float& v : x4) v = u(rng);
     applyPoseTransferPadded(compact.view(), x4.data(), single.data());
     std::fill(split.begin(), split.end(), -7.0f);
     worker->apply(x4.data(), split.data());
@@ -270,6 +335,10 @@ TEST(PoseTransferSplit, CompactCopyBitIdenticalToOneThread) {
   }
   EXPECT_EQ(mismatches, 0);
   EXPECT_GT(worker->workerChunks(), 0u) << "the worker thread never computed a chunk";
+  const std::vector<double> x4d(x4.begin(), x4.end());
+  std::fill(split.begin(), split.end(), -7.0f);
+  worker->apply(x4d.data(), split.data());
+  EXPECT_TRUE(std::all_of(split.begin(), split.end(), [](float v) { return v == -7.0f; }));
 }
 
 }  // namespace

@@ -58,9 +58,11 @@ const Scene& scene() {
 }
 
 // Reference: a LiveRig fed clip frames [first, end) with `iterations` per frame.
-std::vector<std::vector<float>> liveRigFrames(std::size_t first, std::size_t end, int iterations, const LiveRigOptions& live_options = {}) {
+// `clip_path`: another clip of the same markers instead of the moving one.
+std::vector<std::vector<float>> liveRigFrames(std::size_t first, std::size_t end, int iterations, const LiveRigOptions& live_options = {},
+                                              const std::filesystem::path& clip_path = {}) {
   const Scene& sc = scene();
-  const drivers::C3DClip clip = drivers::C3DClip::load(sc.clip_path);
+  const drivers::C3DClip clip = drivers::C3DClip::load(clip_path.empty() ? sc.clip_path : clip_path);
   drivers::C3DPlaybackOptions po;
   po.pacing = drivers::Pacing::kAsFastAsPossible;
   const drivers::C3DPlayback playback(clip, po);
@@ -358,6 +360,17 @@ TEST(Export, KeepVolumeIsTheLiveRigsVolumeConstraint) {
   EXPECT_GT(plain_worst, 10 * kept_worst);
 }
 
+// The export at `path` is, frame for frame and bit for bit, a LiveRig with `live` fed the same clip
+// frames with `iterations` per frame, and differs from a default LiveRig's (so the options reached it).
+void expectTheLiveRigsFrames(const std::filesystem::path& path, int iterations, const LiveRigOptions& live,
+                             const std::filesystem::path& clip = {}) {
+  const auto got = readPc2(path).frames;
+  const auto reference = liveRigFrames(0, kFrames, iterations, live, clip);
+  ASSERT_EQ(got.size(), kFrames) << path;
+  for (std::size_t f = 0; f < kFrames; ++f) EXPECT_EQ(got[f], reference[f]) << path << " frame " << f;
+  EXPECT_NE(got, liveRigFrames(0, kFrames, iterations, {}, clip)) << path;
+}
+
 // --after-publish-iterations N with --iterations 3: the LiveRig's frames with
 // LiveRigOptions::after_publish_iterations, bit for bit (each frame written, then refined); without
 // --iterations (convergence) it is refused before anything is written.
@@ -368,15 +381,82 @@ TEST(Export, AfterPublishIterationsAreTheLiveRigs) {
   (void)tools::exportClip(refined);
   LiveRigOptions after;
   after.after_publish_iterations = 2;
-  const auto reference = liveRigFrames(0, kFrames, 3, after);
-  const auto got = readPc2(out.path() / "refined.pc2").frames;
-  ASSERT_EQ(got.size(), kFrames);
-  for (std::size_t f = 0; f < kFrames; ++f) EXPECT_EQ(got[f], reference[f]) << "frame " << f;
-  EXPECT_NE(got, liveRigFrames(0, kFrames, 3));
+  expectTheLiveRigsFrames(out.path() / "refined.pc2", 3, after);
   auto converging = options(out.path() / "converging.pc2", 0);
   converging.after_publish_iterations = 2;
   EXPECT_THROW_CONTAINS(tools::exportClip(converging), "--after-publish-iterations needs --iterations N");
   EXPECT_FALSE(std::filesystem::exists(out.path() / "converging.pc2"));
+}
+
+// --predict, --relax and --inversion-guard with --iterations 3: the LiveRig's frames with the same
+// LiveRigOptions, bit for bit; --predict without --iterations is refused before anything is written.
+TEST(Export, PredictRelaxAndTheGuardAreTheLiveRigs) {
+  const TempDir out;
+  auto tuned = options(out.path() / "tuned.pc2", 3);
+  tuned.predict = true;
+  tuned.relax = 1.9;
+  tuned.inversion_guard = 1.0;
+  (void)tools::exportClip(tuned);
+  LiveRigOptions live;
+  live.rotation_extrapolation = 1.0;
+  live.rotation_relaxation = 1.9;
+  live.inversion_guard = 1.0;
+  expectTheLiveRigsFrames(out.path() / "tuned.pc2", 3, live);
+  // Each option on its own changes the frames (so none of them is dropped on the way).
+  constexpr int kGuardIterations = 200;
+  for (int which = 0; which < 3; ++which) {
+    auto one = options(out.path() / ("one" + std::to_string(which) + ".pc2"), 3);
+    LiveRigOptions o;
+    std::filesystem::path clip;
+    if (which == 0) {
+      one.predict = true;
+      o.rotation_extrapolation = 1.0;
+    } else if (which == 1) {
+      one.relax = 1.0;
+      o.rotation_relaxation = 1.0;
+    } else {
+      // The guard acts only on tets squashed below half their volume: the block crushed from the
+      // top and the right, frame after frame (TOP pulled 400 mm down through the block, RIGHT 400 mm
+      // left through it), iterated long enough to follow.
+      test::TestC3DSpec spec;
+      spec.floating = true;
+      spec.scale = 1.0f;
+      spec.rate = kRate;
+      spec.frames = kFrames;
+      spec.labels = {"TOP", "LEFT", "RIGHT", "FRONT", "BACK"};
+      const auto rest = test::smallMarkerPositionsMm();
+      for (std::size_t f = 0; f < kFrames; ++f) {
+        const float t = static_cast<float>(f + 1) / static_cast<float>(kFrames);
+        for (std::size_t m = 0; m < rest.size(); ++m) {
+          auto p = rest[m];
+          if (m == 0) p[1] -= 400.0f * t;
+          if (m == 2) p[0] -= 400.0f * t;
+          spec.xyz.push_back(p);
+          spec.valid.push_back(true);
+        }
+      }
+      clip = out.path() / "crushed.c3d";
+      const auto bytes = test::writeTestC3D(spec);
+      std::ofstream(clip, std::ios::binary).write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
+      one.clip_path = clip;
+      one.iterations = kGuardIterations;  // enough to squash it
+      one.inversion_guard = 1.0;
+      o.inversion_guard = 1.0;
+    }
+    (void)tools::exportClip(one);
+    expectTheLiveRigsFrames(one.out, one.iterations, o, clip);
+  }
+  auto converging = options(out.path() / "converging.pc2", 0);
+  converging.predict = true;
+  EXPECT_THROW_CONTAINS(tools::exportClip(converging), "--predict needs --iterations N");
+  EXPECT_FALSE(std::filesystem::exists(out.path() / "converging.pc2"));
+  auto bad = options(out.path() / "bad.pc2", 3);
+  bad.relax = 2.0;
+  EXPECT_THROW_CONTAINS(tools::exportClip(bad), "--relax must be in [1, 2)");
+  bad.relax = 1.8;
+  bad.inversion_guard = 1.5;
+  EXPECT_THROW_CONTAINS(tools::exportClip(bad), "--inversion-guard must be in [0, 1]");
+  EXPECT_FALSE(std::filesystem::exists(out.path() / "bad.pc2"));
 }
 
 // Samples at exactly (0, 0, 0) with residual 0 are gaps (predicted), as in `tetrig run`, unless

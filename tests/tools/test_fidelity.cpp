@@ -25,6 +25,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <memory>
+#include <map>
 #include <set>
 #include <span>
 #include <vector>
@@ -120,6 +121,23 @@ int checkRegions(const Rig& rig, const nlohmann::json& run) {
       }
       EXPECT_EQ(inverted, f[std::string(pose) == "budgeted" ? "inverted_body_tets" : "inverted_body_tets_converged"].get<int>())
           << "frame " << f["frame"] << " " << pose;
+      // Each inverted tet listed: a body tet, inverted (det F <= 0), of a valid rest shape, in a
+      // region that counts it, with its corners; as many as counted.
+      std::map<std::string, int> listed;
+      std::set<int> tets;
+      for (const auto& tet : t["inverted_tets"]) {
+        const int id = tet["tet"].get<int>();
+        EXPECT_GE(id, 0);
+        EXPECT_LT(id, rig.body_tet_count);
+        EXPECT_TRUE(tets.insert(id).second) << "tet " << id << " listed twice";
+        EXPECT_LE(tet["volume_ratio"].get<double>(), 0.0);
+        EXPECT_GT(tet["rest_radius_ratio"].get<double>(), 0.0);
+        EXPECT_LE(tet["rest_radius_ratio"].get<double>(), 1.0 + 1e-9);
+        ++listed[tet["near"].get<std::string>()];
+        for (int k = 0; k < 4; ++k) EXPECT_EQ(tet["corners"][static_cast<std::size_t>(k)].get<int>(), rig.tet_mesh.tets(id, k));
+      }
+      EXPECT_EQ(static_cast<int>(tets.size()), inverted) << "frame " << f["frame"] << " " << pose;
+      for (const auto& [label, n] : t["inverted_near"].items()) EXPECT_EQ(listed[label], n.get<int>()) << label;
       with_inversions += inverted > 0;
       EXPECT_LE(t["volume_change_near"].size(), 3u);
       double previous = -1.0;

@@ -75,6 +75,8 @@ struct DeformerOptions {
   double max_abs_coordinate = 1e6;    // a target coordinate beyond this is rejected as absurd
   bool padded_positions = false;      // also write paddedPositions() every step (~30 % more output
                                       // traffic; for applyPoseTransferPadded)
+  bool padded_float_positions = false;  // also write paddedFloatPositions() every step (the input of the
+                                        // compact pose transfer's float kernel)
   double rotation_extrapolation = 0.0;  // alpha in [0, 1]: a frame starts from every tet's rotation carried
                                         // on by alpha times its last frame's rotation (rotation_extrapolation.hpp);
                                         // 0: the plain warm start
@@ -165,6 +167,9 @@ class Deformer {
   // applyPoseTransferPadded (one vector load per entry of B). Empty unless
   // DeformerOptions::padded_positions.
   std::span<const double> paddedPositions() const { return padded_positions_; }
+  // The same in float (x0 y0 z0 0 x1 ..., each rounded to nearest), for the compact pose transfer's
+  // float kernel. Empty unless DeformerOptions::padded_float_positions.
+  std::span<const float> paddedFloatPositions() const { return padded_float_positions_; }
   Eigen::Vector3d position(std::int32_t v) const;
 
   // Current rotation of tet t.
@@ -228,6 +233,7 @@ class Deformer {
   AlignedVector<double> rhs_constant_;          // -L_fh u_h + point terms, free part
   std::vector<double> positions_;             // mesh order output
   AlignedVector<double> padded_positions_;      // mesh order output, kVectorStride per vertex
+  AlignedVector<float> padded_float_positions_;  // the same in float
 
   // -L_fh as CSR over the free rows next to a handle (coupling_row_: their solver index),
   // columns = handle slots.

@@ -88,6 +88,17 @@ template <typename W, typename C, typename Out>
 void applyPoseTransferPaddedRows(const PoseTransferView<W, C>& b, const double* x_tet4, Out* x_fine,
                                  std::int32_t row_begin, std::int32_t row_end) noexcept;
 
+// The compact copy from float tet positions (#tetV x 4 floats, e.g. Deformer::paddedFloatPositions()),
+// summed in float: about twice as fast (the positions stay in L1 and four partial sums per row
+// hide the FMA latency), and off the double result by |error| <= (n/4 + 3) 2^-24 sum_k |B_ik| |x_k|
+// plus the rounding of x to float (n: the row's entries; micrometres on a body). Same preconditions.
+void applyPoseTransferPaddedRows(const PoseTransferView<float, std::uint16_t>& b, const float* x_tet4, float* x_fine,
+                                 std::int32_t row_begin, std::int32_t row_end) noexcept;
+inline void applyPoseTransferPadded(const PoseTransferView<float, std::uint16_t>& b, const float* x_tet4,
+                                    float* x_fine) noexcept {
+  applyPoseTransferPaddedRows(b, x_tet4, x_fine, 0, b.rows);
+}
+
 template <typename W, typename C, typename Out>
 inline void applyPoseTransferPadded(const PoseTransferView<W, C>& b, const double* x_tet4, Out* x_fine) noexcept {
   applyPoseTransferPaddedRows(b, x_tet4, x_fine, 0, b.rows);

@@ -35,8 +35,11 @@ class PoseTransferSplit {
   PoseTransferSplit(const PoseTransferSplit&) = delete;
   PoseTransferSplit& operator=(const PoseTransferSplit&) = delete;
 
-  // x_fine (b.rows x 3 floats) = B x_tet4 (b.cols x 4 doubles, e.g. Deformer::paddedPositions()).
+  // x_fine (b.rows x 3 floats) = B x_tet4: b.cols x 4 doubles (e.g. Deformer::paddedPositions()) for
+  // the rig's B, b.cols x 4 floats (Deformer::paddedFloatPositions(), the float kernel) for the
+  // compact copy. The other overload of each writes nothing (a precondition, checked).
   void apply(const double* x_tet4, float* x_fine) noexcept;
+  void apply(const float* x_tet4, float* x_fine) noexcept;
 
   // Chunks the worker computed so far (any thread; for tests and stats).
   [[nodiscard]] std::uint64_t workerChunks() const noexcept { return worker_chunks_.load(std::memory_order_relaxed); }
@@ -46,6 +49,7 @@ class PoseTransferSplit {
   void start();
   void work() noexcept;
   void runChunks(bool worker) noexcept;
+  void run(const void* x_tet4, float* x_fine) noexcept;
 
   PoseTransferView<double> b_;                 // used when compact_ is empty (rows 0)
   CompactPoseTransfer::view_type compact_;
@@ -53,7 +57,7 @@ class PoseTransferSplit {
   std::int32_t chunk_rows_ = 0, chunks_ = 0;
   // The job's input and output, stored before next_chunk_ is reset (atomic: a late worker may read
   // them while the caller starts the next job; it then computes that job's rows, correctly).
-  std::atomic<const double*> x_{nullptr};
+  std::atomic<const void*> x_{nullptr};  // const double* for b_, const float* for compact_
   std::atomic<float*> out_{nullptr};
   alignas(64) std::atomic<std::uint32_t> job_{0};        // bumped by apply()
   alignas(64) std::atomic<std::uint32_t> wake_{0};       // bumped to wake the worker; it sleeps on it
