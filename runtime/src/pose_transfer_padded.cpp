@@ -42,9 +42,10 @@ TETRIG_MULTIVERSION void applyPoseTransferPaddedRows(const PoseTransferView<W, C
 // Float tet positions (x, y, z, pad as 4 floats: the tet mesh's 1541 vertices take 25 KB, inside L1,
 // where doubles took 49 KB) and float sums, four partial sums per row: an entry is then one column
 // load, one weight broadcast and one 4-wide FMA with its position as the memory operand; with four
-// independent sums the loads, not the FMA latency, set the pace. Rounding: each of the <= n terms
-// and partial sums adds at most 2^-24 of the running magnitude, so |error| <= (n/4 + 3) 2^-24
-// sum_k |B_ik| |x_k| (plus the rounding of x to float), a few micrometres on a body of 2 m.
+// independent sums the loads, not the FMA latency, set the pace. Rounding: each of the <= n/4 + 3
+// additions on a partial sum's path adds at most 2^-24 of the running magnitude, and the weight and
+// the position each one more, so |error| <= (n/4 + 5) 2^-24 sum_k |B_ik| |x_k|, a few micrometres
+// on a body of 2 m (tested against the exact product).
 TETRIG_MULTIVERSION void applyPoseTransferPaddedRows(const PoseTransferView<float, std::uint16_t>& b, const float* x_tet4,
                                                      float* x_fine, std::int32_t row_begin, std::int32_t row_end) noexcept {
   using lanes::load4f;

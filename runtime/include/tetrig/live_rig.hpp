@@ -73,11 +73,12 @@ struct LiveRigOptions {
   double untimed_frame_period_s = 1.0 / 120.0;  // clock advance of a frame with neither timestamp
   bool fade_dropout_offset = true;   // false: keep the dropout offset (in the anchor's frame) for the whole occlusion
   bool compact_pose_transfer = true;  // stream a copy of B with float weights and 16-bit columns (6 bytes
-                                     // per entry, narrowPoseTransfer) instead of the rig's double B (12):
-                                     // 0.74-0.78x the pose transfer's time with B out of the caches, a
-                                     // fine vertex within 2^-24 of |B| |x_tet| of the double product
-                                     // (docs/live.md, "Latency"); rigs of more than 65536 tet vertices use
-                                     // the double B
+                                     // per entry, narrowPoseTransfer) instead of the rig's double B (12),
+                                     // summed from float tet positions in float: 0.74-0.78x the pose
+                                     // transfer's time with B out of the caches and 0.81-0.85x again for
+                                     // the float sums, a fine vertex within (n/4 + 5) 2^-24 of |B| |x_tet|
+                                     // of the double product, n the row's entries (docs/live.md, "Latency");
+                                     // rigs of more than 65536 tet vertices use the double B
   bool split_pose_transfer = false; // run the pose transfer on this thread and one worker thread made at
                                      // load (PoseTransferSplit; bit-identical results); for machines with 2+ cores
   bool predict_all_markers = false;  // false: predict only the markers that need it (not measured, or
