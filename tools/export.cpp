@@ -21,6 +21,7 @@
 
 #include "export_formats.hpp"
 #include "signal_scope.hpp"
+#include "solver_flags.hpp"
 #include "tetrig/atomic_file.hpp"
 #include "tetrig/drivers/c3d_playback.hpp"
 #include "tetrig/drivers/c3d_reader.hpp"
@@ -303,8 +304,8 @@ ExportReport exportClip(const ExportOptions& o) {
   if (o.predict && o.iterations == 0)
     throw std::invalid_argument("--predict needs --iterations N: it predicts where a frame starts, and a frame solved to convergence "
                                 "lands where it lands from any start");
-  if (!(o.relax >= 1.0 && o.relax < 2.0)) throw std::invalid_argument("--relax must be in [1, 2)");
-  if (!(o.inversion_guard >= 0.0 && o.inversion_guard <= 1.0)) throw std::invalid_argument("--inversion-guard must be in [0, 1]");
+  LiveRigOptions live_options;
+  setRelaxAndGuard(o.relax, o.inversion_guard, live_options);  // checked before anything is written
   ExportReport report;
   report.target = parseExportTarget(o.out);
   const ExportTarget& target = report.target;
@@ -336,7 +337,6 @@ ExportReport exportClip(const ExportOptions& o) {
     throw std::invalid_argument("the clip has no frame rate and glTF needs sample times: give --rate HZ");
 
   // 2. The live rig and the binding, exactly as `tetrig run` binds a c3d: source.
-  LiveRigOptions live_options;
   live_options.occlusion_blend_s = o.occlusion_blend_ms * 1e-3;
   // The rig's coarse level (docs/fidelity.md) only sets where a frame starts: with --iterations N
   // (one call per frame) it is used as in `tetrig run`; iterating to convergence calls processFrame
@@ -345,8 +345,6 @@ ExportReport exportClip(const ExportOptions& o) {
   live_options.volume_constraint = o.keep_volume;
   live_options.after_publish_iterations = o.after_publish_iterations;
   if (o.predict) live_options.rotation_extrapolation = 1.0;
-  live_options.rotation_relaxation = o.relax;
-  live_options.inversion_guard = o.inversion_guard;
   LiveRig live(rig, live_options);
   std::vector<std::string> labels;
   {

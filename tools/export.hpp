@@ -12,6 +12,8 @@
 // Output is atomic: nothing appears unless every frame was solved and written (docs/export.md).
 #pragma once
 
+#include "tetrig/live_rig.hpp"
+
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
@@ -57,8 +59,8 @@ struct ExportOptions {
   bool keep_volume = false;             // as `tetrig run --keep-volume` (LiveRigOptions::volume_constraint)
   int after_publish_iterations = 0;     // as `tetrig run --after-publish-iterations` (needs iterations > 0)
   bool predict = false;                 // as `tetrig run --predict` (needs iterations > 0)
-  double relax = 1.8;                   // as `tetrig run --relax`
-  double inversion_guard = 0.0;         // as `tetrig run --inversion-guard`
+  double relax = LiveRigOptions{}.rotation_relaxation;   // as `tetrig run --relax`
+  double inversion_guard = LiveRigOptions{}.inversion_guard;  // as `tetrig run --inversion-guard`
   double rate_hz = 0;                   // > 0: overrides the clip's frame rate (needed for glTF without one)
   bool keep_zero_markers = false;       // as `tetrig run --keep-zero-markers`: samples at x = y = z = 0 with
                                         // residual 0 stay valid (default: gaps)

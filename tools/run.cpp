@@ -1,6 +1,7 @@
 // `tetrig run` (tools/run.hpp): source -> mailbox -> solver thread -> shared memory.
 #include "run.hpp"
 #include "signal_scope.hpp"
+#include "solver_flags.hpp"
 
 #include "tetrig/clock.hpp"
 #include "tetrig/drivers/source_factory.hpp"
@@ -91,11 +92,7 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
   live_options.volume_constraint = options.keep_volume;
   if (options.after_publish_iterations < 0) throw std::invalid_argument("--after-publish-iterations must be >= 0");
   live_options.after_publish_iterations = options.after_publish_iterations;
-  if (!(options.relax >= 1.0 && options.relax < 2.0)) throw std::invalid_argument("--relax must be in [1, 2)");
-  live_options.rotation_relaxation = options.relax;
-  if (!(options.inversion_guard >= 0.0 && options.inversion_guard <= 1.0))
-    throw std::invalid_argument("--inversion-guard must be in [0, 1]");
-  live_options.inversion_guard = options.inversion_guard;
+  setRelaxAndGuard(options.relax, options.inversion_guard, live_options);
   std::optional<Rig> coarse;
   if (!options.coarse_rig_path.empty()) coarse = loadRigFile(options.coarse_rig_path);
   LiveRig live(rig, live_options, coarse ? &*coarse : nullptr);

@@ -5,6 +5,7 @@
 #pragma once
 
 #include "tetrig/frame_loop.hpp"
+#include "tetrig/live_rig.hpp"
 #include "tetrig/rig_file.hpp"
 
 #include <nlohmann/json.hpp>
@@ -25,8 +26,8 @@ struct RunOptions {
   bool predict = false;                 // temporal prediction of the warm start (LiveRigOptions::rotation_extrapolation = 1)
   bool keep_volume = false;             // keep the fine mesh's enclosed volume (LiveRigOptions::volume_constraint)
   int after_publish_iterations = 0;     // LiveRigOptions::after_publish_iterations
-  double relax = 1.8;                   // LiveRigOptions::rotation_relaxation, omega in [1, 2)
-  double inversion_guard = 0.0;         // LiveRigOptions::inversion_guard, k in [0, 1]
+  double relax = LiveRigOptions{}.rotation_relaxation;   // omega in [1, 2) (solver_flags.hpp)
+  double inversion_guard = LiveRigOptions{}.inversion_guard;  // k in [0, 1] (solver_flags.hpp)
   std::optional<tetrig::Rig> rig;       // an already built rig (tetrig demo)
   std::string source = "synthetic";     // c3d:PATH, replay:PATH, synthetic[:N], hid:VID:PID, usb:VID:PID, hydra[:SERIAL]
   std::string publish = "tetrig";       // shared-memory segment name (without the leading '/')

@@ -138,16 +138,16 @@ class RegionTally {
       const Eigen::Vector3d a = p(0);
       const double volume = (p(1) - a).dot((p(2) - a).cross(p(3) - a)) / 6.0;  // as tetrig::signedVolume
       const double rest = rest_volume_[static_cast<std::size_t>(t)];
+      change[static_cast<std::size_t>(r)] += volume - rest;
       if (volume * rest <= 0.0) {
+        ++inverted[static_cast<std::size_t>(r)];
         const auto c = rig_.tet_mesh.tets.row(t);
         inverted_tets.push_back({{"tet", t},
                                  {"volume_ratio", volume / rest},
                                  {"rest_radius_ratio", tetrig::rigbuild::tetRadiusRatio(rig_.tet_mesh, t)},
-                                 {"near", r >= 0 ? rig_.markers[static_cast<std::size_t>(r)].label : std::string()},
+                                 {"near", rig_.markers[static_cast<std::size_t>(r)].label},
                                  {"corners", {c[0], c[1], c[2], c[3]}}});
       }
-      change[static_cast<std::size_t>(r)] += volume - rest;
-      if (volume * rest <= 0.0) ++inverted[static_cast<std::size_t>(r)];
     }
     std::vector<std::size_t> order(change.size());
     for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;

@@ -14,6 +14,7 @@
 #include <numeric>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 
 namespace tetrig {
 
@@ -503,20 +504,18 @@ void Deformer::writePositions() {
     double* out = &positions_[3 * static_cast<size_t>(mesh_vertex_[static_cast<size_t>(s)])];
     for (size_t c = 0; c < 3; ++c) out[c] = rest_solver_[i + c] + u_[i + c];
   }
-  if (!padded_positions_.empty()) {
+  // The padded copies (double and/or float; empty when not asked for), (x, y, z, 0) per vertex.
+  const auto mirror = [this](auto& padded) {
+    using T = typename std::decay_t<decltype(padded)>::value_type;
+    if (padded.empty()) return;
     for (std::int32_t v = 0; v < vertex_count_; ++v) {
       const double* out = &positions_[3 * static_cast<size_t>(v)];
-      double* padded = &padded_positions_[kVectorStride * static_cast<size_t>(v)];
-      for (int c = 0; c < 3; ++c) padded[c] = out[c];
+      T* p = &padded[kVectorStride * static_cast<size_t>(v)];
+      for (int c = 0; c < 3; ++c) p[c] = static_cast<T>(out[c]);
     }
-  }
-  if (!padded_float_positions_.empty()) {
-    for (std::int32_t v = 0; v < vertex_count_; ++v) {
-      const double* out = &positions_[3 * static_cast<size_t>(v)];
-      float* padded = &padded_float_positions_[kVectorStride * static_cast<size_t>(v)];
-      for (int c = 0; c < 3; ++c) padded[c] = static_cast<float>(out[c]);
-    }
-  }
+  };
+  mirror(padded_positions_);
+  mirror(padded_float_positions_);
 }
 
 bool Deformer::setLinearConstraint(std::span<const double> g, double c) noexcept {
