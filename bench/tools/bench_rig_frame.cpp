@@ -36,6 +36,8 @@
 //   BM_LiveRigFrame/smpl_hdm05_landing/<k>: the same live path with everything issue #12 adds to a
 //   frame (docs/fidelity.md): the 150-vertex coarse level, the temporal prediction, omega 1.9, the
 //   inversion guard, and k iterations after publishing (in the frame's time, and apart as prepare_us).
+//   BM_LiveRigFrame/smpl_hdm05_landing_implicit/<s>: the same with the implicit inversion guard (k 3,
+//   s conjugate-gradient steps per iteration; docs/deformation.md) and no iterations after publishing.
 //   BM_PoseTransfer/smpl_hdm05/<layout>/<cache>: the pose transfer alone, from the padded positions of
 //   one posed frame into a float buffer; layout 0 = the rig's B (double weights, 32-bit columns, 12
 //   bytes per entry), 1 = the compact copy (float, 16-bit, 6 bytes: narrowPoseTransfer) from double
@@ -241,7 +243,7 @@ void BM_RigFrameCoarsePredictedRelaxed(benchmark::State& state) { rigFrame(state
 BENCHMARK(BM_RigFrameCoarsePredictedRelaxed)->Name("BM_RigFrame/smpl_hdm05_coarse_predicted_relaxed")->Unit(benchmark::kMicrosecond);
 
 void liveRigFrame(benchmark::State& state, bool feet, bool volume_constraint = false, bool after_publish = false,
-                  bool landing = false) {
+                  bool landing = false, bool implicit_guard = false) {
   const RigScene* scene = sceneOrSkip(state, feet);
   if (scene == nullptr) return;
   tetrig::LiveRigOptions live_options;
@@ -252,7 +254,13 @@ void liveRigFrame(benchmark::State& state, bool feet, bool volume_constraint = f
     live_options.rotation_extrapolation = 1.0;
     live_options.rotation_relaxation = 1.9;
     live_options.inversion_guard = 1.0;
-    live_options.after_publish_iterations = static_cast<int>(state.range(0));
+    if (implicit_guard) {
+      // The implicit guard instead (docs/deformation.md): k 3, range(0) conjugate-gradient steps.
+      live_options.inversion_guard = 3.0;
+      live_options.inversion_guard_solves = static_cast<int>(state.range(0));
+    } else {
+      live_options.after_publish_iterations = static_cast<int>(state.range(0));
+    }
   } else if (volume_constraint) {
     live_options.volume_constraint_gradient_entries = static_cast<int>(state.range(0));
   } else if (after_publish) {
@@ -297,6 +305,9 @@ void BM_LiveRigFrameAfterPublish(benchmark::State& state) { liveRigFrame(state, 
 void BM_LiveRigFrameLanding(benchmark::State& state) { liveRigFrame(state, false, false, false, true); }
 // Argument: iterations after publishing, on top of the coarse level, the prediction, omega 1.9 and the guard.
 BENCHMARK(BM_LiveRigFrameLanding)->Name("BM_LiveRigFrame/smpl_hdm05_landing")->DenseRange(0, 3)->Unit(benchmark::kMicrosecond);
+void BM_LiveRigFrameLandingImplicit(benchmark::State& state) { liveRigFrame(state, false, false, false, true, true); }
+// Argument: the implicit guard's conjugate-gradient steps (k 3), with no iterations after publishing.
+BENCHMARK(BM_LiveRigFrameLandingImplicit)->Name("BM_LiveRigFrame/smpl_hdm05_landing_implicit")->DenseRange(1, 2)->Unit(benchmark::kMicrosecond);
 // Argument: iterations after publishing (LiveRigOptions::after_publish_iterations).
 BENCHMARK(BM_LiveRigFrameAfterPublish)->Name("BM_LiveRigFrame/smpl_hdm05_after_publish")->Arg(1)->Arg(2)->Unit(benchmark::kMicrosecond);
 // Argument: entries of each row of B the constraint's gradient uses (0 = all).
