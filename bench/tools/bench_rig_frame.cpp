@@ -280,7 +280,7 @@ void liveRigFrame(benchmark::State& state, bool feet, bool volume_constraint = f
   const std::size_t frames = scene->clip.frameCount();
   std::size_t f = 0;
   std::uint64_t counter = 0;
-  std::int64_t step_ns = 0, pose_ns = 0, prepare_ns = 0, iterations = 0;
+  std::int64_t step_ns = 0, pose_ns = 0, prepare_ns = 0, iterations = 0, guarded_solves = 0;
   for (auto _ : state) {
     playback.fillFrame(f, counter++, *frame);
     const tetrig::LiveFrameStats s = live.processFrame(*frame, tetrig::StepBudget{3}, fine.data(), nullptr);
@@ -290,6 +290,7 @@ void liveRigFrame(benchmark::State& state, bool feet, bool volume_constraint = f
     pose_ns += s.pose_transfer_ns;
     prepare_ns += s.prepare_ns;
     iterations += s.step.iterations;
+    guarded_solves += s.step.guarded_solves;
     f = (f + 1) % frames;
   }
   const auto n = static_cast<double>(state.iterations());
@@ -297,6 +298,7 @@ void liveRigFrame(benchmark::State& state, bool feet, bool volume_constraint = f
   state.counters["pose_transfer_us"] = static_cast<double>(pose_ns) / n * 1e-3;
   if (volume_constraint || after_publish || landing) state.counters["prepare_us"] = static_cast<double>(prepare_ns) / n * 1e-3;
   state.counters["iterations"] = static_cast<double>(iterations) / n;
+  if (implicit_guard) state.counters["guarded_solves"] = static_cast<double>(guarded_solves) / n;  // global steps that held tets
 }
 void BM_LiveRigFrame(benchmark::State& state) { liveRigFrame(state, false); }
 void BM_LiveRigFrameFeet(benchmark::State& state) { liveRigFrame(state, true); }

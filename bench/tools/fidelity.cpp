@@ -539,6 +539,11 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0.01, 1.0));
   CLI11_PARSE(app, argc, argv);
   cfg.live.use_coarse_level = !no_coarse;
+  if (cfg.live.inversion_guard > 1.0 && cfg.live.inversion_guard_solves == 0) {
+    std::fprintf(stderr, "tetrig_fidelity: error: --inversion-guard above 1 needs --inversion-guard-solves N (the explicit guard is "
+                         "unstable there: docs/deformation.md)\n");
+    return 1;
+  }
   try {
     const std::vector<int> ks = parseIterations(iterations);
     const Rig rig = tetrig::loadRigFile(cfg.rig_path);

@@ -603,7 +603,10 @@ StepStats Deformer::step(const HandleTargets& targets, const StepBudget& budget)
     const auto t0 = Clock::now();
     for (size_t i = 0; i < free4; ++i) u_[i] = delta_[i] + rhs_constant_[i];
     if (free_count_ > 0) factor_.solveInPlace(u_.data());
-    if (guarded_count_ > 0) implicitGuardSolve();
+    if (guarded_count_ > 0) {
+      implicitGuardSolve();
+      ++stats.guarded_solves;
+    }
     if (constraint_active_) applyLinearConstraint();
     const auto t1 = Clock::now();
     stats.solve_ns += nanosecondsBetween(t0, t1);
@@ -636,6 +639,7 @@ StepStats Deformer::step(const HandleTargets& targets, const StepBudget& budget)
     }
   }
   if (stats.exact_rotations > 0) stats.flags |= kStepExactRotations;
+  stats.guarded_tets = static_cast<std::int32_t>(guarded_count_);
   writePositions();
   stats.total_ns = nanosecondsBetween(start, Clock::now());
   return stats;

@@ -148,6 +148,8 @@ struct StepStats {
   double energy = 0.0;                    // sum_j a_j ||F_j - R_j||^2 after the last rotation update
                                           // (with the volume term, the combined energy of rotationPass)
   std::int32_t exact_rotations = 0;       // tets that took the exact rotation, summed over iterations
+  std::int32_t guarded_solves = 0;        // implicit inversion guard: global steps that held squashed tets
+  std::int32_t guarded_tets = 0;          // implicit inversion guard: the tets it holds after the last iteration
   std::int64_t solve_ns = 0;              // linear solves
   std::int64_t rotation_ns = 0;           // rotation extraction + differential update
   std::int64_t interpolation_ns = 0;      // rotation interpolation
