@@ -308,6 +308,17 @@ TEST(Deformer, VolumeWeightsActOnlyOnTheirTets) {
   for (const double x : tetVolumeWeights(grouped, tets)) ASSERT_EQ(x, 0.0);
 }
 
+// The vertex of a bar's +y face at its middle (the guard tests push it into the bar).
+std::int32_t middleOfTopFace(const scenes::BarScene& bar) {
+  std::int32_t pushed = 0;
+  const Eigen::Vector3d middle = bar.axis_point + Eigen::Vector3d(0.0, 0.5 * bar.ny, 0.5 * bar.length);
+  for (std::int32_t v = 1; v < bar.mesh.vertexCount(); ++v)
+    if ((bar.mesh.vertices.row(v).transpose() - middle).norm() < (bar.mesh.vertices.row(pushed).transpose() - middle).norm())
+      pushed = v;
+  EXPECT_LT((bar.mesh.vertices.row(pushed).transpose() - middle).norm(), 1e-9);
+  return pushed;
+}
+
 // The inversion guard (DeformerOptions::inversion_guard): a surface vertex of a 4-thick bar pushed 2
 // units into it by a vertex handle. As rigid as possible, the converged pose inverts the tets
 // under it (measured: 4, smallest det F -0.04); with the guard (k 1, tau 0.5) the squashed tets
@@ -317,12 +328,7 @@ TEST(Deformer, VolumeWeightsActOnlyOnTheirTets) {
 // (smallest det F measured -0.302 -> -0.123).
 TEST(Deformer, InversionGuardKeepsAPushedFaceFromInverting) {
   const auto bar = scenes::makeBarScene(4, 4, 12);
-  std::int32_t pushed = 0;  // the vertex of the +y face nearest the middle
-  const Eigen::Vector3d middle = bar.axis_point + Eigen::Vector3d(0.0, 0.5 * bar.ny, 0.5 * bar.length);
-  for (std::int32_t v = 1; v < bar.mesh.vertexCount(); ++v)
-    if ((bar.mesh.vertices.row(v).transpose() - middle).norm() < (bar.mesh.vertices.row(pushed).transpose() - middle).norm())
-      pushed = v;
-  ASSERT_LT((bar.mesh.vertices.row(pushed).transpose() - middle).norm(), 1e-9);
+  const std::int32_t pushed = middleOfTopFace(bar);
   const TetRestFrames frames = computeRestFrames(bar.mesh);
   struct Result {
     int inverted = 0;
@@ -374,11 +380,7 @@ TEST(Deformer, InversionGuardKeepsAPushedFaceFromInverting) {
 // guard (k <= 1) still inverts tets, k = 4 keeps every tet the right way out, and the handle lands.
 TEST(Deformer, ImplicitInversionGuardHoldsWhereTheExplicitOneCannot) {
   const auto bar = scenes::makeBarScene(4, 4, 12);
-  std::int32_t pushed = 0;  // the vertex of the +y face nearest the middle
-  const Eigen::Vector3d middle = bar.axis_point + Eigen::Vector3d(0.0, 0.5 * bar.ny, 0.5 * bar.length);
-  for (std::int32_t v = 1; v < bar.mesh.vertexCount(); ++v)
-    if ((bar.mesh.vertices.row(v).transpose() - middle).norm() < (bar.mesh.vertices.row(pushed).transpose() - middle).norm())
-      pushed = v;
+  const std::int32_t pushed = middleOfTopFace(bar);
   const TetRestFrames frames = computeRestFrames(bar.mesh);
   struct Result {
     Vertices x;
