@@ -27,7 +27,8 @@ struct RunOptions {
   bool keep_volume = false;             // keep the fine mesh's enclosed volume (LiveRigOptions::volume_constraint)
   int after_publish_iterations = 0;     // LiveRigOptions::after_publish_iterations
   double relax = LiveRigOptions{}.rotation_relaxation;   // omega in [1, 2) (solver_flags.hpp)
-  double inversion_guard = LiveRigOptions{}.inversion_guard;  // k in [0, 1] (solver_flags.hpp)
+  double inversion_guard = LiveRigOptions{}.inversion_guard;  // k in [0, 1], or [0, 1000] when implicit (solver_flags.hpp)
+  int inversion_guard_solves = LiveRigOptions{}.inversion_guard_solves;  // > 0: the implicit guard (solver_flags.hpp)
   std::optional<tetrig::Rig> rig;       // an already built rig (tetrig demo)
   std::string source = "synthetic";     // c3d:PATH, replay:PATH, synthetic[:N], hid:VID:PID, usb:VID:PID, hydra[:SERIAL]
   std::string publish = "tetrig";       // shared-memory segment name (without the leading '/')

@@ -194,9 +194,14 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1.0, 1.999));
   run_cmd->add_option("--inversion-guard", run.inversion_guard,
                       "Body tets squashed below half their volume take up to 1 + K times their stiffness (docs/deformation.md): "
-                      "fewer inverted tets where the markers bend the body far")
+                      "fewer inverted tets where the markers bend the body far; at most 1, or 1000 with --inversion-guard-solves")
       ->capture_default_str()
-      ->check(CLI::Range(0.0, 1.0));
+      ->check(CLI::Range(0.0, 1000.0));
+  run_cmd->add_option("--inversion-guard-solves", run.inversion_guard_solves,
+                      "The inversion guard implicit: S conjugate-gradient steps per iteration, one more solve each "
+                      "(docs/deformation.md); 2 with --inversion-guard 2 kept every body tet the right way out on HDM05")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 64));
   run_cmd->add_flag("--no-coarse", run.no_coarse, "Do not use the rig's own coarse level (built with --coarse-tet-vertices)");
   run_cmd->add_option("--coarse-rig", run.coarse_rig_path,
                       "Coarse level: the same mesh and markers built with fewer --tet-vertices (e.g. 300), solved first every "
@@ -274,7 +279,11 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1.0, 1.999));
   export_cmd->add_option("--inversion-guard", exp.inversion_guard, "Extra stiffness K of squashed body tets (as tetrig run)")
       ->capture_default_str()
-      ->check(CLI::Range(0.0, 1.0));
+      ->check(CLI::Range(0.0, 1000.0));
+  export_cmd->add_option("--inversion-guard-solves", exp.inversion_guard_solves,
+                         "The inversion guard implicit, S conjugate-gradient steps per iteration (as tetrig run)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 64));
   export_cmd->add_flag("--keep-zero-markers", exp.keep_zero_markers,
                        "Samples at x = y = z = 0 with residual 0 are valid points, not gaps (as tetrig run)");
   export_cmd->add_option("--rate", exp.rate_hz, "Frame rate in Hz instead of the clip's (glTF sample times)")->check(CLI::Range(0.001, 100000.0));

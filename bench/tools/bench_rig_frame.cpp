@@ -36,6 +36,8 @@
 //   BM_LiveRigFrame/smpl_hdm05_landing/<k>: the same live path with everything issue #12 adds to a
 //   frame (docs/fidelity.md): the 150-vertex coarse level, the temporal prediction, omega 1.9, the
 //   inversion guard, and k iterations after publishing (in the frame's time, and apart as prepare_us).
+//   BM_LiveRigFrame/smpl_hdm05_landing_implicit/<s>: the same with the implicit inversion guard (k 3,
+//   s conjugate-gradient steps per iteration; docs/deformation.md) and no iterations after publishing.
 //   BM_PoseTransfer/smpl_hdm05/<layout>/<cache>: the pose transfer alone, from the padded positions of
 //   one posed frame into a float buffer; layout 0 = the rig's B (double weights, 32-bit columns, 12
 //   bytes per entry), 1 = the compact copy (float, 16-bit, 6 bytes: narrowPoseTransfer) from double
@@ -241,7 +243,7 @@ void BM_RigFrameCoarsePredictedRelaxed(benchmark::State& state) { rigFrame(state
 BENCHMARK(BM_RigFrameCoarsePredictedRelaxed)->Name("BM_RigFrame/smpl_hdm05_coarse_predicted_relaxed")->Unit(benchmark::kMicrosecond);
 
 void liveRigFrame(benchmark::State& state, bool feet, bool volume_constraint = false, bool after_publish = false,
-                  bool landing = false) {
+                  bool landing = false, bool implicit_guard = false) {
   const RigScene* scene = sceneOrSkip(state, feet);
   if (scene == nullptr) return;
   tetrig::LiveRigOptions live_options;
@@ -252,7 +254,13 @@ void liveRigFrame(benchmark::State& state, bool feet, bool volume_constraint = f
     live_options.rotation_extrapolation = 1.0;
     live_options.rotation_relaxation = 1.9;
     live_options.inversion_guard = 1.0;
-    live_options.after_publish_iterations = static_cast<int>(state.range(0));
+    if (implicit_guard) {
+      // The implicit guard instead (docs/deformation.md): k 3, range(0) conjugate-gradient steps.
+      live_options.inversion_guard = 3.0;
+      live_options.inversion_guard_solves = static_cast<int>(state.range(0));
+    } else {
+      live_options.after_publish_iterations = static_cast<int>(state.range(0));
+    }
   } else if (volume_constraint) {
     live_options.volume_constraint_gradient_entries = static_cast<int>(state.range(0));
   } else if (after_publish) {
@@ -272,7 +280,7 @@ void liveRigFrame(benchmark::State& state, bool feet, bool volume_constraint = f
   const std::size_t frames = scene->clip.frameCount();
   std::size_t f = 0;
   std::uint64_t counter = 0;
-  std::int64_t step_ns = 0, pose_ns = 0, prepare_ns = 0, iterations = 0;
+  std::int64_t step_ns = 0, pose_ns = 0, prepare_ns = 0, iterations = 0, guarded_solves = 0;
   for (auto _ : state) {
     playback.fillFrame(f, counter++, *frame);
     const tetrig::LiveFrameStats s = live.processFrame(*frame, tetrig::StepBudget{3}, fine.data(), nullptr);
@@ -282,6 +290,7 @@ void liveRigFrame(benchmark::State& state, bool feet, bool volume_constraint = f
     pose_ns += s.pose_transfer_ns;
     prepare_ns += s.prepare_ns;
     iterations += s.step.iterations;
+    guarded_solves += s.step.guarded_solves;
     f = (f + 1) % frames;
   }
   const auto n = static_cast<double>(state.iterations());
@@ -289,6 +298,7 @@ void liveRigFrame(benchmark::State& state, bool feet, bool volume_constraint = f
   state.counters["pose_transfer_us"] = static_cast<double>(pose_ns) / n * 1e-3;
   if (volume_constraint || after_publish || landing) state.counters["prepare_us"] = static_cast<double>(prepare_ns) / n * 1e-3;
   state.counters["iterations"] = static_cast<double>(iterations) / n;
+  if (implicit_guard) state.counters["guarded_solves"] = static_cast<double>(guarded_solves) / n;  // global steps that held tets
 }
 void BM_LiveRigFrame(benchmark::State& state) { liveRigFrame(state, false); }
 void BM_LiveRigFrameFeet(benchmark::State& state) { liveRigFrame(state, true); }
@@ -297,6 +307,9 @@ void BM_LiveRigFrameAfterPublish(benchmark::State& state) { liveRigFrame(state, 
 void BM_LiveRigFrameLanding(benchmark::State& state) { liveRigFrame(state, false, false, false, true); }
 // Argument: iterations after publishing, on top of the coarse level, the prediction, omega 1.9 and the guard.
 BENCHMARK(BM_LiveRigFrameLanding)->Name("BM_LiveRigFrame/smpl_hdm05_landing")->DenseRange(0, 3)->Unit(benchmark::kMicrosecond);
+void BM_LiveRigFrameLandingImplicit(benchmark::State& state) { liveRigFrame(state, false, false, false, true, true); }
+// Argument: the implicit guard's conjugate-gradient steps (k 3), with no iterations after publishing.
+BENCHMARK(BM_LiveRigFrameLandingImplicit)->Name("BM_LiveRigFrame/smpl_hdm05_landing_implicit")->DenseRange(1, 2)->Unit(benchmark::kMicrosecond);
 // Argument: iterations after publishing (LiveRigOptions::after_publish_iterations).
 BENCHMARK(BM_LiveRigFrameAfterPublish)->Name("BM_LiveRigFrame/smpl_hdm05_after_publish")->Arg(1)->Arg(2)->Unit(benchmark::kMicrosecond);
 // Argument: entries of each row of B the constraint's gradient uses (0 = all).

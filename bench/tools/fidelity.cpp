@@ -175,11 +175,12 @@ class Measurer {
   // a_j [(1 - w_j) ||F_j - R_j||^2 + w_j ||F_j - T_j||^2], rigid-group tets plain.
   // guard, threshold: the inversion guard's (DeformerOptions::inversion_guard) extra a alpha ||F - R||^2
   // on body tets squashed below the threshold.
-  Measurer(const Rig& rig, double volume_weight, double guard, double threshold)
+  Measurer(const Rig& rig, double volume_weight, double guard, double threshold, bool guard_push_cap)
       : rig_(rig), frames_(tetrig::computeRestFrames(rig.tet_mesh)),
         weights_(tetrig::tetWeights(frames_, rig.setup.stiffness)),
         volume_weight_(volumeWeights(rig, volume_weight)),
-        guard_(static_cast<std::size_t>(rig.tet_mesh.tetCount()), 0.0), guard_threshold_(threshold) {
+        guard_(static_cast<std::size_t>(rig.tet_mesh.tetCount()), 0.0), guard_threshold_(threshold),
+        guard_push_cap_(guard_push_cap) {
     for (std::int32_t t = 0; t < rig.body_tet_count; ++t) guard_[static_cast<std::size_t>(t)] = guard;
     for (const auto& group : rig.setup.rigid_groups)
       for (const std::int32_t t : group.tets) guard_[static_cast<std::size_t>(t)] = 0.0;
@@ -214,7 +215,7 @@ class Measurer {
         const double s = w > 0.0 ? tetrig::unitVolumeShift(f, r) : 0.0;
         const double off = (f - r).norm();
         const double guard =
-            tetrig::inversionGuardTerm(guard_[static_cast<std::size_t>(t)], guard_threshold_, f.determinant(), off).extra;
+            tetrig::inversionGuardTerm(guard_[static_cast<std::size_t>(t)], guard_threshold_, f.determinant(), off, guard_push_cap_).extra;
         m.energy += weights_[static_cast<std::size_t>(t)] * ((1.0 - w) * off * off + guard + 3.0 * w * s * s);
       }
     }
@@ -235,6 +236,7 @@ class Measurer {
   std::vector<double> volume_weight_;  // per tet
   std::vector<double> guard_;          // per tet: the inversion guard's k
   double guard_threshold_ = 0.5;
+  bool guard_push_cap_ = true;  // the explicit guard's cap; the implicit guard has none
   double fine_rest_volume_ = 0.0;
 };
 
@@ -269,6 +271,7 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
   reference_setup.options.volume_weight = cfg.live.volume_weight;  // the same energy as the live rig's
   reference_setup.options.inversion_guard = cfg.live.inversion_guard;
   reference_setup.options.inversion_guard_threshold = cfg.live.inversion_guard_threshold;
+  reference_setup.options.inversion_guard_solves = cfg.live.inversion_guard_solves;
   reference_setup.guarded_tet_count = rig.body_tet_count;
   reference_setup.options.linear_constraint = cfg.live.volume_constraint;
   tetrig::Deformer reference(rig.tet_mesh, reference_setup);
@@ -525,13 +528,22 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0, 100000));
   app.add_option("--inversion-guard", cfg.live.inversion_guard,
                  "Inversion guard's k: extra stiffness of squashed body tets, live rig and reference alike "
-                 "(docs/deformation.md; default 0)")
-      ->check(CLI::Range(0.0, 1.0));
+                 "(docs/deformation.md; default 0; at most 1, or 1000 with --inversion-guard-solves)")
+      ->check(CLI::Range(0.0, 1000.0));
+  app.add_option("--inversion-guard-solves", cfg.live.inversion_guard_solves,
+                 "Implicit inversion guard: conjugate-gradient steps per iteration, each one more solve "
+                 "(docs/deformation.md; default 0: the explicit guard)")
+      ->check(CLI::Range(0, 64));
   app.add_option("--inversion-guard-threshold", cfg.live.inversion_guard_threshold,
                  "Volume ratio below which the inversion guard acts (default 0.5)")
       ->check(CLI::Range(0.01, 1.0));
   CLI11_PARSE(app, argc, argv);
   cfg.live.use_coarse_level = !no_coarse;
+  if (cfg.live.inversion_guard > 1.0 && cfg.live.inversion_guard_solves == 0) {
+    std::fprintf(stderr, "tetrig_fidelity: error: --inversion-guard above 1 needs --inversion-guard-solves N (the explicit guard is "
+                         "unstable there: docs/deformation.md)\n");
+    return 1;
+  }
   try {
     const std::vector<int> ks = parseIterations(iterations);
     const Rig rig = tetrig::loadRigFile(cfg.rig_path);
@@ -540,7 +552,8 @@ int main(int argc, char** argv) {
       coarse_rig = tetrig::loadRigFile(coarse_path);
       cfg.coarse = &coarse_rig;
     }
-    const Measurer measurer(rig, cfg.live.volume_weight, cfg.live.inversion_guard, cfg.live.inversion_guard_threshold);
+    const Measurer measurer(rig, cfg.live.volume_weight, cfg.live.inversion_guard, cfg.live.inversion_guard_threshold,
+                            cfg.live.inversion_guard_solves == 0);
     nlohmann::json out = {{"rig", cfg.rig_path},
                           {"tet_vertices", rig.tet_mesh.vertexCount()},
                           {"tets", rig.tet_mesh.tetCount()},
@@ -554,6 +567,7 @@ int main(int argc, char** argv) {
                           {"after_publish_iterations", cfg.live.after_publish_iterations},
                           {"inversion_guard", cfg.live.inversion_guard},
                           {"inversion_guard_threshold", cfg.live.inversion_guard_threshold},
+                          {"inversion_guard_solves", cfg.live.inversion_guard_solves},
                           {"extrapolate", cfg.live.rotation_extrapolation},
                           {"runs", nlohmann::json::array()}};
     // The coarse level the live rig will use: --coarse-rig, else the rig's own unless --no-coarse.

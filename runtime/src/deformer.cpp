@@ -63,7 +63,14 @@ Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(s
     fail("rotation_extrapolation must be in [0, 1]");
   }
   if (!(options_.volume_weight >= 0.0 && options_.volume_weight < 1.0)) fail("volume_weight must be in [0, 1)");
-  if (!(options_.inversion_guard >= 0.0 && options_.inversion_guard <= 1.0)) fail("inversion_guard must be in [0, 1]");
+  if (options_.inversion_guard_solves < 0 || options_.inversion_guard_solves > 64) fail("inversion_guard_solves must be in [0, 64]");
+  if (options_.inversion_guard_solves > 0) {
+    if (!(options_.inversion_guard >= 0.0 && options_.inversion_guard <= kImplicitGuardMaxK)) {
+      fail("inversion_guard must be in [0, " + std::to_string(static_cast<int>(kImplicitGuardMaxK)) + "] when implicit");
+    }
+  } else if (!(options_.inversion_guard >= 0.0 && options_.inversion_guard <= 1.0)) {
+    fail("inversion_guard must be in [0, 1] (explicit; larger with inversion_guard_solves)");
+  }
   if (!(options_.inversion_guard_threshold > 0.0 && options_.inversion_guard_threshold <= 1.0)) {
     fail("inversion_guard_threshold must be in (0, 1]");
   }
@@ -330,6 +337,14 @@ Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(s
   if (options_.inversion_guard > 0.0 && options_.update_rotations) {
     perSlot(guard_, options_.inversion_guard,
             setup.guarded_tet_count < 0 ? tet_count_ : std::min(setup.guarded_tet_count, tet_count_));
+    if (options_.inversion_guard_solves > 0) {
+      const auto guarded = static_cast<size_t>(std::count_if(guard_.begin(), guard_.end(), [](float k) { return k > 0.0f; }));
+      guarded_slot_.assign(guarded, 0);
+      guarded_coef_.assign(guarded, 0.0);
+      guard_det_.assign(guard_.size(), 1.0f);
+      for (AlignedVector<double>* v : {&cg_r_, &cg_z_, &cg_p_, &cg_lp_, &cg_ap_})
+        v->assign(static_cast<size_t>(vertex_count_) * kVectorStride, 0.0);
+    }
   }
 
   if (options_.linear_constraint) {
@@ -351,6 +366,7 @@ void Deformer::reset() {
     }
   }
   std::fill(u_.begin(), u_.end(), 0.0);
+  guarded_count_ = 0;
   for (std::int32_t h = 0; h < vertex_handle_count_; ++h) {
     const double* p = &rest_solver_[kVectorStride * static_cast<size_t>(free_count_ + h)];
     vertex_targets_[static_cast<size_t>(h)] = Eigen::Vector3d(p[0], p[1], p[2]);
@@ -587,6 +603,10 @@ StepStats Deformer::step(const HandleTargets& targets, const StepBudget& budget)
     const auto t0 = Clock::now();
     for (size_t i = 0; i < free4; ++i) u_[i] = delta_[i] + rhs_constant_[i];
     if (free_count_ > 0) factor_.solveInPlace(u_.data());
+    if (guarded_count_ > 0) {
+      implicitGuardSolve();
+      ++stats.guarded_solves;
+    }
     if (constraint_active_) applyLinearConstraint();
     const auto t1 = Clock::now();
     stats.solve_ns += nanosecondsBetween(t0, t1);
@@ -597,8 +617,10 @@ StepStats Deformer::step(const HandleTargets& targets, const StepBudget& budget)
       const RotationPassStats pass =
           rotationPass(blocks_.data(), block_count, u_.data(), has_groups ? nullptr : delta_.data(),
                        options_.rotation_steps, exact_lanes_.data(), static_cast<float>(options_.rotation_relaxation - 1.0),
-                       volumeWeights(), guard(), static_cast<float>(options_.inversion_guard_threshold));
+                       volumeWeights(), guard(), static_cast<float>(options_.inversion_guard_threshold),
+                       guarded_slot_.empty() ? nullptr : guard_det_.data());
       stats.energy = pass.energy;
+      if (!guarded_slot_.empty()) collectGuardedTets();
       stats.exact_rotations += pass.exact_fallbacks;
       std::int64_t rigid_ns = 0;
       if (has_groups) {
@@ -617,6 +639,7 @@ StepStats Deformer::step(const HandleTargets& targets, const StepBudget& budget)
     }
   }
   if (stats.exact_rotations > 0) stats.flags |= kStepExactRotations;
+  stats.guarded_tets = static_cast<std::int32_t>(guarded_count_);
   writePositions();
   stats.total_ns = nanosecondsBetween(start, Clock::now());
   return stats;

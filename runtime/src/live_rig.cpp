@@ -37,6 +37,7 @@ DeformerSetup liveSetup(const Rig& rig, const LiveRigOptions& options, bool fram
   setup.options.volume_weight = options.volume_weight;
   setup.options.inversion_guard = options.inversion_guard;
   setup.options.inversion_guard_threshold = options.inversion_guard_threshold;
+  setup.options.inversion_guard_solves = options.inversion_guard_solves;
   setup.options.linear_constraint = options.volume_constraint;
   setup.guarded_tet_count = rig.body_tet_count;
   return setup;
@@ -210,6 +211,7 @@ void LiveRig::buildCoarseLevel(const Rig& coarse) {
   setup.options.volume_weight = options_.volume_weight;
   setup.options.inversion_guard = options_.inversion_guard;
   setup.options.inversion_guard_threshold = options_.inversion_guard_threshold;
+  setup.options.inversion_guard_solves = options_.inversion_guard_solves;
   setup.guarded_tet_count = coarse.body_tet_count;
   setup.options.frame_guide = false;
   CoarseLevelOptions co;

@@ -308,6 +308,17 @@ TEST(Deformer, VolumeWeightsActOnlyOnTheirTets) {
   for (const double x : tetVolumeWeights(grouped, tets)) ASSERT_EQ(x, 0.0);
 }
 
+// The vertex of a bar's +y face at its middle (the guard tests push it into the bar).
+std::int32_t middleOfTopFace(const scenes::BarScene& bar) {
+  std::int32_t pushed = 0;
+  const Eigen::Vector3d middle = bar.axis_point + Eigen::Vector3d(0.0, 0.5 * bar.ny, 0.5 * bar.length);
+  for (std::int32_t v = 1; v < bar.mesh.vertexCount(); ++v)
+    if ((bar.mesh.vertices.row(v).transpose() - middle).norm() < (bar.mesh.vertices.row(pushed).transpose() - middle).norm())
+      pushed = v;
+  EXPECT_LT((bar.mesh.vertices.row(pushed).transpose() - middle).norm(), 1e-9);
+  return pushed;
+}
+
 // The inversion guard (DeformerOptions::inversion_guard): a surface vertex of a 4-thick bar pushed 2
 // units into it by a vertex handle. As rigid as possible, the converged pose inverts the tets
 // under it (measured: 4, smallest det F -0.04); with the guard (k 1, tau 0.5) the squashed tets
@@ -317,12 +328,7 @@ TEST(Deformer, VolumeWeightsActOnlyOnTheirTets) {
 // (smallest det F measured -0.302 -> -0.123).
 TEST(Deformer, InversionGuardKeepsAPushedFaceFromInverting) {
   const auto bar = scenes::makeBarScene(4, 4, 12);
-  std::int32_t pushed = 0;  // the vertex of the +y face nearest the middle
-  const Eigen::Vector3d middle = bar.axis_point + Eigen::Vector3d(0.0, 0.5 * bar.ny, 0.5 * bar.length);
-  for (std::int32_t v = 1; v < bar.mesh.vertexCount(); ++v)
-    if ((bar.mesh.vertices.row(v).transpose() - middle).norm() < (bar.mesh.vertices.row(pushed).transpose() - middle).norm())
-      pushed = v;
-  ASSERT_LT((bar.mesh.vertices.row(pushed).transpose() - middle).norm(), 1e-9);
+  const std::int32_t pushed = middleOfTopFace(bar);
   const TetRestFrames frames = computeRestFrames(bar.mesh);
   struct Result {
     int inverted = 0;
@@ -365,6 +371,62 @@ TEST(Deformer, InversionGuardKeepsAPushedFaceFromInverting) {
   EXPECT_LT(guarded.rise, 1e-5);
   EXPECT_LT(deep_plain.smallest_det, 0.0);
   EXPECT_GT(deep_guarded.smallest_det, 0.5 * deep_plain.smallest_det);
+}
+
+// The implicit guard (DeformerOptions::inversion_guard_solves; inversion_guard.cpp) puts the guard's
+// stiffness into the global step. (1) With k = 1 it settles where the explicit guard does (the
+// same guarded energy; the pushed face stays below the explicit guard's push cap), which checks its
+// conjugate-gradient solve against the explicit splitting. (2) Pushed 3 units, where the explicit
+// guard (k <= 1) still inverts tets, k = 4 keeps every tet the right way out, and the handle lands.
+TEST(Deformer, ImplicitInversionGuardHoldsWhereTheExplicitOneCannot) {
+  const auto bar = scenes::makeBarScene(4, 4, 12);
+  const std::int32_t pushed = middleOfTopFace(bar);
+  const TetRestFrames frames = computeRestFrames(bar.mesh);
+  struct Result {
+    Vertices x;
+    int inverted = 0;
+    double smallest_det = 0.0, handle_error = 0.0;
+  };
+  auto push = [&](double depth, double guard, int solves) {
+    DeformerSetup setup = test::endVertexHandles(bar);
+    setup.vertex_handles.push_back(pushed);
+    setup.options.inversion_guard = guard;
+    setup.options.inversion_guard_solves = solves;
+    Deformer deformer(bar.mesh, setup);
+    auto targets = test::endTargets(bar, Eigen::Isometry3d::Identity());
+    const Eigen::Vector3d target = bar.mesh.vertices.row(pushed).transpose() - Eigen::Vector3d(0.0, depth, 0.0);
+    targets.push_back(target);
+    for (int iteration = 0; iteration < 1500; ++iteration) deformer.step(vertexTargets(targets), StepBudget{1});
+    Result r;
+    r.x = test::deformedVertices(deformer);
+    r.smallest_det = std::numeric_limits<double>::infinity();
+    for (std::int32_t t = 0; t < bar.mesh.tetCount(); ++t) {
+      const double det = deformationGradient(bar.mesh, frames, r.x, t).determinant();
+      r.inverted += det <= 0.0;
+      r.smallest_det = std::min(r.smallest_det, det);
+    }
+    r.handle_error = (deformer.position(pushed) - target).norm();
+    return r;
+  };
+  const Result explicit1 = push(2.0, 1.0, 0), implicit1 = push(2.0, 1.0, 4);
+  const double apart = (explicit1.x - implicit1.x).rowwise().norm().maxCoeff();
+  const Result deep_explicit = push(3.0, 1.0, 0), deep_implicit = push(3.0, 4.0, 2);
+  std::printf("pushed 2, k 1: explicit and implicit %.2e apart (smallest det F %.3f, %.3f); pushed 3: smallest det F explicit "
+              "k 1 %.3f (%d inverted), implicit k 4 %.3f (%d inverted)\n",
+              apart, explicit1.smallest_det, implicit1.smallest_det, deep_explicit.smallest_det, deep_explicit.inverted,
+              deep_implicit.smallest_det, deep_implicit.inverted);
+  EXPECT_LT(apart, 1e-4 * bar.length);
+  EXPECT_EQ(implicit1.inverted, 0);
+  ASSERT_GE(deep_explicit.inverted, 1) << "the deep push must beat the explicit guard for the test to mean anything";
+  EXPECT_EQ(deep_implicit.inverted, 0);
+  EXPECT_GT(deep_implicit.smallest_det, 0.05);
+  EXPECT_LT(deep_implicit.handle_error, 1e-9);
+  // The explicit guard refuses k > 1; the implicit one takes it.
+  DeformerSetup setup = test::endVertexHandles(bar);
+  setup.options.inversion_guard = 2.0;
+  EXPECT_THROW(Deformer(bar.mesh, setup), std::invalid_argument);
+  setup.options.inversion_guard_solves = 1;
+  EXPECT_NO_THROW(Deformer(bar.mesh, setup));
 }
 
 TEST(Deformer, EnergyNeverIncreasesWithoutInterpolationOrRigidGroups) {

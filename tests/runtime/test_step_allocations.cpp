@@ -72,6 +72,25 @@ TEST(StepAllocations, NoneWithTheTemporalPredictionAndTheVolumeTerm) {
   EXPECT_EQ(allocationsDuringSteps(deformer, frames, 3, nullptr), 0u);
 }
 
+// The implicit inversion guard (its conjugate-gradient vectors are preallocated) on frames that squash
+// the bar to 40 %: it must act for the test to mean anything.
+TEST(StepAllocations, NoneWithTheImplicitInversionGuard) {
+  const auto bar = scenes::makeBarScene(4, 4, 33);
+  DeformerSetup setup = test::endVertexHandles(bar);
+  setup.options.inversion_guard = 3.0;
+  setup.options.inversion_guard_solves = 2;
+  Deformer deformer(bar.mesh, setup);
+  std::vector<std::vector<Eigen::Vector3d>> positions;
+  for (int f = 0; f < 6; ++f)
+    positions.push_back(test::endTargets(bar, scenes::barAxisTransform(bar, 0.3 * f, Eigen::Vector3d(0, f, -3.0 * f))));
+  std::vector<HandleTargets> frames(positions.size());
+  for (size_t f = 0; f < positions.size(); ++f) frames[f].vertex_positions = positions[f];
+  EXPECT_EQ(allocationsDuringSteps(deformer, frames, 3, nullptr), 0u);
+  const StepStats last = deformer.step(frames.back(), StepBudget{3});
+  EXPECT_GT(last.guarded_solves, 0) << "the squash was meant to engage the guard";
+  EXPECT_GT(last.guarded_tets, 0);
+}
+
 // setLinearConstraint (one solve) before every step, and the constrained steps.
 TEST(StepAllocations, NoneWithALinearConstraint) {
   const auto bar = scenes::makeBarScene(4, 4, 33);

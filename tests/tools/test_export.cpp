@@ -402,9 +402,10 @@ TEST(Export, PredictRelaxAndTheGuardAreTheLiveRigs) {
   live.rotation_relaxation = 1.9;
   live.inversion_guard = 1.0;
   expectTheLiveRigsFrames(out.path() / "tuned.pc2", 3, live);
-  // Each option on its own changes the frames (so none of them is dropped on the way).
+  // Each option on its own changes the frames (so none of them is dropped on the way); the fourth
+  // is the implicit guard (k 3, 2 solves) against the explicit one on the crushed block.
   constexpr int kGuardIterations = 200;
-  for (int which = 0; which < 3; ++which) {
+  for (int which = 0; which < 4; ++which) {
     auto one = options(out.path() / ("one" + std::to_string(which) + ".pc2"), 3);
     LiveRigOptions o;
     std::filesystem::path clip;
@@ -440,8 +441,12 @@ TEST(Export, PredictRelaxAndTheGuardAreTheLiveRigs) {
       std::ofstream(clip, std::ios::binary).write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
       one.clip_path = clip;
       one.iterations = kGuardIterations;  // enough to squash it
-      one.inversion_guard = 1.0;
-      o.inversion_guard = 1.0;
+      one.inversion_guard = which == 2 ? 1.0 : 3.0;
+      o.inversion_guard = one.inversion_guard;
+      if (which == 3) {
+        one.inversion_guard_solves = 2;
+        o.inversion_guard_solves = 2;
+      }
     }
     (void)tools::exportClip(one);
     expectTheLiveRigsFrames(one.out, one.iterations, o, clip);
@@ -455,7 +460,10 @@ TEST(Export, PredictRelaxAndTheGuardAreTheLiveRigs) {
   EXPECT_THROW_CONTAINS(tools::exportClip(bad), "--relax must be in [1, 2)");
   bad.relax = 1.8;
   bad.inversion_guard = 1.5;
-  EXPECT_THROW_CONTAINS(tools::exportClip(bad), "--inversion-guard must be in [0, 1]");
+  EXPECT_THROW_CONTAINS(tools::exportClip(bad), "--inversion-guard must be in [0, 1] (above 1 only with --inversion-guard-solves");
+  bad.inversion_guard_solves = 2;
+  bad.inversion_guard = 1001.0;
+  EXPECT_THROW_CONTAINS(tools::exportClip(bad), "--inversion-guard must be in [0, 1000] with --inversion-guard-solves");
   EXPECT_FALSE(std::filesystem::exists(out.path() / "bad.pc2"));
 }
 

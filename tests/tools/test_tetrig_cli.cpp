@@ -184,22 +184,24 @@ TEST(TetrigCli, RunPlaysAClipAndRefusesBadInput) {
   one_line_error(run("run --rig /nonexistent/x.rig --source synthetic", dir), "/nonexistent/x.rig");
   // The coarse level (here the rig as its own coarse level): announced, and a missing file refused.
   const std::string coarse_stats = (dir.path() / "coarse.json").string();
-  const CliRun coarse = run("run --rig '" + rig + "' --coarse-rig '" + rig + "' --predict --relax 1.9 --inversion-guard 1 --source 'c3d:" +
+  const CliRun coarse = run("run --rig '" + rig + "' --coarse-rig '" + rig + "' --predict --relax 1.9 --inversion-guard 2 --inversion-guard-solves 2 --source 'c3d:" +
                                 clip.string() + "' --publish " + name + " --stats-json '" + coarse_stats + "'",
                             dir);
   ASSERT_EQ(coarse.status, 0) << coarse.err;
   // The over-relaxation and the inversion guard: announced when not the defaults, and in the stats.
   EXPECT_CONTAINS(coarse.out, "over-relaxation of the rotation update: omega 1.9");
-  EXPECT_CONTAINS(coarse.out, "inversion guard: squashed body tets up to 2 times stiffer");
+  EXPECT_CONTAINS(coarse.out, "inversion guard: squashed body tets up to 3 times stiffer, implicit (2 conjugate-gradient steps per iteration)");
   EXPECT_EQ(ok.out.find("over-relaxation"), std::string::npos);
   EXPECT_EQ(ok.out.find("inversion guard"), std::string::npos);
   const nlohmann::json jc = nlohmann::json::parse(std::ifstream(coarse_stats));
   EXPECT_EQ(jc["solver"]["relax"].get<double>(), 1.9);
-  EXPECT_EQ(jc["solver"]["inversion_guard"].get<double>(), 1.0);
+  EXPECT_EQ(jc["solver"]["inversion_guard"].get<double>(), 2.0);
   EXPECT_TRUE(jc["solver"]["predict"].get<bool>());
   EXPECT_TRUE(jc["solver"]["coarse_level"].get<bool>());
   EXPECT_EQ(j["solver"]["relax"].get<double>(), 1.8);
   EXPECT_EQ(j["solver"]["inversion_guard"].get<double>(), 0.0);
+  EXPECT_EQ(j["solver"]["inversion_guard_solves"].get<int>(), 0);
+  EXPECT_EQ(jc["solver"]["inversion_guard_solves"].get<int>(), 2);
   EXPECT_CONTAINS(coarse.out, "coarse level: ");
   EXPECT_CONTAINS(coarse.out, "temporal prediction of each frame's start: on");
   EXPECT_EQ(ok.out.find("temporal prediction"), std::string::npos);

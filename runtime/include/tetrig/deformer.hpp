@@ -92,9 +92,16 @@ struct DeformerOptions {
                                  // volume takes up to k times more stiffness (rotation_kernel.hpp, inversion
                                  // guard); the factor is the same. 0: none
   double inversion_guard_threshold = 0.5;  // tau in (0, 1]: the volume ratio det F where the guard starts
+  int inversion_guard_solves = 0;  // > 0: the guard is implicit (inversion_guard.cpp): its stiffness enters each
+                                   // global step, solved by this many preconditioned conjugate-gradient steps
+                                   // (one more solve each) with the factor as preconditioner; k may then be up to
+                                   // kImplicitGuardMaxK, and no push cap. 0: the explicit guard (k <= 1)
   bool linear_constraint = false;  // accept one linear equality constraint on the positions
                                    // (setLinearConstraint); 64 bytes per vertex more state
 };
+
+// The largest k of the implicit inversion guard (DeformerOptions::inversion_guard_solves > 0).
+inline constexpr double kImplicitGuardMaxK = 1000.0;
 
 struct DeformerSetup {
   std::vector<std::int32_t> vertex_handles;
@@ -141,6 +148,8 @@ struct StepStats {
   double energy = 0.0;                    // sum_j a_j ||F_j - R_j||^2 after the last rotation update
                                           // (with the volume term, the combined energy of rotationPass)
   std::int32_t exact_rotations = 0;       // tets that took the exact rotation, summed over iterations
+  std::int32_t guarded_solves = 0;        // implicit inversion guard: global steps that held squashed tets
+  std::int32_t guarded_tets = 0;          // implicit inversion guard: the tets it holds after the last iteration
   std::int64_t solve_ns = 0;              // linear solves
   std::int64_t rotation_ns = 0;           // rotation extraction + differential update
   std::int64_t interpolation_ns = 0;      // rotation interpolation
@@ -281,7 +290,17 @@ class Deformer {
   const float* volumeWeights() const { return volume_weight_.empty() ? nullptr : volume_weight_.data(); }
   // Inversion guard (options_.inversion_guard > 0): k per slot, 0 for unguarded tets and padding
   AlignedVector<float> guard_;
-  const float* guard() const { return guard_.empty() ? nullptr : guard_.data(); }
+  // The kernels' (explicit) guard; nullptr when the guard is implicit.
+  const float* guard() const { return guard_.empty() || options_.inversion_guard_solves > 0 ? nullptr : guard_.data(); }
+  // Implicit guard (options_.inversion_guard_solves > 0; inversion_guard.cpp): the tets squashed
+  // below tau at the last rotation pass, with alpha_j a_j, and the conjugate-gradient vectors.
+  std::vector<std::int32_t> guarded_slot_;
+  std::vector<double> guarded_coef_;
+  AlignedVector<float> guard_det_;  // det F per slot at the last rotation pass (written by it)
+  std::size_t guarded_count_ = 0;
+  AlignedVector<double> cg_r_, cg_z_, cg_p_, cg_lp_, cg_ap_;
+  void collectGuardedTets();
+  void implicitGuardSolve();
 
   // Rigid groups: CSR over tet slots.
   std::vector<std::int32_t> group_start_, group_slot_;

@@ -95,6 +95,7 @@ struct LiveRigOptions {
   double volume_weight = 0.0;  // DeformerOptions::volume_weight (the volume term; docs/deformation.md), rig and coarse level
   double inversion_guard = 0.0;            // DeformerOptions::inversion_guard over the rig's body tets, rig and coarse level
   double inversion_guard_threshold = 0.5;  // DeformerOptions::inversion_guard_threshold
+  int inversion_guard_solves = 0;          // DeformerOptions::inversion_guard_solves (> 0: the implicit guard)
   // Keep the fine mesh's enclosed volume at rest (FineVolumeConstraint, a Lagrange multiplier on the
   // fine rig; linearized at each frame's published pose for the next frame by prepareNextFrame(): one
   // transposed product of B and one solve per frame; the first frame, and the first after a reset,

@@ -57,10 +57,12 @@ struct RotationPassStats {
 // det T_j = 1, and delta receives a_j (M_j - I) G_j with M_j = (1 - w_j) R_j + w_j T_j instead of
 // a_j (R_j - I) G_j: the factor does not change (volumeBlend in rotation_kernel.cpp). The energy
 // returned is then this combined one. nullptr: the plain as-rigid-as-possible pass.
+// `det_out` (one float per slot, the blocks' lane layout), if not null, receives each tet's det F
+// at `u` (the implicit inversion guard's input: inversion_guard.cpp).
 RotationPassStats rotationPass(TetBlock* blocks, std::int32_t block_count, const double* u, float* delta,
                                int steps, std::uint16_t* exact_lanes, float relax = 0.0f,
                                const float* volume_weight = nullptr, const float* guard = nullptr,
-                               float guard_threshold = 0.5f);
+                               float guard_threshold = 0.5f, float* det_out = nullptr);
 
 // The inversion guard's largest push alpha ||R - F|| (Frobenius): a tet far from any rotation (a
 // frame's first iteration after a jump) is not kicked; beyond it the guard's energy grows linearly
@@ -77,12 +79,13 @@ struct InversionGuardTerm {
   double alpha = 0.0;
   double extra = 0.0;
 };
-inline InversionGuardTerm inversionGuardTerm(double k, double tau, double det, double off) {
+// push_cap false: the implicit guard's (DeformerOptions::inversion_guard_solves > 0), uncapped.
+inline InversionGuardTerm inversionGuardTerm(double k, double tau, double det, double off, bool push_cap = true) {
   const double alpha = k * (tau - det) / tau;
   if (!(alpha > 0.0)) return {};
   const double a = alpha < k ? alpha : k;
   const double c = kInversionGuardPushCap;
-  if (a * off <= c) return {a, a * off * off};
+  if (!push_cap || a * off <= c) return {a, a * off * off};
   return {c / off, c * (2.0 * off - c / a)};
 }
 

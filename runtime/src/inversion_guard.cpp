@@ -1,0 +1,149 @@
+// The implicit inversion guard (DeformerOptions::inversion_guard_solves > 0; docs/deformation.md,
+// "Implicit inversion guard").
+//
+// A guarded tet j whose volume ratio J = det F_j fell below tau at the last rotation pass takes
+// extra stiffness alpha_j = k min(1, (tau - J) / tau) on its rotation term, as with the explicit
+// guard, but the extra term enters the global step itself:
+//
+//     (L + sum_j alpha_j a_j G_j^T G_j) u = b + sum_j alpha_j a_j G_j^T (R_j - I),
+//
+// with L u = b the plain step (b: the rotation pass's delta and the handle terms), G_j the tet's
+// displacement gradient (H_j = G_j u: corner k's column u_k - u_3 times E_j^-1), R_j its stored
+// rotation. The factor is L's: the system is solved by preconditioned conjugate gradients with L^-1
+// as the preconditioner, started from the plain solution u_0 = L^-1 b. Its residual
+//
+//     r_0 = sum_j alpha_j a_j G_j^T (R_j - I - H_j(u_0))
+//
+// lives on the guarded tets' corners only, and L^-1 (L + U) = I + L^-1 U differs from I by a
+// matrix of rank 3 x (guarded tets), so a few steps remove most of it. L p is kept by the
+// recurrence L p_{i+1} = r_{i+1} + beta L p_i (L z = r), so each step costs one solve with the
+// factor (three right-hand sides, one per coordinate: the system is the same for x, y and z, and
+// each coordinate takes its own step lengths) plus the guarded tets' product. No bound on k: the
+// splitting of the explicit guard is not used, so nothing limits it to k <= 1 and no push cap is
+// needed. Handles do not move: their components of r, z, p are kept 0.
+#include "tetrig/deformer.hpp"
+
+#include <Eigen/Dense>
+
+#include <algorithm>
+#include <array>
+
+namespace tetrig {
+namespace {
+
+// A tet's corner offsets, rest edge inverse E^-1 and weight, from its block and lane.
+struct GuardedTet {
+  std::array<std::int32_t, 4> corner;
+  Eigen::Matrix3d einv;
+  double weight;
+};
+
+GuardedTet guardedTet(const TetBlock& block, int l) {
+  GuardedTet t;
+  for (int c = 0; c < 4; ++c) t.corner[static_cast<size_t>(c)] = block.corner_offset[c][l];
+  for (int i = 0; i < 9; ++i) t.einv(i / 3, i % 3) = block.edge_inverse[i][l];
+  t.weight = block.weight[l];
+  return t;
+}
+
+// H = [v_0 - v_3, v_1 - v_3, v_2 - v_3] E^-1 of the displacements v (solver order, stride 4).
+Eigen::Matrix3d gradientOf(const GuardedTet& t, const double* v) {
+  Eigen::Matrix3d edges;
+  const double* p3 = v + t.corner[3];
+  for (int k = 0; k < 3; ++k) {
+    const double* pk = v + t.corner[static_cast<size_t>(k)];
+    for (int c = 0; c < 3; ++c) edges(c, k) = pk[c] - p3[c];
+  }
+  return edges * t.einv;
+}
+
+// out += G^T X for a per-tet 3x3 X: corner k (0..2) takes column k of X E^-T, corner 3 minus their sum.
+void scatterGradient(const GuardedTet& t, const Eigen::Matrix3d& x, double* out) {
+  const Eigen::Matrix3d m = x * t.einv.transpose();
+  double* o3 = out + t.corner[3];
+  for (int k = 0; k < 3; ++k) {
+    double* ok = out + t.corner[static_cast<size_t>(k)];
+    for (int c = 0; c < 3; ++c) {
+      ok[c] += m(c, k);
+      o3[c] -= m(c, k);
+    }
+  }
+}
+
+}  // namespace
+
+void Deformer::collectGuardedTets() {
+  // det F of every slot from the rotation pass (float, as the explicit guard's); most tets are
+  // above tau, so this is a scan of two float arrays.
+  const float tau = static_cast<float>(options_.inversion_guard_threshold);
+  std::size_t n = 0;
+  for (size_t s = 0; s < guard_.size(); ++s) {
+    if (!(guard_det_[s] < tau) || guard_[s] <= 0.0f) continue;  // J >= tau, unguarded, padding; NaN too
+    const double k = guard_[s];
+    const double alpha = std::min(k, k * (tau - guard_det_[s]) / tau);
+    guarded_slot_[n] = static_cast<std::int32_t>(s);
+    guarded_coef_[n] = alpha * blocks_[s / kTetBlockWidth].weight[s % kTetBlockWidth];
+    ++n;
+  }
+  guarded_count_ = n;
+}
+
+void Deformer::implicitGuardSolve() {
+  const size_t free4 = static_cast<size_t>(free_count_) * kVectorStride;
+  const auto tetOf = [this](std::int32_t s) { return guardedTet(blocks_[static_cast<size_t>(s / kTetBlockWidth)], s % kTetBlockWidth); };
+  // r_0 = sum_j alpha_j a_j G_j^T (R_j - I - H_j(u_0)), free components only.
+  std::fill(cg_r_.begin(), cg_r_.end(), 0.0);
+  for (size_t i = 0; i < guarded_count_; ++i) {
+    const std::int32_t s = guarded_slot_[i];
+    const TetBlock& block = blocks_[static_cast<size_t>(s / kTetBlockWidth)];
+    const int l = s % kTetBlockWidth;
+    const GuardedTet t = tetOf(s);
+    const Eigen::Quaternionf q(block.rotation[0][l], block.rotation[1][l], block.rotation[2][l], block.rotation[3][l]);
+    const Eigen::Matrix3d target = q.cast<double>().normalized().toRotationMatrix() - Eigen::Matrix3d::Identity();
+    scatterGradient(t, guarded_coef_[i] * (target - gradientOf(t, u_.data())), cg_r_.data());
+  }
+  std::fill(cg_r_.begin() + static_cast<std::ptrdiff_t>(free4), cg_r_.end(), 0.0);
+  const auto dot3 = [free4](const AlignedVector<double>& a, const AlignedVector<double>& b) {
+    std::array<double, 3> d{0.0, 0.0, 0.0};
+    for (size_t i = 0; i < free4; i += kVectorStride)
+      for (size_t c = 0; c < 3; ++c) d[c] += a[i + c] * b[i + c];
+    return d;
+  };
+  std::copy(cg_r_.begin(), cg_r_.end(), cg_z_.begin());
+  factor_.solveInPlace(cg_z_.data());
+  std::copy(cg_z_.begin(), cg_z_.end(), cg_p_.begin());
+  std::copy(cg_r_.begin(), cg_r_.end(), cg_lp_.begin());  // L p_0 = L z_0 = r_0
+  std::array<double, 3> rz = dot3(cg_r_, cg_z_);
+  for (int step = 0; step < options_.inversion_guard_solves; ++step) {
+    // A p = L p + sum_j alpha_j a_j G_j^T G_j p (free components).
+    std::copy(cg_lp_.begin(), cg_lp_.end(), cg_ap_.begin());
+    for (size_t i = 0; i < guarded_count_; ++i) {
+      const GuardedTet t = tetOf(guarded_slot_[i]);
+      scatterGradient(t, guarded_coef_[i] * gradientOf(t, cg_p_.data()), cg_ap_.data());
+    }
+    std::fill(cg_ap_.begin() + static_cast<std::ptrdiff_t>(free4), cg_ap_.end(), 0.0);
+    const std::array<double, 3> pap = dot3(cg_p_, cg_ap_);
+    std::array<double, 3> gamma{};
+    for (size_t c = 0; c < 3; ++c) gamma[c] = pap[c] > 0.0 && rz[c] > 0.0 ? rz[c] / pap[c] : 0.0;
+    for (size_t i = 0; i < free4; i += kVectorStride) {
+      for (size_t c = 0; c < 3; ++c) {
+        u_[i + c] += gamma[c] * cg_p_[i + c];
+        cg_r_[i + c] -= gamma[c] * cg_ap_[i + c];
+      }
+    }
+    if (step + 1 == options_.inversion_guard_solves) break;
+    std::copy(cg_r_.begin(), cg_r_.end(), cg_z_.begin());
+    factor_.solveInPlace(cg_z_.data());
+    const std::array<double, 3> rz_next = dot3(cg_r_, cg_z_);
+    for (size_t c = 0; c < 3; ++c) {
+      const double beta = rz[c] > 0.0 ? rz_next[c] / rz[c] : 0.0;
+      for (size_t i = c; i < free4; i += kVectorStride) {
+        cg_p_[i] = cg_z_[i] + beta * cg_p_[i];
+        cg_lp_[i] = cg_r_[i] + beta * cg_lp_[i];
+      }
+    }
+    rz = rz_next;
+  }
+}
+
+}  // namespace tetrig
