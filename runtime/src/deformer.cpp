@@ -342,7 +342,7 @@ Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(s
       guarded_slot_.assign(guarded, 0);
       guarded_coef_.assign(guarded, 0.0);
       guard_det_.assign(guard_.size(), 1.0f);
-      for (AlignedVector<double>* v : {&cg_r_, &cg_z_, &cg_p_, &cg_lp_, &cg_ap_})
+      for (AlignedVector<double>* v : {&cg_r_, &cg_z_, &cg_p_, &cg_lp_})
         v->assign(static_cast<size_t>(vertex_count_) * kVectorStride, 0.0);
     }
   }

@@ -115,31 +115,38 @@ void Deformer::implicitGuardSolve() {
   std::copy(cg_r_.begin(), cg_r_.end(), cg_lp_.begin());  // L p_0 = L z_0 = r_0
   std::array<double, 3> rz = dot3(cg_r_, cg_z_);
   for (int step = 0; step < options_.inversion_guard_solves; ++step) {
-    // A p = L p + sum_j alpha_j a_j G_j^T G_j p (free components).
-    std::copy(cg_lp_.begin(), cg_lp_.end(), cg_ap_.begin());
+    // p^T A p = p^T L p + sum_j alpha_j a_j ||G_j p||^2, per coordinate (row c of G_j p). A p is
+    // never stored: its dense part is L p, its guarded part is local.
+    std::array<double, 3> pap = dot3(cg_p_, cg_lp_);
     for (size_t i = 0; i < guarded_count_; ++i) {
-      const GuardedTet t = tetOf(guarded_slot_[i]);
-      scatterGradient(t, guarded_coef_[i] * gradientOf(t, cg_p_.data()), cg_ap_.data());
+      const Eigen::Matrix3d x = gradientOf(tetOf(guarded_slot_[i]), cg_p_.data());
+      for (int c = 0; c < 3; ++c) pap[static_cast<size_t>(c)] += guarded_coef_[i] * x.row(c).squaredNorm();
     }
-    std::fill(cg_ap_.begin() + static_cast<std::ptrdiff_t>(free4), cg_ap_.end(), 0.0);
-    const std::array<double, 3> pap = dot3(cg_p_, cg_ap_);
     std::array<double, 3> gamma{};
     for (size_t c = 0; c < 3; ++c) gamma[c] = pap[c] > 0.0 && rz[c] > 0.0 ? rz[c] / pap[c] : 0.0;
+    // u += gamma p; r -= gamma A p (the dense part here, the guarded part below).
     for (size_t i = 0; i < free4; i += kVectorStride) {
       for (size_t c = 0; c < 3; ++c) {
         u_[i + c] += gamma[c] * cg_p_[i + c];
-        cg_r_[i + c] -= gamma[c] * cg_ap_[i + c];
+        cg_r_[i + c] -= gamma[c] * cg_lp_[i + c];
       }
     }
+    const Eigen::DiagonalMatrix<double, 3> minus_gamma(-gamma[0], -gamma[1], -gamma[2]);
+    for (size_t i = 0; i < guarded_count_; ++i) {
+      const GuardedTet t = tetOf(guarded_slot_[i]);
+      scatterGradient(t, guarded_coef_[i] * (minus_gamma * gradientOf(t, cg_p_.data())), cg_r_.data());
+    }
+    std::fill(cg_r_.begin() + static_cast<std::ptrdiff_t>(free4), cg_r_.end(), 0.0);
     if (step + 1 == options_.inversion_guard_solves) break;
     std::copy(cg_r_.begin(), cg_r_.end(), cg_z_.begin());
     factor_.solveInPlace(cg_z_.data());
     const std::array<double, 3> rz_next = dot3(cg_r_, cg_z_);
-    for (size_t c = 0; c < 3; ++c) {
-      const double beta = rz[c] > 0.0 ? rz_next[c] / rz[c] : 0.0;
-      for (size_t i = c; i < free4; i += kVectorStride) {
-        cg_p_[i] = cg_z_[i] + beta * cg_p_[i];
-        cg_lp_[i] = cg_r_[i] + beta * cg_lp_[i];
+    std::array<double, 3> beta{};
+    for (size_t c = 0; c < 3; ++c) beta[c] = rz[c] > 0.0 ? rz_next[c] / rz[c] : 0.0;
+    for (size_t i = 0; i < free4; i += kVectorStride) {
+      for (size_t c = 0; c < 3; ++c) {
+        cg_p_[i + c] = cg_z_[i + c] + beta[c] * cg_p_[i + c];
+        cg_lp_[i + c] = cg_r_[i + c] + beta[c] * cg_lp_[i + c];
       }
     }
     rz = rz_next;

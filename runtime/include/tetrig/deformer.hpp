@@ -298,7 +298,7 @@ class Deformer {
   std::vector<double> guarded_coef_;
   AlignedVector<float> guard_det_;  // det F per slot at the last rotation pass (written by it)
   std::size_t guarded_count_ = 0;
-  AlignedVector<double> cg_r_, cg_z_, cg_p_, cg_lp_, cg_ap_;
+  AlignedVector<double> cg_r_, cg_z_, cg_p_, cg_lp_;
   void collectGuardedTets();
   void implicitGuardSolve();
 
