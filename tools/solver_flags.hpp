@@ -1,5 +1,5 @@
-// The solver flags `tetrig run` and `tetrig export` share, checked and set on the live rig's options
-// in one place so that both commands accept and mean the same thing.
+// The solver flags `tetrig run`, `tetrig export` and `tetrig_fidelity` share, checked and set on the
+// live rig's options in one place so that all accept and mean the same thing.
 #pragma once
 
 #include "tetrig/live_rig.hpp"

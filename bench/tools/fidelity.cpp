@@ -35,6 +35,7 @@
 #include "tetrig/volume_constraint.hpp"
 #include "tetrig/rigbuild/tet_quality.hpp"
 #include "tetrig/rigbuild/write_file_atomic.hpp"
+#include "solver_flags.hpp"
 
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
@@ -539,12 +540,9 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0.01, 1.0));
   CLI11_PARSE(app, argc, argv);
   cfg.live.use_coarse_level = !no_coarse;
-  if (cfg.live.inversion_guard > 1.0 && cfg.live.inversion_guard_solves == 0) {
-    std::fprintf(stderr, "tetrig_fidelity: error: --inversion-guard above 1 needs --inversion-guard-solves N (the explicit guard is "
-                         "unstable there: docs/deformation.md)\n");
-    return 1;
-  }
   try {
+    // The same checks as tetrig run and tetrig export (K above 1 only with the implicit guard).
+    tetrig::tools::setRelaxAndGuard(cfg.live.rotation_relaxation, cfg.live.inversion_guard, cfg.live.inversion_guard_solves, cfg.live);
     const std::vector<int> ks = parseIterations(iterations);
     const Rig rig = tetrig::loadRigFile(cfg.rig_path);
     Rig coarse_rig;

@@ -22,6 +22,7 @@
 // splitting of the explicit guard is not used, so nothing limits it to k <= 1 and no push cap is
 // needed. Handles do not move: their components of r, z, p are kept 0.
 #include "tetrig/deformer.hpp"
+#include "tetrig/rotation_kernel.hpp"
 
 #include <Eigen/Dense>
 
@@ -74,13 +75,13 @@ void scatterGradient(const GuardedTet& t, const Eigen::Matrix3d& x, double* out)
 
 void Deformer::collectGuardedTets() {
   // det F of every slot from the rotation pass (float, as the explicit guard's); most tets are
-  // above tau, so this is a scan of two float arrays.
-  const float tau = static_cast<float>(options_.inversion_guard_threshold);
+  // above tau, so this is a scan of two float arrays. alpha as the explicit guard's scalar form
+  // (inversionGuardTerm), without its push cap.
+  const double tau = options_.inversion_guard_threshold;
   std::size_t n = 0;
   for (size_t s = 0; s < guard_.size(); ++s) {
     if (!(guard_det_[s] < tau) || guard_[s] <= 0.0f) continue;  // J >= tau, unguarded, padding; NaN too
-    const double k = guard_[s];
-    const double alpha = std::min(k, k * (tau - guard_det_[s]) / tau);
+    const double alpha = inversionGuardTerm(guard_[s], tau, guard_det_[s], 0.0, /*push_cap=*/false).alpha;
     guarded_slot_[n] = static_cast<std::int32_t>(s);
     guarded_coef_[n] = alpha * blocks_[s / kTetBlockWidth].weight[s % kTetBlockWidth];
     ++n;
@@ -97,7 +98,7 @@ void Deformer::implicitGuardSolve() {
     const std::int32_t s = guarded_slot_[i];
     const TetBlock& block = blocks_[static_cast<size_t>(s / kTetBlockWidth)];
     const int l = s % kTetBlockWidth;
-    const GuardedTet t = tetOf(s);
+    const GuardedTet t = guardedTet(block, l);
     const Eigen::Quaternionf q(block.rotation[0][l], block.rotation[1][l], block.rotation[2][l], block.rotation[3][l]);
     const Eigen::Matrix3d target = q.cast<double>().normalized().toRotationMatrix() - Eigen::Matrix3d::Identity();
     scatterGradient(t, guarded_coef_[i] * (target - gradientOf(t, u_.data())), cg_r_.data());
