@@ -38,6 +38,8 @@
 //   inversion guard, and k iterations after publishing (in the frame's time, and apart as prepare_us).
 //   BM_LiveRigFrame/smpl_hdm05_landing_implicit/<s>: the same with the implicit inversion guard (k 3,
 //   s conjugate-gradient steps per iteration; docs/deformation.md) and no iterations after publishing.
+//   BM_LiveRigFrame/smpl_hdm05_landing_implicit_volume/<s>: that and the volume constraint (its
+//   linearization after publishing, in the frame's time and apart as prepare_us): every mechanism.
 //   BM_PoseTransfer/smpl_hdm05/<layout>/<cache>: the pose transfer alone, from the padded positions of
 //   one posed frame into a float buffer; layout 0 = the rig's B (double weights, 32-bit columns, 12
 //   bytes per entry), 1 = the compact copy (float, 16-bit, 6 bytes: narrowPoseTransfer) from double
@@ -312,6 +314,9 @@ BENCHMARK(BM_LiveRigFrameLanding)->Name("BM_LiveRigFrame/smpl_hdm05_landing")->D
 void BM_LiveRigFrameLandingImplicit(benchmark::State& state) { liveRigFrame(state, false, false, false, true, true); }
 // Argument: the implicit guard's conjugate-gradient steps (k 3), with no iterations after publishing.
 BENCHMARK(BM_LiveRigFrameLandingImplicit)->Name("BM_LiveRigFrame/smpl_hdm05_landing_implicit")->DenseRange(1, 2)->Unit(benchmark::kMicrosecond);
+void BM_LiveRigFrameLandingImplicitVolume(benchmark::State& state) { liveRigFrame(state, false, true, false, true, true); }
+// The same with the volume constraint too (its after-publish work in the frame's time): all of it.
+BENCHMARK(BM_LiveRigFrameLandingImplicitVolume)->Name("BM_LiveRigFrame/smpl_hdm05_landing_implicit_volume")->DenseRange(1, 2)->Unit(benchmark::kMicrosecond);
 // Argument: iterations after publishing (LiveRigOptions::after_publish_iterations).
 BENCHMARK(BM_LiveRigFrameAfterPublish)->Name("BM_LiveRigFrame/smpl_hdm05_after_publish")->Arg(1)->Arg(2)->Unit(benchmark::kMicrosecond);
 // Argument: entries of each row of B the constraint's gradient uses (0 = all).
