@@ -58,6 +58,32 @@ RandomProduct randomProduct(int rows, int cols, unsigned seed) {
   return p;
 }
 
+// A random B of rows x cols with 0 to max_entries entries per row (weights in [-0.3, 1)).
+Eigen::SparseMatrix<double, Eigen::RowMajor> randomRowsB(int rows, int cols, int max_entries, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_int_distribution<int> count(0, max_entries), col(0, cols - 1);
+  std::uniform_real_distribution<double> value(-0.3, 1.0);
+  std::vector<Eigen::Triplet<double>> t;
+  for (int i = 0; i < rows; ++i) {
+    const int n = count(rng);
+    for (int k = 0; k < n; ++k) t.emplace_back(i, col(rng), value(rng));
+  }
+  Eigen::SparseMatrix<double, Eigen::RowMajor> b(rows, cols);
+  b.setFromTriplets(t.begin(), t.end());
+  return b;
+}
+
+// x as padded float positions (x, y, z, pad); the pad holds a huge value that must never reach a
+// fine position (the CSR kernel sums it in its fourth lane, the blocked one never reads it).
+std::vector<float> paddedFloatPositions(const Positions& x) {
+  std::vector<float> x4(static_cast<size_t>(x.rows()) * 4);
+  for (Eigen::Index v = 0; v < x.rows(); ++v) {
+    for (int c = 0; c < 3; ++c) x4[4 * static_cast<size_t>(v) + static_cast<size_t>(c)] = static_cast<float>(x(v, c));
+    x4[4 * static_cast<size_t>(v) + 3] = 1e30f;
+  }
+  return x4;
+}
+
 TEST(PoseTransfer, MatchesEigenProductInDoubleAndFloat) {
   const int rows = 500;
   const int cols = 80;
@@ -221,24 +247,11 @@ TEST(PoseTransfer, CompactCopyIsWithinTheWeightsRoundingOfTheDoubleProduct) {
 TEST(PoseTransfer, FloatKernelIsWithinItsRoundingBoundOfTheDoubleProduct) {
   const int rows = 2000;
   const int cols = 3000;
-  std::mt19937 rng(29);
-  std::uniform_int_distribution<int> count(0, 60), col(0, cols - 1);
-  std::uniform_real_distribution<double> value(-0.3, 1.0);
-  std::vector<Eigen::Triplet<double>> t;
-  for (int i = 0; i < rows; ++i) {
-    const int n = count(rng);
-    for (int k = 0; k < n; ++k) t.emplace_back(i, col(rng), value(rng));
-  }
-  Eigen::SparseMatrix<double, Eigen::RowMajor> b(rows, cols);
-  b.setFromTriplets(t.begin(), t.end());
+  const Eigen::SparseMatrix<double, Eigen::RowMajor> b = randomRowsB(rows, cols, 60, 29);
   const Positions x = 1.5 * Positions::Random(cols, 3);
   const Positions expected = b * x;
   const CompactPoseTransfer compact = narrowPoseTransfer(makePoseTransferCsr<double>(b));
-  std::vector<float> x4(static_cast<size_t>(cols) * 4);
-  for (int v = 0; v < cols; ++v) {
-    for (int c = 0; c < 3; ++c) x4[4 * static_cast<size_t>(v) + static_cast<size_t>(c)] = static_cast<float>(x(v, c));
-    x4[4 * static_cast<size_t>(v) + 3] = 1e30f;  // summed in the pad lane, never written out
-  }
+  const std::vector<float> x4 = paddedFloatPositions(x);
   std::vector<float> out(static_cast<size_t>(rows) * 3, -7.0f);
   applyPoseTransferPadded(compact.view(), x4.data(), out.data());
   std::array<int, 4> remainders{};
@@ -357,16 +370,7 @@ TEST(PoseTransferSplit, BlockedCopyBitIdenticalToOneThread) {
 TEST(BlockedPoseTransfer, WithinItsRoundingBoundOfTheDoubleProduct) {
   const int rows = 2003;
   const int cols = 65536;
-  std::mt19937 rng(31);
-  std::uniform_int_distribution<int> count(0, 60), col(0, cols - 1);
-  std::uniform_real_distribution<double> value(-0.3, 1.0);
-  std::vector<Eigen::Triplet<double>> t;
-  for (int i = 0; i < rows; ++i) {
-    const int n = count(rng);
-    for (int k = 0; k < n; ++k) t.emplace_back(i, col(rng), value(rng));
-  }
-  Eigen::SparseMatrix<double, Eigen::RowMajor> b(rows, cols);
-  b.setFromTriplets(t.begin(), t.end());
+  const Eigen::SparseMatrix<double, Eigen::RowMajor> b = randomRowsB(rows, cols, 60, 31);
   const Positions x = 1.5 * Positions::Random(cols, 3);
   const Positions expected = b * x;
   const Positions points = Positions::Random(rows, 3);
@@ -394,11 +398,7 @@ TEST(BlockedPoseTransfer, WithinItsRoundingBoundOfTheDoubleProduct) {
   EXPECT_EQ(reinterpret_cast<std::uintptr_t>(blocked.weights.data()) % 32, 0u);
   EXPECT_GE(blocked.fill(bd.nonzeros()), 1.0);
 
-  std::vector<float> x4(static_cast<size_t>(cols) * 4);
-  for (int v = 0; v < cols; ++v) {
-    for (int c = 0; c < 3; ++c) x4[4 * static_cast<size_t>(v) + static_cast<size_t>(c)] = static_cast<float>(x(v, c));
-    x4[4 * static_cast<size_t>(v) + 3] = 1e30f;  // never read
-  }
+  const std::vector<float> x4 = paddedFloatPositions(x);
   std::vector<float> out(static_cast<size_t>(rows) * 3, -7.0f);
   applyPoseTransferBlocked(blocked.view(), x4.data(), out.data());
   double largest_ratio = 0.0;
