@@ -38,10 +38,13 @@
 //   inversion guard, and k iterations after publishing (in the frame's time, and apart as prepare_us).
 //   BM_LiveRigFrame/smpl_hdm05_landing_implicit/<s>: the same with the implicit inversion guard (k 3,
 //   s conjugate-gradient steps per iteration; docs/deformation.md) and no iterations after publishing.
+//   BM_LiveRigFrame/smpl_hdm05_landing_implicit_volume/<s>: that and the volume constraint (its
+//   linearization after publishing, in the frame's time and apart as prepare_us): every mechanism.
 //   BM_PoseTransfer/smpl_hdm05/<layout>/<cache>: the pose transfer alone, from the padded positions of
 //   one posed frame into a float buffer; layout 0 = the rig's B (double weights, 32-bit columns, 12
 //   bytes per entry), 1 = the compact copy (float, 16-bit, 6 bytes: narrowPoseTransfer) from double
-//   positions, 2 = the compact copy from float positions (its float kernel, as the live rig runs it);
+//   positions, 2 = the compact copy from float positions (its float kernel, as the live rig ran it
+//   until session 22), 3 = the blocked copy (blockPoseTransfer, as the live rig runs it now);
 //   cache 0 = back to back (B stays in the caches), 1 = a 64 MB buffer written between calls
 //   (untimed), as between two frames of a live run 8 ms apart on a shared machine.
 #include "bench_data.hpp"
@@ -52,6 +55,7 @@
 #include "tetrig/live_rig.hpp"
 #include "tetrig/drivers/c3d_reader.hpp"
 #include "tetrig/pose_transfer.hpp"
+#include "tetrig/pose_transfer_blocked.hpp"
 #include "tetrig/rig_file.hpp"
 #include "tetrig/rigbuild/build_rig.hpp"
 #include "tetrig/rigbuild/rig_description.hpp"
@@ -310,6 +314,9 @@ BENCHMARK(BM_LiveRigFrameLanding)->Name("BM_LiveRigFrame/smpl_hdm05_landing")->D
 void BM_LiveRigFrameLandingImplicit(benchmark::State& state) { liveRigFrame(state, false, false, false, true, true); }
 // Argument: the implicit guard's conjugate-gradient steps (k 3), with no iterations after publishing.
 BENCHMARK(BM_LiveRigFrameLandingImplicit)->Name("BM_LiveRigFrame/smpl_hdm05_landing_implicit")->DenseRange(1, 2)->Unit(benchmark::kMicrosecond);
+void BM_LiveRigFrameLandingImplicitVolume(benchmark::State& state) { liveRigFrame(state, false, true, false, true, true); }
+// The same with the volume constraint too (its after-publish work in the frame's time): all of it.
+BENCHMARK(BM_LiveRigFrameLandingImplicitVolume)->Name("BM_LiveRigFrame/smpl_hdm05_landing_implicit_volume")->DenseRange(1, 2)->Unit(benchmark::kMicrosecond);
 // Argument: iterations after publishing (LiveRigOptions::after_publish_iterations).
 BENCHMARK(BM_LiveRigFrameAfterPublish)->Name("BM_LiveRigFrame/smpl_hdm05_after_publish")->Arg(1)->Arg(2)->Unit(benchmark::kMicrosecond);
 // Argument: entries of each row of B the constraint's gradient uses (0 = all).
@@ -337,6 +344,8 @@ void BM_PoseTransfer(benchmark::State& state) {
   handle_targets.vertex_positions = targets;
   deformer.step(handle_targets, tetrig::StepBudget{10});
   const tetrig::CompactPoseTransfer narrow = tetrig::narrowPoseTransfer(rig.pose_transfer);
+  const tetrig::BlockedPoseTransfer blocked = tetrig::blockPoseTransfer(
+      rig.pose_transfer, std::span<const double>(rig.fine_vertices.data(), static_cast<std::size_t>(rig.fine_vertices.size())));
   std::vector<float> fine(static_cast<std::size_t>(rig.pose_transfer.rows) * 3);
   std::vector<unsigned char> evict(cold ? std::size_t{64} << 20 : 0);
   const double* x4 = deformer.paddedPositions().data();
@@ -348,7 +357,9 @@ void BM_PoseTransfer(benchmark::State& state) {
       benchmark::ClobberMemory();
     }
     const auto t0 = std::chrono::steady_clock::now();
-    if (state.range(0) == 2) {
+    if (state.range(0) == 3) {
+      tetrig::applyPoseTransferBlocked(blocked.view(), x4f.data(), fine.data());
+    } else if (state.range(0) == 2) {
       tetrig::applyPoseTransferPadded(narrow.view(), x4f.data(), fine.data());
     } else if (compact) {
       tetrig::applyPoseTransferPadded(narrow.view(), x4, fine.data());
@@ -359,11 +370,12 @@ void BM_PoseTransfer(benchmark::State& state) {
     benchmark::ClobberMemory();
     state.SetIterationTime(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
   }
-  state.counters["B_bytes"] = static_cast<double>(compact ? narrow.bytes() : rig.pose_transfer.bytes());
+  state.counters["B_bytes"] = static_cast<double>(state.range(0) == 3 ? blocked.bytes() : compact ? narrow.bytes() : rig.pose_transfer.bytes());
+  if (state.range(0) == 3) state.counters["fill"] = blocked.fill(rig.pose_transfer.nonzeros());
 }
 BENCHMARK(BM_PoseTransfer)
     ->Name("BM_PoseTransfer/smpl_hdm05")
-    ->ArgsProduct({{0, 1, 2}, {0, 1}})
+    ->ArgsProduct({{0, 1, 2, 3}, {0, 1}})
     ->UseManualTime()
     ->Unit(benchmark::kMicrosecond);
 

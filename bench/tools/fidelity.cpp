@@ -252,6 +252,7 @@ struct Config {
   int frame_count = 0;  // 0: to the end
   bool quiet = false;
   tetrig::LiveRigOptions live;
+  int reference_guard_solves = 0;  // --reference-guard-solves: the reference's CG steps (0: the live rig's)
   const Rig* coarse = nullptr;  // --coarse-rig
 };
 
@@ -272,7 +273,10 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
   reference_setup.options.volume_weight = cfg.live.volume_weight;  // the same energy as the live rig's
   reference_setup.options.inversion_guard = cfg.live.inversion_guard;
   reference_setup.options.inversion_guard_threshold = cfg.live.inversion_guard_threshold;
-  reference_setup.options.inversion_guard_solves = cfg.live.inversion_guard_solves;
+  // The same guarded energy; the reference may solve each global step's guarded system further
+  // (--reference-guard-solves) than the live rig's frame budget allows.
+  reference_setup.options.inversion_guard_solves =
+      cfg.reference_guard_solves > 0 ? cfg.reference_guard_solves : cfg.live.inversion_guard_solves;
   reference_setup.guarded_tet_count = rig.body_tet_count;
   reference_setup.options.linear_constraint = cfg.live.volume_constraint;
   tetrig::Deformer reference(rig.tet_mesh, reference_setup);
@@ -535,6 +539,10 @@ int main(int argc, char** argv) {
                  "Implicit inversion guard: conjugate-gradient steps per iteration, each one more solve "
                  "(docs/deformation.md; default 0: the explicit guard)")
       ->check(CLI::Range(0, 64));
+  app.add_option("--reference-guard-solves", cfg.reference_guard_solves,
+                 "Implicit inversion guard: the reference's conjugate-gradient steps per iteration (default: the live "
+                 "rig's --inversion-guard-solves). The same energy, its global steps solved further")
+      ->check(CLI::Range(1, 64));
   app.add_option("--inversion-guard-threshold", cfg.live.inversion_guard_threshold,
                  "Volume ratio below which the inversion guard acts (default 0.5)")
       ->check(CLI::Range(0.01, 1.0));
@@ -543,6 +551,8 @@ int main(int argc, char** argv) {
   try {
     // The same checks as tetrig run and tetrig export (K above 1 only with the implicit guard).
     tetrig::tools::setRelaxAndGuard(cfg.live.rotation_relaxation, cfg.live.inversion_guard, cfg.live.inversion_guard_solves, cfg.live);
+    if (cfg.reference_guard_solves > 0 && cfg.live.inversion_guard_solves == 0)
+      throw std::invalid_argument("--reference-guard-solves needs the implicit inversion guard: give --inversion-guard-solves too");
     const std::vector<int> ks = parseIterations(iterations);
     const Rig rig = tetrig::loadRigFile(cfg.rig_path);
     Rig coarse_rig;
@@ -566,6 +576,8 @@ int main(int argc, char** argv) {
                           {"inversion_guard", cfg.live.inversion_guard},
                           {"inversion_guard_threshold", cfg.live.inversion_guard_threshold},
                           {"inversion_guard_solves", cfg.live.inversion_guard_solves},
+                          {"reference_guard_solves",
+                           cfg.reference_guard_solves > 0 ? cfg.reference_guard_solves : cfg.live.inversion_guard_solves},
                           {"extrapolate", cfg.live.rotation_extrapolation},
                           {"runs", nlohmann::json::array()}};
     // The coarse level the live rig will use: --coarse-rig, else the rig's own unless --no-coarse.

@@ -143,7 +143,8 @@ LiveRig::LiveRig(const Rig& rig, const LiveRigOptions& options, const Rig* coars
   measured_.assign(markers, 0);
   skip_prediction_.assign(markers, 0);
   if (options.compact_pose_transfer && fitsCompactPoseTransfer(rig.pose_transfer.cols))
-    compact_b_ = narrowPoseTransfer(rig.pose_transfer);
+    compact_b_ = blockPoseTransfer(rig.pose_transfer, std::span<const double>(rig.fine_vertices.data(),
+                                                                              static_cast<std::size_t>(rig.fine_vertices.size())));
   if (options.split_pose_transfer) {
     split_ = compact_b_.rows > 0 ? std::make_unique<PoseTransferSplit>(compact_b_.view())
                                  : std::make_unique<PoseTransferSplit>(rig.pose_transfer.view());
@@ -560,7 +561,7 @@ void LiveRig::transferPose(float* positions) const noexcept {
   } else if (split_) {
     split_->apply(deformer_.paddedPositions().data(), positions);
   } else if (compact_b_.rows > 0) {
-    applyPoseTransferPadded(compact_b_.view(), deformer_.paddedFloatPositions().data(), positions);
+    applyPoseTransferBlocked(compact_b_.view(), deformer_.paddedFloatPositions().data(), positions);
   } else {
     applyPoseTransferPadded(rig_->pose_transfer.view(), deformer_.paddedPositions().data(), positions);
   }

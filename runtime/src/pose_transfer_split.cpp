@@ -21,8 +21,8 @@ PoseTransferSplit::PoseTransferSplit(const PoseTransferView<double>& b, std::int
   start();
 }
 
-PoseTransferSplit::PoseTransferSplit(const CompactPoseTransfer::view_type& b, std::int32_t chunk_rows)
-    : compact_(b), rows_(b.rows), chunk_rows_(std::max<std::int32_t>(1, chunk_rows)) {
+PoseTransferSplit::PoseTransferSplit(const BlockedPoseTransferView& b, std::int32_t chunk_rows)
+    : compact_(b), rows_(b.blocks), chunk_rows_((std::max<std::int32_t>(1, chunk_rows) + kPoseBlockRows - 1) / kPoseBlockRows) {
   start();
 }
 
@@ -48,7 +48,7 @@ void PoseTransferSplit::runChunks(bool worker) noexcept {
     const void* x = x_.load(std::memory_order_acquire);
     float* out = out_.load(std::memory_order_acquire);
     if (compact_.rows > 0) {
-      applyPoseTransferPaddedRows(compact_, static_cast<const float*>(x), out, begin, end);
+      applyPoseTransferBlocked(compact_, static_cast<const float*>(x), out, begin, end);
     } else {
       applyPoseTransferPaddedRows(b_, static_cast<const double*>(x), out, begin, end);
     }

@@ -6,6 +6,7 @@
 #include <Eigen/Geometry>
 
 #include <algorithm>
+#include <cmath>
 #include <stdexcept>
 #include <string>
 #include <utility>
@@ -69,7 +70,23 @@ FineVolumeConstraint::FineVolumeConstraint(const PoseTransferView<double>& b, st
       bt.weights[at] = kept_weights[static_cast<std::size_t>(k)];
     }
   if (fitsCompactPoseTransfer(bt.cols)) {
-    bt_compact_ = narrowPoseTransfer(bt);
+    // Each tet vertex placed where it acts: the |B|-weighted mean of the fine vertices it moves (its
+    // row of B^T), for the blocks' grouping by place.
+    std::vector<double> where(3 * static_cast<std::size_t>(bt.rows), 0.0);
+    for (std::int32_t j = 0; j < bt.rows; ++j) {
+      double total = 0.0;
+      for (std::int32_t k = bt.row_offsets[static_cast<std::size_t>(j)]; k < bt.row_offsets[static_cast<std::size_t>(j) + 1]; ++k) {
+        const double w = std::abs(bt.weights[static_cast<std::size_t>(k)]);
+        total += w;
+        for (std::size_t c = 0; c < 3; ++c)
+          where[3 * static_cast<std::size_t>(j) + c] += w * rest_fine[3 * static_cast<std::size_t>(bt.columns[static_cast<std::size_t>(k)]) + c];
+      }
+      if (total > 0.0)
+        for (std::size_t c = 0; c < 3; ++c) where[3 * static_cast<std::size_t>(j) + c] /= total;
+    }
+    bt_blocked_ = blockPoseTransfer(bt, where);
+    fine_gradient4f_.assign(4 * static_cast<std::size_t>(b.rows), 0.0f);
+    tet_gradient3f_.assign(3 * static_cast<std::size_t>(b.cols), 0.0f);
   } else {
     bt_wide_.rows = bt.rows;
     bt_wide_.cols = bt.cols;
@@ -118,9 +135,13 @@ double FineVolumeConstraint::linearize(std::span<const double> x_tet, const T* x
       for (int c = 0; c < 3; ++c) out[c] += d[k][c];  // 6 dV/da; the 1/6 is applied to g
     }
   }
-  // g = B^T dV/dx_fine (a gather per tet vertex: the pose transfer's padded kernel), and g . x0.
-  if (bt_compact_.rows > 0) {
-    applyPoseTransferPadded(bt_compact_.view(), fine_gradient4_.data(), g.data());
+  // g = B^T dV/dx_fine (a gather per tet vertex: the pose transfer's kernels), and g . x0. The sums
+  // over a vertex's triangles stay in double: they cancel (|b x c| ~ |x|^2, their sum ~ the ring's
+  // area); the blocked gather then takes them in float.
+  if (bt_blocked_.rows > 0) {
+    for (std::size_t i = 0; i < fine_gradient4_.size(); ++i) fine_gradient4f_[i] = static_cast<float>(fine_gradient4_[i]);
+    applyPoseTransferBlocked(bt_blocked_.view(), fine_gradient4f_.data(), tet_gradient3f_.data());
+    for (std::size_t i = 0; i < g.size(); ++i) g[i] = static_cast<double>(tet_gradient3f_[i]);
   } else {
     applyPoseTransferPadded(bt_wide_.view(), fine_gradient4_.data(), g.data());
   }

@@ -1,5 +1,6 @@
 // Run-time pose transfer x_fine = B x_tet over a CSR matrix.
 #include "tetrig/pose_transfer.hpp"
+#include "tetrig/pose_transfer_blocked.hpp"
 #include "tetrig/pose_transfer_split.hpp"
 
 #include <gtest/gtest.h>
@@ -15,7 +16,10 @@
 #include <cstdlib>
 #include <stdexcept>
 #include <string>
+#include <limits>
 #include <new>
+#include <numeric>
+#include <span>
 #include <random>
 #include <vector>
 
@@ -52,6 +56,32 @@ RandomProduct randomProduct(int rows, int cols, unsigned seed) {
   RandomProduct p{randomB(rows, cols, seed), Eigen::MatrixXd::Random(cols, 3), {}};
   p.expected = p.b * p.x;
   return p;
+}
+
+// A random B of rows x cols with 0 to max_entries entries per row (weights in [-0.3, 1)).
+Eigen::SparseMatrix<double, Eigen::RowMajor> randomRowsB(int rows, int cols, int max_entries, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_int_distribution<int> count(0, max_entries), col(0, cols - 1);
+  std::uniform_real_distribution<double> value(-0.3, 1.0);
+  std::vector<Eigen::Triplet<double>> t;
+  for (int i = 0; i < rows; ++i) {
+    const int n = count(rng);
+    for (int k = 0; k < n; ++k) t.emplace_back(i, col(rng), value(rng));
+  }
+  Eigen::SparseMatrix<double, Eigen::RowMajor> b(rows, cols);
+  b.setFromTriplets(t.begin(), t.end());
+  return b;
+}
+
+// x as padded float positions (x, y, z, pad); the pad holds a huge value that must never reach a
+// fine position (the CSR kernel sums it in its fourth lane, the blocked one never reads it).
+std::vector<float> paddedFloatPositions(const Positions& x) {
+  std::vector<float> x4(static_cast<size_t>(x.rows()) * 4);
+  for (Eigen::Index v = 0; v < x.rows(); ++v) {
+    for (int c = 0; c < 3; ++c) x4[4 * static_cast<size_t>(v) + static_cast<size_t>(c)] = static_cast<float>(x(v, c));
+    x4[4 * static_cast<size_t>(v) + 3] = 1e30f;
+  }
+  return x4;
 }
 
 TEST(PoseTransfer, MatchesEigenProductInDoubleAndFloat) {
@@ -217,24 +247,11 @@ TEST(PoseTransfer, CompactCopyIsWithinTheWeightsRoundingOfTheDoubleProduct) {
 TEST(PoseTransfer, FloatKernelIsWithinItsRoundingBoundOfTheDoubleProduct) {
   const int rows = 2000;
   const int cols = 3000;
-  std::mt19937 rng(29);
-  std::uniform_int_distribution<int> count(0, 60), col(0, cols - 1);
-  std::uniform_real_distribution<double> value(-0.3, 1.0);
-  std::vector<Eigen::Triplet<double>> t;
-  for (int i = 0; i < rows; ++i) {
-    const int n = count(rng);
-    for (int k = 0; k < n; ++k) t.emplace_back(i, col(rng), value(rng));
-  }
-  Eigen::SparseMatrix<double, Eigen::RowMajor> b(rows, cols);
-  b.setFromTriplets(t.begin(), t.end());
+  const Eigen::SparseMatrix<double, Eigen::RowMajor> b = randomRowsB(rows, cols, 60, 29);
   const Positions x = 1.5 * Positions::Random(cols, 3);
   const Positions expected = b * x;
   const CompactPoseTransfer compact = narrowPoseTransfer(makePoseTransferCsr<double>(b));
-  std::vector<float> x4(static_cast<size_t>(cols) * 4);
-  for (int v = 0; v < cols; ++v) {
-    for (int c = 0; c < 3; ++c) x4[4 * static_cast<size_t>(v) + static_cast<size_t>(c)] = static_cast<float>(x(v, c));
-    x4[4 * static_cast<size_t>(v) + 3] = 1e30f;  // summed in the pad lane, never written out
-  }
+  const std::vector<float> x4 = paddedFloatPositions(x);
   std::vector<float> out(static_cast<size_t>(rows) * 3, -7.0f);
   applyPoseTransferPadded(compact.view(), x4.data(), out.data());
   std::array<int, 4> remainders{};
@@ -313,22 +330,25 @@ TEST(PoseTransferSplit, BitIdenticalToOneThreadAndTheWorkerTakesChunks) {
   EXPECT_GT(worker->workerChunks(), 0u) << "the worker thread never computed a chunk";
 }
 
-// The same with the compact copy and float positions (its float kernel), as the live rig runs it.
-// Double positions are not its input: that overload writes nothing.
-TEST(PoseTransferSplit, CompactCopyBitIdenticalToOneThread) {
+// The same with the blocked copy and float positions (its float kernel), as the live rig runs it:
+// chunks of whole blocks. Double positions are not its input: that overload writes nothing.
+TEST(PoseTransferSplit, BlockedCopyBitIdenticalToOneThread) {
   const int rows = 3001;
   const int cols = 200;
   const auto [b, x, expected] = randomProduct(rows, cols, 23);
-  const CompactPoseTransfer compact = narrowPoseTransfer(makePoseTransferCsr<double>(b));
+  const Positions points = Positions::Random(rows, 3);
+  const BlockedPoseTransfer compact =
+      blockPoseTransfer(makePoseTransferCsr<double>(b), std::span<const double>(points.data(), static_cast<std::size_t>(points.size())));
   std::vector<float> x4(static_cast<size_t>(cols) * 4, 0.0f);
   std::vector<float> single(static_cast<size_t>(rows) * 3), split(static_cast<size_t>(rows) * 3);
   auto worker = std::make_unique<PoseTransferSplit>(compact.view(), 64);
+  EXPECT_EQ(worker->chunkCount(), (compact.blocks + 7) / 8);  // 64 rows: 8 blocks per chunk
   std::mt19937 rng(9);
   std::uniform_real_distribution<float> u(-2.0f, 2.0f);
   int mismatches = 0;
   for (int call = 0; call < 300 || (worker->workerChunks() == 0 && call < 20000); ++call) {
     for (float& v : x4) v = u(rng);
-    applyPoseTransferPadded(compact.view(), x4.data(), single.data());
+    applyPoseTransferBlocked(compact.view(), x4.data(), single.data());
     std::fill(split.begin(), split.end(), -7.0f);
     worker->apply(x4.data(), split.data());
     mismatches += std::memcmp(single.data(), split.data(), single.size() * sizeof(float)) != 0;
@@ -339,6 +359,144 @@ TEST(PoseTransferSplit, CompactCopyBitIdenticalToOneThread) {
   std::fill(split.begin(), split.end(), -7.0f);
   worker->apply(x4d.data(), split.data());
   EXPECT_TRUE(std::all_of(split.begin(), split.end(), [](float v) { return v == -7.0f; }));
+}
+
+// The blocked copy (tetrig/pose_transfer_blocked.hpp): every fine coordinate within the kernel's
+// stated bound of the exact product of the double positions, |dx_ic| <= (n_i + 4) 2^-24 sum_k |B_ik|
+// |x_kc| (n_i: the row's entries), on rows of 0-60 entries, a row count that is not a multiple of the
+// block, column indices up to 65535 (a signed or truncated index would gather the wrong vertex), and a
+// pad lane holding a huge value that must not reach the result. Every row sits in exactly one lane of
+// one block, and block ranges write only their blocks' rows.
+TEST(BlockedPoseTransfer, WithinItsRoundingBoundOfTheDoubleProduct) {
+  const int rows = 2003;
+  const int cols = 65536;
+  const Eigen::SparseMatrix<double, Eigen::RowMajor> b = randomRowsB(rows, cols, 60, 31);
+  const Positions x = 1.5 * Positions::Random(cols, 3);
+  const Positions expected = b * x;
+  const Positions points = Positions::Random(rows, 3);
+  const PoseTransferCsr<double> bd = makePoseTransferCsr<double>(b);
+  int high_columns = 0;
+  for (const std::int32_t c : bd.columns) high_columns += c >= 32768;
+  ASSERT_GT(high_columns, 1000);
+  const BlockedPoseTransfer blocked =
+      blockPoseTransfer(bd, std::span<const double>(points.data(), static_cast<std::size_t>(points.size())));
+  ASSERT_EQ(blocked.blocks, (rows + kPoseBlockRows - 1) / kPoseBlockRows);
+  ASSERT_EQ(blocked.lane_rows.size(), static_cast<std::size_t>(blocked.blocks) * kPoseBlockRows);
+  std::vector<int> seen(static_cast<std::size_t>(rows), 0);
+  int empty_lanes = 0;
+  for (const std::int32_t r : blocked.lane_rows) {
+    if (r < 0) {
+      ++empty_lanes;
+      continue;
+    }
+    ASSERT_LT(r, rows);
+    ++seen[static_cast<std::size_t>(r)];
+  }
+  EXPECT_EQ(empty_lanes, blocked.blocks * kPoseBlockRows - rows);
+  EXPECT_TRUE(std::all_of(seen.begin(), seen.end(), [](int n) { return n == 1; }));
+  EXPECT_EQ(blocked.weights.size(), blocked.columns.size() * kPoseBlockRows);
+  EXPECT_EQ(reinterpret_cast<std::uintptr_t>(blocked.weights.data()) % 32, 0u);
+  EXPECT_GE(blocked.fill(bd.nonzeros()), 1.0);
+
+  const std::vector<float> x4 = paddedFloatPositions(x);
+  std::vector<float> out(static_cast<size_t>(rows) * 3, -7.0f);
+  applyPoseTransferBlocked(blocked.view(), x4.data(), out.data());
+  double largest_ratio = 0.0;
+  int rounded = 0;
+  for (int i = 0; i < rows; ++i) {
+    const int n = static_cast<int>(b.outerIndexPtr()[i + 1] - b.outerIndexPtr()[i]);
+    for (int c = 0; c < 3; ++c) {
+      double magnitude = 0.0;
+      for (Eigen::SparseMatrix<double, Eigen::RowMajor>::InnerIterator it(b, i); it; ++it)
+        magnitude += std::abs(it.value()) * std::abs(x(it.col(), c));
+      const double bound = (n + 4.0) * 0x1p-24 * magnitude;
+      const double error = std::abs(static_cast<double>(out[3 * static_cast<size_t>(i) + static_cast<size_t>(c)]) - expected(i, c));
+      ASSERT_LE(error, bound) << "row " << i << " (" << n << " entries) coordinate " << c;
+      if (bound > 0.0) largest_ratio = std::max(largest_ratio, error / bound);
+      rounded += error > 1e-12;
+    }
+  }
+  EXPECT_GT(rounded, 1000);  // the float sums do round: the bound is not vacuous
+  RecordProperty("largest_fraction_of_bound", ::testing::PrintToString(largest_ratio));
+
+  // Block ranges write only their blocks' rows.
+  std::vector<float> part(out.size(), 42.0f);
+  applyPoseTransferBlocked(blocked.view(), x4.data(), part.data(), 10, 31);
+  std::vector<char> in_range(static_cast<std::size_t>(rows), 0);
+  for (std::int32_t k = 10 * kPoseBlockRows; k < 31 * kPoseBlockRows; ++k) in_range[static_cast<std::size_t>(blocked.lane_rows[static_cast<std::size_t>(k)])] = 1;
+  for (int i = 0; i < rows; ++i)
+    for (int c = 0; c < 3; ++c) {
+      const size_t k = 3 * static_cast<size_t>(i) + static_cast<size_t>(c);
+      ASSERT_EQ(part[k], in_range[static_cast<std::size_t>(i)] ? out[k] : 42.0f) << i;
+    }
+
+  const std::uint64_t before = ::tetrig::test::allocationCount();
+  for (int frame = 0; frame < 10; ++frame) applyPoseTransferBlocked(blocked.view(), x4.data(), out.data());
+  EXPECT_EQ(::tetrig::test::allocationCount(), before);
+}
+
+// Rows are blocked by where their fine vertices lie, not by their order: on a surface grid whose rows
+// take their weights from the nearest coarse grid points, listed in a shuffled order, the blocks hold
+// less than half the weights that blocks of consecutive rows would (those gather 8 unrelated patches).
+TEST(BlockedPoseTransfer, BlocksAreNearbyVertices) {
+  const int side = 60, coarse = 12;  // a 60 x 60 grid of fine vertices over a 12 x 12 grid of tet vertices
+  std::vector<int> order(side * side);
+  std::iota(order.begin(), order.end(), 0);
+  std::mt19937 rng(3);
+  std::shuffle(order.begin(), order.end(), rng);
+  Positions points(side * side, 3);
+  std::vector<Eigen::Triplet<double>> t;
+  for (int r = 0; r < side * side; ++r) {
+    const int u = order[static_cast<std::size_t>(r)] % side, v = order[static_cast<std::size_t>(r)] / side;
+    points.row(r) << u / double(side), v / double(side), 0.1 * std::sin(u * 0.1);
+    const int cu = u * coarse / side, cv = v * coarse / side;
+    for (int du = -1; du <= 1; ++du)
+      for (int dv = -1; dv <= 1; ++dv) {
+        const int a = std::clamp(cu + du, 0, coarse - 1), c = std::clamp(cv + dv, 0, coarse - 1);
+        t.emplace_back(r, a + coarse * c, 1.0 / 9.0);
+      }
+  }
+  Eigen::SparseMatrix<double, Eigen::RowMajor> b(side * side, coarse * coarse);
+  b.setFromTriplets(t.begin(), t.end());
+  const PoseTransferCsr<double> bd = makePoseTransferCsr<double>(b);
+  const BlockedPoseTransfer blocked =
+      blockPoseTransfer(bd, std::span<const double>(points.data(), static_cast<std::size_t>(points.size())));
+  std::size_t consecutive = 0;  // weights stored by blocks of 8 consecutive rows
+  for (int first = 0; first < side * side; first += kPoseBlockRows) {
+    std::vector<int> columns;
+    for (int r = first; r < std::min(side * side, first + kPoseBlockRows); ++r)
+      for (Eigen::SparseMatrix<double, Eigen::RowMajor>::InnerIterator it(b, r); it; ++it) columns.push_back(static_cast<int>(it.col()));
+    std::sort(columns.begin(), columns.end());
+    consecutive += static_cast<std::size_t>(std::unique(columns.begin(), columns.end()) - columns.begin()) * kPoseBlockRows;
+  }
+  RecordProperty("fill", ::testing::PrintToString(blocked.fill(bd.nonzeros())));
+  RecordProperty("fill_of_consecutive_rows", ::testing::PrintToString(static_cast<double>(consecutive) / static_cast<double>(bd.nonzeros())));
+  EXPECT_LT(static_cast<double>(blocked.weights.size()), 0.5 * static_cast<double>(consecutive));
+  EXPECT_LT(blocked.fill(bd.nonzeros()), 2.0);
+}
+
+TEST(BlockedPoseTransfer, RefusesWhatItCannotBlock) {
+  const auto expectRefusal = [](const PoseTransferCsr<double>& b, std::span<const double> points, const char* what) {
+    try {
+      (void)blockPoseTransfer(b, points);
+      ADD_FAILURE() << "accepted: expected \"" << what << "\"";
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find(what), std::string::npos) << e.what();
+    }
+  };
+  const PoseTransferCsr<double> wide = makePoseTransferCsr<double>(randomB(10, 65537, 3));
+  const std::vector<double> ten(30, 0.5);
+  expectRefusal(wide, ten, "65537 tet vertices");
+  PoseTransferCsr<double> broken = makePoseTransferCsr<double>(randomB(10, 5, 5));
+  ASSERT_GT(broken.nonzeros(), 2);
+  broken.columns[1] = 5;
+  expectRefusal(broken, ten, "column index out of range");
+  const PoseTransferCsr<double> fine = makePoseTransferCsr<double>(randomB(10, 5, 5));
+  expectRefusal(fine, std::vector<double>(27, 0.5), "27 rest coordinates for 10 fine vertices");
+  std::vector<double> nan_point = ten;
+  nan_point[13] = std::numeric_limits<double>::quiet_NaN();
+  expectRefusal(fine, nan_point, "not finite");
+  EXPECT_NO_THROW((void)blockPoseTransfer(fine, ten));  // all points the same: one cell, still blocked
 }
 
 }  // namespace

@@ -75,7 +75,7 @@ TEST(FineVolumeConstraint, TheCubesVolumeAndAnExactLinearization) {
     up[i] += h;
     down[i] -= h;
     const double fd = (work.volume(fineOf(b, up).data()) - work.volume(fineOf(b, down).data())) / (2 * h);
-    EXPECT_NEAR(g[i], fd, 1e-6 * (1.0 + std::abs(fd))) << "component " << i;  // B^T holds float weights
+    EXPECT_NEAR(g[i], fd, 1e-6 * (1.0 + std::abs(fd))) << "component " << i;  // B^T: float weights and sums
   }
   // c = V_rest - V(x0) + g . x0: a pose on the plane g . x = c keeps the rest volume to first order.
   double gx = 0.0;

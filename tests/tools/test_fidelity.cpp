@@ -427,6 +427,27 @@ TEST_F(FidelityTool, TheVolumeTermKeepsTheVolume) {
       << bad_guard.err;
 }
 
+// --reference-guard-solves: the reference solves the same guarded energy with more conjugate-gradient
+// steps than the live rig; it means nothing without the implicit guard, and is refused there.
+TEST_F(FidelityTool, TheReferenceMaySolveTheImplicitGuardFurther) {
+  const TempDir dir;
+  const auto out = dir.path() / "ref.json", same = dir.path() / "same.json";
+  const std::string args = common_all() + "--frames 3 --reference-every 2 --iterations 1 --inversion-guard 2 --inversion-guard-solves 1 ";
+  const ToolRun r = fidelity(args + "--reference-guard-solves 3 --json '" + out.string() + "'", dir);
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_EQ(readJson(out)["inversion_guard_solves"].get<int>(), 1);
+  EXPECT_EQ(readJson(out)["reference_guard_solves"].get<int>(), 3);
+  ASSERT_EQ(fidelity(args + "--json '" + same.string() + "'", dir).status, 0);
+  EXPECT_EQ(readJson(same)["reference_guard_solves"].get<int>(), 1);  // the live rig's, by default
+  const ToolRun explicit_guard = fidelity(common_all() + "--frames 3 --inversion-guard 1 --reference-guard-solves 3", dir);
+  EXPECT_NE(explicit_guard.status, 0);
+  EXPECT_NE(explicit_guard.err.find("--reference-guard-solves needs the implicit inversion guard"), std::string::npos)
+      << explicit_guard.err;
+  const ToolRun zero = fidelity(args + "--reference-guard-solves 0", dir);
+  EXPECT_NE(zero.status, 0);
+  EXPECT_NE(zero.err.find("--reference-guard-solves"), std::string::npos) << zero.err;
+}
+
 // --volume-constraint (LiveRigOptions::volume_constraint, tetrig/volume_constraint.hpp): the live
 // rig keeps the fine mesh's enclosed volume in every frame, and the reference converges to the
 // constrained minimum. Frames 0-1700 of HDM05 (the arms swing down, the performer bends) on the

@@ -51,6 +51,7 @@
 #include "tetrig/marker_prediction.hpp"
 #include "tetrig/pose_bound.hpp"
 #include "tetrig/pose_sensor.hpp"
+#include "tetrig/pose_transfer_blocked.hpp"
 #include "tetrig/pose_transfer_split.hpp"
 #include "tetrig/rig_file.hpp"
 #include "tetrig/volume_constraint.hpp"
@@ -72,13 +73,13 @@ struct LiveRigOptions {
   int prediction_rings = 3;          // anchor rings of the occlusion prediction (MarkerPredictionOptions::rings)
   double untimed_frame_period_s = 1.0 / 120.0;  // clock advance of a frame with neither timestamp
   bool fade_dropout_offset = true;   // false: keep the dropout offset (in the anchor's frame) for the whole occlusion
-  bool compact_pose_transfer = true;  // stream a copy of B with float weights and 16-bit columns (6 bytes
-                                     // per entry, narrowPoseTransfer) instead of the rig's double B (12),
-                                     // summed from float tet positions in float: 0.74-0.78x the pose
-                                     // transfer's time with B out of the caches and 0.81-0.85x again for
-                                     // the float sums, a fine vertex within (n/4 + 5) 2^-24 of |B| |x_tet|
-                                     // of the double product, n the row's entries (docs/live.md, "Latency");
-                                     // rigs of more than 65536 tet vertices use the double B
+  bool compact_pose_transfer = true;  // stream a copy of B in blocks of 8 nearby fine vertices, float
+                                     // weights and 16-bit columns (blockPoseTransfer), instead of the rig's
+                                     // double B row by row, summed from float tet positions in float:
+                                     // 0.45x the float CSR kernel's time in the caches, 0.65-0.7x out of
+                                     // them (docs/live.md, "The pose transfer in blocks"), a fine vertex
+                                     // within (n + 4) 2^-24 of |B| |x_tet| of the double product, n the
+                                     // row's entries; rigs of more than 65536 tet vertices use the double B
   bool split_pose_transfer = false; // run the pose transfer on this thread and one worker thread made at
                                      // load (PoseTransferSplit; bit-identical results); for machines with 2+ cores
   bool predict_all_markers = false;  // false: predict only the markers that need it (not measured, or
@@ -209,7 +210,7 @@ class LiveRig {
   const Deformer& deformer() const noexcept { return deformer_; }
   const CoarseLevel* coarseLevel() const noexcept { return coarse_.get(); }  // nullptr without a coarse rig
   const LiveRigOptions& options() const noexcept { return options_; }
-  // Bytes of B each frame's pose transfer streams: the compact copy's, or the rig's double B's.
+  // Bytes of B each frame's pose transfer streams: the blocked copy's, or the rig's double B's.
   std::int64_t poseTransferBytes() const noexcept {
     return compact_b_.rows > 0 ? compact_b_.bytes() : rig_->pose_transfer.bytes();
   }
@@ -258,7 +259,7 @@ class LiveRig {
   LiveRigOptions options_;
   Deformer deformer_;
   MarkerPredictor predictor_;
-  CompactPoseTransfer compact_b_;             // when options.compact_pose_transfer and the rig fits (else empty)
+  BlockedPoseTransfer compact_b_;             // when options.compact_pose_transfer and the rig fits (else empty)
   std::unique_ptr<PoseTransferSplit> split_;  // when options.split_pose_transfer
   std::unique_ptr<FineVolumeConstraint> volume_constraint_;  // when options.volume_constraint
   std::vector<double> constraint_gradient_;                // its g, #tetV*3

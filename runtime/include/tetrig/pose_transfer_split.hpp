@@ -19,6 +19,7 @@
 #pragma once
 
 #include "tetrig/pose_transfer.hpp"
+#include "tetrig/pose_transfer_blocked.hpp"
 
 #include <atomic>
 #include <cstdint>
@@ -28,16 +29,17 @@ namespace tetrig {
 
 class PoseTransferSplit {
  public:
-  // `b` (the rig's B, or its compact copy) must outlive this object. chunk_rows: rows per chunk (>= 1).
+  // `b` (the rig's B, or its blocked copy) must outlive this object. chunk_rows: rows per chunk (>= 1;
+  // for the blocked copy rounded up to whole blocks).
   explicit PoseTransferSplit(const PoseTransferView<double>& b, std::int32_t chunk_rows = 512);
-  explicit PoseTransferSplit(const CompactPoseTransfer::view_type& b, std::int32_t chunk_rows = 512);
+  explicit PoseTransferSplit(const BlockedPoseTransferView& b, std::int32_t chunk_rows = 512);
   ~PoseTransferSplit();
   PoseTransferSplit(const PoseTransferSplit&) = delete;
   PoseTransferSplit& operator=(const PoseTransferSplit&) = delete;
 
   // x_fine (b.rows x 3 floats) = B x_tet4: b.cols x 4 doubles (e.g. Deformer::paddedPositions()) for
   // the rig's B, b.cols x 4 floats (Deformer::paddedFloatPositions(), the float kernel) for the
-  // compact copy. The other overload of each writes nothing (a precondition, checked).
+  // blocked copy. The other overload of each writes nothing (a precondition, checked).
   void apply(const double* x_tet4, float* x_fine) noexcept;
   void apply(const float* x_tet4, float* x_fine) noexcept;
 
@@ -52,9 +54,9 @@ class PoseTransferSplit {
   void run(const void* x_tet4, float* x_fine) noexcept;
 
   PoseTransferView<double> b_;                 // used when compact_ is empty (rows 0)
-  CompactPoseTransfer::view_type compact_;
-  std::int32_t rows_ = 0;
-  std::int32_t chunk_rows_ = 0, chunks_ = 0;
+  BlockedPoseTransferView compact_;
+  std::int32_t rows_ = 0;                      // rows of b_, or blocks of compact_: what the chunks split
+  std::int32_t chunk_rows_ = 0, chunks_ = 0;    // chunk_rows_: rows of b_, or blocks of compact_, per chunk
   // The job's input and output, stored before next_chunk_ is reset (atomic: a late worker may read
   // them while the caller starts the next job; it then computes that job's rows, correctly).
   std::atomic<const void*> x_{nullptr};  // const double* for b_, const float* for compact_

@@ -15,6 +15,7 @@
 #pragma once
 
 #include "tetrig/pose_transfer.hpp"
+#include "tetrig/pose_transfer_blocked.hpp"
 
 #include <cstdint>
 #include <span>
@@ -63,13 +64,17 @@ class FineVolumeConstraint {
   std::int32_t tet_vertices_ = 0, fine_vertices_ = 0;  // B's columns and rows
   // B^T (a row per tet vertex: the fine vertices it moves), built at load, so that g = B^T dV/dx_fine
   // gathers instead of scattering (the scatter over B's rows took about four times the forward pose
-  // transfer), with the pose transfer's own padded kernel: float weights, and 16-bit columns when
-  // there are at most 65536 fine vertices (bt_compact_), else 32-bit (bt_wide_); the other is empty.
-  CompactPoseTransfer bt_compact_;
+  // transfer), with the pose transfer's own kernels: in blocks of 8 nearby tet vertices (each placed
+  // at the |B|-weighted mean of the fine vertices it moves), float weights and sums, when there are
+  // at most 65536 fine vertices (bt_blocked_), else row by row with float weights and double sums
+  // (bt_wide_); the other is empty.
+  BlockedPoseTransfer bt_blocked_;
   PoseTransferCsr<float> bt_wide_;
   std::span<const std::int32_t> triangles_;
   double rest_volume_ = 0.0;
-  std::vector<double> fine_gradient4_;  // #fine*4 scratch: dV/dx_fine, padded (x, y, z, 0)
+  std::vector<double> fine_gradient4_;  // #fine*4 scratch: 6 dV/dx_fine, padded (x, y, z, 0)
+  std::vector<float> fine_gradient4f_;  // #fine*4 scratch for bt_blocked_: the same in float
+  std::vector<float> tet_gradient3f_;   // #tetV*3 scratch for bt_blocked_: B^T of it
 };
 
 }  // namespace tetrig
