@@ -76,8 +76,8 @@ struct LiveRigOptions {
   bool compact_pose_transfer = true;  // stream a copy of B in blocks of 8 nearby fine vertices, float
                                      // weights and 16-bit columns (blockPoseTransfer), instead of the rig's
                                      // double B row by row, summed from float tet positions in float:
-                                     // 0.45x the float CSR kernel's time in the caches, 0.65-0.7x out of
-                                     // them (docs/live.md, "The pose transfer in blocks"), a fine vertex
+                                     // 0.35-0.45x the float CSR kernel's time in the caches, 0.45-0.5x out
+                                     // of them (docs/live.md, "The pose transfer in blocks"), a fine vertex
                                      // within (n + 4) 2^-24 of |B| |x_tet| of the double product, n the
                                      // row's entries; rigs of more than 65536 tet vertices use the double B
   bool split_pose_transfer = false; // run the pose transfer on this thread and one worker thread made at

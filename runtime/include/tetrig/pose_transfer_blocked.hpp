@@ -11,7 +11,7 @@
 // row-by-row CSR kernel (applyPoseTransferPaddedRows) spends a column load, a weight broadcast and
 // an FMA on every entry. On the SMPL rigs the blocks hold 1.3x B's entries (the zeros), in about
 // the bytes of the compact CSR copy (float weights, 16-bit columns), and the product runs in
-// 0.45x its time with B in the caches (docs/live.md).
+// 0.35-0.45x its time with B in the caches, 0.45-0.5x out of them (docs/live.md).
 //
 // Load time: blockPoseTransfer allocates and may throw. Per frame: applyPoseTransferBlocked reads
 // a view and writes a caller buffer: no allocation, no lock, no exception; any thread, concurrent
