@@ -199,7 +199,7 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0.0, 1000.0));
   run_cmd->add_option("--inversion-guard-solves", run.inversion_guard_solves,
                       "The inversion guard implicit: S conjugate-gradient steps per iteration, one more solve each "
-                      "(docs/deformation.md); 2 with --inversion-guard 2 kept every body tet the right way out on HDM05")
+                      "(docs/deformation.md); with --inversion-guard 2, 1 (or 2, at twice the solves) kept every body tet the right way out on HDM05")
       ->capture_default_str()
       ->check(CLI::Range(0, 64));
   run_cmd->add_flag("--no-coarse", run.no_coarse, "Do not use the rig's own coarse level (built with --coarse-tet-vertices)");
