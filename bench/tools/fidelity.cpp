@@ -252,7 +252,7 @@ struct Config {
   int frame_count = 0;  // 0: to the end
   bool quiet = false;
   tetrig::LiveRigOptions live;
-  int reference_guard_solves = 0;  // --reference-guard-solves: the reference's CG steps (0: the live rig's)
+  int reference_guard_solves = 0;  // --reference-guard-solves: the reference's CG steps (set to the live rig's when not given)
   const Rig* coarse = nullptr;  // --coarse-rig
 };
 
@@ -275,8 +275,7 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
   reference_setup.options.inversion_guard_threshold = cfg.live.inversion_guard_threshold;
   // The same guarded energy; the reference may solve each global step's guarded system further
   // (--reference-guard-solves) than the live rig's frame budget allows.
-  reference_setup.options.inversion_guard_solves =
-      cfg.reference_guard_solves > 0 ? cfg.reference_guard_solves : cfg.live.inversion_guard_solves;
+  reference_setup.options.inversion_guard_solves = cfg.reference_guard_solves;
   reference_setup.guarded_tet_count = rig.body_tet_count;
   reference_setup.options.linear_constraint = cfg.live.volume_constraint;
   tetrig::Deformer reference(rig.tet_mesh, reference_setup);
@@ -553,6 +552,7 @@ int main(int argc, char** argv) {
     tetrig::tools::setRelaxAndGuard(cfg.live.rotation_relaxation, cfg.live.inversion_guard, cfg.live.inversion_guard_solves, cfg.live);
     if (cfg.reference_guard_solves > 0 && cfg.live.inversion_guard_solves == 0)
       throw std::invalid_argument("--reference-guard-solves needs the implicit inversion guard: give --inversion-guard-solves too");
+    if (cfg.reference_guard_solves == 0) cfg.reference_guard_solves = cfg.live.inversion_guard_solves;
     const std::vector<int> ks = parseIterations(iterations);
     const Rig rig = tetrig::loadRigFile(cfg.rig_path);
     Rig coarse_rig;
@@ -576,8 +576,7 @@ int main(int argc, char** argv) {
                           {"inversion_guard", cfg.live.inversion_guard},
                           {"inversion_guard_threshold", cfg.live.inversion_guard_threshold},
                           {"inversion_guard_solves", cfg.live.inversion_guard_solves},
-                          {"reference_guard_solves",
-                           cfg.reference_guard_solves > 0 ? cfg.reference_guard_solves : cfg.live.inversion_guard_solves},
+                          {"reference_guard_solves", cfg.reference_guard_solves},
                           {"extrapolate", cfg.live.rotation_extrapolation},
                           {"runs", nlohmann::json::array()}};
     // The coarse level the live rig will use: --coarse-rig, else the rig's own unless --no-coarse.

@@ -32,18 +32,16 @@
 namespace tetrig {
 namespace {
 
-// A tet's corner offsets, rest edge inverse E^-1 and weight, from its block and lane.
+// A tet's corner offsets and rest edge inverse E^-1, from its block and lane.
 struct GuardedTet {
   std::array<std::int32_t, 4> corner;
   Eigen::Matrix3d einv;
-  double weight;
 };
 
 GuardedTet guardedTet(const TetBlock& block, int l) {
   GuardedTet t;
   for (int c = 0; c < 4; ++c) t.corner[static_cast<size_t>(c)] = block.corner_offset[c][l];
   for (int i = 0; i < 9; ++i) t.einv(i / 3, i % 3) = block.edge_inverse[i][l];
-  t.weight = block.weight[l];
   return t;
 }
 

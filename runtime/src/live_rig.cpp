@@ -143,10 +143,10 @@ LiveRig::LiveRig(const Rig& rig, const LiveRigOptions& options, const Rig* coars
   measured_.assign(markers, 0);
   skip_prediction_.assign(markers, 0);
   if (options.compact_pose_transfer && fitsCompactPoseTransfer(rig.pose_transfer.cols))
-    compact_b_ = blockPoseTransfer(rig.pose_transfer, std::span<const double>(rig.fine_vertices.data(),
+    blocked_b_ = blockPoseTransfer(rig.pose_transfer, std::span<const double>(rig.fine_vertices.data(),
                                                                               static_cast<std::size_t>(rig.fine_vertices.size())));
   if (options.split_pose_transfer) {
-    split_ = compact_b_.rows > 0 ? std::make_unique<PoseTransferSplit>(compact_b_.view())
+    split_ = blocked_b_.rows > 0 ? std::make_unique<PoseTransferSplit>(blocked_b_.view())
                                  : std::make_unique<PoseTransferSplit>(rig.pose_transfer.view());
   }
   if (options.volume_constraint) {
@@ -556,12 +556,12 @@ void LiveRig::linearizeVolumeConstraint(const float* fine) noexcept {
 }
 
 void LiveRig::transferPose(float* positions) const noexcept {
-  if (split_ && compact_b_.rows > 0) {
+  if (split_ && blocked_b_.rows > 0) {
     split_->apply(deformer_.paddedFloatPositions().data(), positions);
   } else if (split_) {
     split_->apply(deformer_.paddedPositions().data(), positions);
-  } else if (compact_b_.rows > 0) {
-    applyPoseTransferBlocked(compact_b_.view(), deformer_.paddedFloatPositions().data(), positions);
+  } else if (blocked_b_.rows > 0) {
+    applyPoseTransferBlocked(blocked_b_.view(), deformer_.paddedFloatPositions().data(), positions);
   } else {
     applyPoseTransferPadded(rig_->pose_transfer.view(), deformer_.paddedPositions().data(), positions);
   }

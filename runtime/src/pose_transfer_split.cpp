@@ -22,7 +22,7 @@ PoseTransferSplit::PoseTransferSplit(const PoseTransferView<double>& b, std::int
 }
 
 PoseTransferSplit::PoseTransferSplit(const BlockedPoseTransferView& b, std::int32_t chunk_rows)
-    : compact_(b), rows_(b.blocks), chunk_rows_((std::max<std::int32_t>(1, chunk_rows) + kPoseBlockRows - 1) / kPoseBlockRows) {
+    : blocked_(b), rows_(b.blocks), chunk_rows_((std::max<std::int32_t>(1, chunk_rows) + kPoseBlockRows - 1) / kPoseBlockRows) {
   start();
 }
 
@@ -47,8 +47,8 @@ void PoseTransferSplit::runChunks(bool worker) noexcept {
     const std::int32_t end = std::min(rows_, begin + chunk_rows_);
     const void* x = x_.load(std::memory_order_acquire);
     float* out = out_.load(std::memory_order_acquire);
-    if (compact_.rows > 0) {
-      applyPoseTransferBlocked(compact_, static_cast<const float*>(x), out, begin, end);
+    if (blocked_.rows > 0) {
+      applyPoseTransferBlocked(blocked_, static_cast<const float*>(x), out, begin, end);
     } else {
       applyPoseTransferPaddedRows(b_, static_cast<const double*>(x), out, begin, end);
     }
@@ -57,11 +57,11 @@ void PoseTransferSplit::runChunks(bool worker) noexcept {
 }
 
 void PoseTransferSplit::apply(const double* x_tet4, float* x_fine) noexcept {
-  if (compact_.rows == 0) run(x_tet4, x_fine);
+  if (blocked_.rows == 0) run(x_tet4, x_fine);
 }
 
 void PoseTransferSplit::apply(const float* x_tet4, float* x_fine) noexcept {
-  if (compact_.rows > 0) run(x_tet4, x_fine);
+  if (blocked_.rows > 0) run(x_tet4, x_fine);
 }
 
 void PoseTransferSplit::run(const void* x_tet4, float* x_fine) noexcept {

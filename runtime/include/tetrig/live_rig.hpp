@@ -212,7 +212,7 @@ class LiveRig {
   const LiveRigOptions& options() const noexcept { return options_; }
   // Bytes of B each frame's pose transfer streams: the blocked copy's, or the rig's double B's.
   std::int64_t poseTransferBytes() const noexcept {
-    return compact_b_.rows > 0 ? compact_b_.bytes() : rig_->pose_transfer.bytes();
+    return blocked_b_.rows > 0 ? blocked_b_.bytes() : rig_->pose_transfer.bytes();
   }
 
   // Region handles' targets (x = R x_rest + t, rig units), passed to every step: identity (rest)
@@ -259,7 +259,7 @@ class LiveRig {
   LiveRigOptions options_;
   Deformer deformer_;
   MarkerPredictor predictor_;
-  BlockedPoseTransfer compact_b_;             // when options.compact_pose_transfer and the rig fits (else empty)
+  BlockedPoseTransfer blocked_b_;             // when options.compact_pose_transfer and the rig fits (else empty)
   std::unique_ptr<PoseTransferSplit> split_;  // when options.split_pose_transfer
   std::unique_ptr<FineVolumeConstraint> volume_constraint_;  // when options.volume_constraint
   std::vector<double> constraint_gradient_;                // its g, #tetV*3

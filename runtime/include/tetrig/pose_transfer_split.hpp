@@ -53,13 +53,13 @@ class PoseTransferSplit {
   void runChunks(bool worker) noexcept;
   void run(const void* x_tet4, float* x_fine) noexcept;
 
-  PoseTransferView<double> b_;                 // used when compact_ is empty (rows 0)
-  BlockedPoseTransferView compact_;
-  std::int32_t rows_ = 0;                      // rows of b_, or blocks of compact_: what the chunks split
-  std::int32_t chunk_rows_ = 0, chunks_ = 0;    // chunk_rows_: rows of b_, or blocks of compact_, per chunk
+  PoseTransferView<double> b_;                 // used when blocked_ is empty (rows 0)
+  BlockedPoseTransferView blocked_;
+  std::int32_t rows_ = 0;                      // rows of b_, or blocks of blocked_: what the chunks split
+  std::int32_t chunk_rows_ = 0, chunks_ = 0;    // chunk_rows_: rows of b_, or blocks of blocked_, per chunk
   // The job's input and output, stored before next_chunk_ is reset (atomic: a late worker may read
   // them while the caller starts the next job; it then computes that job's rows, correctly).
-  std::atomic<const void*> x_{nullptr};  // const double* for b_, const float* for compact_
+  std::atomic<const void*> x_{nullptr};  // const double* for b_, const float* for blocked_
   std::atomic<float*> out_{nullptr};
   alignas(64) std::atomic<std::uint32_t> job_{0};        // bumped by apply()
   alignas(64) std::atomic<std::uint32_t> wake_{0};       // bumped to wake the worker; it sleeps on it
