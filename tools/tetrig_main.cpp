@@ -189,7 +189,7 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0, 100));
   run_cmd->add_option("--relax", run.relax,
                       "Over-relaxation omega of each iteration's rotation update (docs/fidelity.md): 1 plain; 1.9 with --predict "
-                      "and a coarse level lands nearest the converged pose")
+                      "and a coarse level lands nearest the converged pose; with --keep-volume too, keep 1.8")
       ->capture_default_str()
       ->check(CLI::Range(1.0, 1.999));
   run_cmd->add_option("--inversion-guard", run.inversion_guard,

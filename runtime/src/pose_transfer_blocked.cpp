@@ -14,11 +14,68 @@
 
 #include "multiversion.hpp"
 
+#if defined(TETRIG_MULTIVERSION_ENABLED)
+#include <immintrin.h>
+#endif
+
 namespace tetrig {
 namespace {
 
 using Lanes8f = float __attribute__((vector_size(kPoseBlockRows * sizeof(float))));
 static_assert(sizeof(Lanes8f) == kPoseBlockRows * sizeof(float));
+
+// IEEE binary16 bits of a float, rounded to nearest (ties to even); |f| <= 65504 (checked by the caller).
+std::uint16_t floatToHalf(float f) {
+  std::uint32_t x;
+  std::memcpy(&x, &f, sizeof x);
+  const std::uint32_t sign = (x >> 16) & 0x8000u, a = x & 0x7fffffffu;
+  if (a < 0x38800000u)  // below 2^-14, half's smallest normal: subnormal steps of 2^-24 (1024 rounds to that normal)
+    return static_cast<std::uint16_t>(sign | static_cast<std::uint32_t>(std::lrint(std::abs(f) * 0x1p24f)));
+  // Rebias the exponent (127 -> 15) and round the 13 dropped mantissa bits to nearest even; a carry
+  // into the exponent is the correct rounding up.
+  return static_cast<std::uint16_t>(sign | ((a - 0x38000000u + 0xfffu + ((a >> 13) & 1u)) >> 13));
+}
+
+using Half8 = std::uint16_t __attribute__((vector_size(kPoseBlockRows * sizeof(std::uint16_t))));
+using Bits8 = std::uint32_t __attribute__((vector_size(kPoseBlockRows * sizeof(std::uint32_t))));
+
+// Widening without F16C: the magnitude's bits moved to float's places and scaled by 2^112 (the
+// exponent bias 15 -> 127; exact, subnormal halves included), the sign put back.
+__attribute__((always_inline)) inline void widenPortable(const std::uint16_t* half, float* out, std::int32_t entries) {
+  for (std::int32_t k = 0; k < entries; ++k) {
+    Half8 h;
+    std::memcpy(&h, half + static_cast<std::ptrdiff_t>(k) * kPoseBlockRows, sizeof h);
+    const Bits8 w = __builtin_convertvector(h, Bits8);
+    const Bits8 magnitude = (w & 0x7fffu) << 13, sign = (w & 0x8000u) << 16;
+    Lanes8f f;
+    std::memcpy(&f, &magnitude, sizeof f);
+    f *= 0x1p112f;
+    Bits8 bits;
+    std::memcpy(&bits, &f, sizeof bits);
+    bits |= sign;
+    std::memcpy(out + static_cast<std::ptrdiff_t>(k) * kPoseBlockRows, &bits, sizeof bits);
+  }
+}
+
+}  // namespace
+
+// kPoseBlockRows half weights per entry -> floats. x86-64 with GCC: F16C's vcvtph2ps where the CPU
+// has it (function multiversioning: the loader picks), the lane arithmetic elsewhere.
+#if defined(TETRIG_MULTIVERSION_ENABLED)
+__attribute__((target("arch=x86-64-v3"))) void widenHalfWeights(const std::uint16_t* half, float* out, std::int32_t entries) {
+  static_assert(kPoseBlockRows == 8, "one vcvtph2ps per entry");
+  for (std::int32_t k = 0; k < entries; ++k)
+    _mm256_store_ps(out + static_cast<std::ptrdiff_t>(k) * kPoseBlockRows,
+                    _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(half + static_cast<std::ptrdiff_t>(k) * kPoseBlockRows))));
+}
+__attribute__((target("default"))) void widenHalfWeights(const std::uint16_t* half, float* out, std::int32_t entries) {
+  widenPortable(half, out, entries);
+}
+#else
+void widenHalfWeights(const std::uint16_t* half, float* out, std::int32_t entries) { widenPortable(half, out, entries); }
+#endif
+
+namespace {
 
 // 21 bits of each coordinate interleaved: x in bits 0, 3, 6, ..., y in 1, 4, ..., z in 2, 5, ...
 std::uint64_t spreadBits(std::uint64_t v) {
@@ -110,47 +167,102 @@ BlockedPoseTransfer blockPoseTransfer(const PoseTransferCsr<double>& b, std::spa
   return out;
 }
 
-TETRIG_MULTIVERSION void applyPoseTransferBlocked(const BlockedPoseTransferView& b, const float* x_tet4, float* x_fine,
-                                                  std::int32_t block_begin, std::int32_t block_end) noexcept {
-  const std::uint16_t* cols = b.columns;
-  for (std::int32_t block = block_begin; block < block_end; ++block) {
-    // Two partial sums per coordinate (even and odd columns): the FMA chains' latency, not the loads,
-    // would set the pace with one.
-    Lanes8f x0{}, y0{}, z0{}, x1{}, y1{}, z1{};
-    std::int32_t k = b.block_offsets[block];
-    const std::int32_t end = b.block_offsets[block + 1];
-    for (; k + 2 <= end; k += 2) {
-      Lanes8f w0, w1;
-      std::memcpy(&w0, b.weights + static_cast<std::ptrdiff_t>(k) * kPoseBlockRows, sizeof w0);
-      std::memcpy(&w1, b.weights + static_cast<std::ptrdiff_t>(k + 1) * kPoseBlockRows, sizeof w1);
-      const float* p = x_tet4 + 4 * static_cast<std::ptrdiff_t>(cols[k]);
-      const float* q = x_tet4 + 4 * static_cast<std::ptrdiff_t>(cols[k + 1]);
-      x0 += w0 * p[0];
-      y0 += w0 * p[1];
-      z0 += w0 * p[2];
-      x1 += w1 * q[0];
-      y1 += w1 * q[1];
-      z1 += w1 * q[2];
-    }
-    if (k < end) {
-      Lanes8f w0;
-      std::memcpy(&w0, b.weights + static_cast<std::ptrdiff_t>(k) * kPoseBlockRows, sizeof w0);
-      const float* p = x_tet4 + 4 * static_cast<std::ptrdiff_t>(cols[k]);
-      x0 += w0 * p[0];
-      y0 += w0 * p[1];
-      z0 += w0 * p[2];
-    }
-    const Lanes8f x = x0 + x1, y = y0 + y1, z = z0 + z1;
-    const std::int32_t* rows = b.lane_rows + static_cast<std::ptrdiff_t>(block) * kPoseBlockRows;
-    for (int l = 0; l < kPoseBlockRows; ++l) {
-      const std::int32_t r = rows[l];
-      if (r < 0) continue;
-      float* out = x_fine + 3 * static_cast<std::ptrdiff_t>(r);
-      out[0] = x[l];
-      out[1] = y[l];
-      out[2] = z[l];
-    }
+namespace {
+
+// Sums W(c, l) x_tet[c] over `count` column entries of a block (weights w: kPoseBlockRows floats per
+// entry, columns cols) into two partial sums per coordinate (even and odd entries): the FMA chains'
+// latency, not the loads, would set the pace with one.
+struct BlockSums {
+  Lanes8f x0{}, y0{}, z0{}, x1{}, y1{}, z1{};
+};
+__attribute__((always_inline)) inline void accumulate(const float* w, const std::uint16_t* cols, std::int32_t count, const float* x_tet4,
+                              BlockSums& s) {
+  std::int32_t k = 0;
+  for (; k + 2 <= count; k += 2) {
+    Lanes8f w0, w1;
+    std::memcpy(&w0, w + static_cast<std::ptrdiff_t>(k) * kPoseBlockRows, sizeof w0);
+    std::memcpy(&w1, w + static_cast<std::ptrdiff_t>(k + 1) * kPoseBlockRows, sizeof w1);
+    const float* p = x_tet4 + 4 * static_cast<std::ptrdiff_t>(cols[k]);
+    const float* q = x_tet4 + 4 * static_cast<std::ptrdiff_t>(cols[k + 1]);
+    s.x0 += w0 * p[0];
+    s.y0 += w0 * p[1];
+    s.z0 += w0 * p[2];
+    s.x1 += w1 * q[0];
+    s.y1 += w1 * q[1];
+    s.z1 += w1 * q[2];
   }
+  if (k < count) {
+    Lanes8f w0;
+    std::memcpy(&w0, w + static_cast<std::ptrdiff_t>(k) * kPoseBlockRows, sizeof w0);
+    const float* p = x_tet4 + 4 * static_cast<std::ptrdiff_t>(cols[k]);
+    s.x0 += w0 * p[0];
+    s.y0 += w0 * p[1];
+    s.z0 += w0 * p[2];
+  }
+}
+
+__attribute__((always_inline)) inline void storeBlock(const BlockSums& s, const std::int32_t* rows, float* x_fine) {
+  const Lanes8f x = s.x0 + s.x1, y = s.y0 + s.y1, z = s.z0 + s.z1;
+  for (int l = 0; l < kPoseBlockRows; ++l) {
+    const std::int32_t r = rows[l];
+    if (r < 0) continue;
+    float* out = x_fine + 3 * static_cast<std::ptrdiff_t>(r);
+    out[0] = x[l];
+    out[1] = y[l];
+    out[2] = z[l];
+  }
+}
+
+TETRIG_MULTIVERSION void applyFloatWeights(const BlockedPoseTransferView& b, const float* x_tet4, float* x_fine,
+                                           std::int32_t block_begin, std::int32_t block_end) noexcept {
+  for (std::int32_t block = block_begin; block < block_end; ++block) {
+    BlockSums sums;
+    const std::int32_t begin = b.block_offsets[block];
+    accumulate(b.weights + static_cast<std::ptrdiff_t>(begin) * kPoseBlockRows, b.columns + begin,
+               b.block_offsets[block + 1] - begin, x_tet4, sums);
+    storeBlock(sums, b.lane_rows + static_cast<std::ptrdiff_t>(block) * kPoseBlockRows, x_fine);
+  }
+}
+
+// Half weights: each block's weights are widened into a float scratch kHalfChunk entries at a time
+// (exactly: every binary16 value is a float), then summed as above.
+constexpr std::int32_t kHalfChunk = 128;
+
+TETRIG_MULTIVERSION void applyHalfWeights(const BlockedPoseTransferView& b, const float* x_tet4, float* x_fine,
+                                          std::int32_t block_begin, std::int32_t block_end) noexcept {
+  alignas(32) float scratch[kHalfChunk * kPoseBlockRows];
+  for (std::int32_t block = block_begin; block < block_end; ++block) {
+    BlockSums sums;
+    const std::int32_t end = b.block_offsets[block + 1];
+    for (std::int32_t begin = b.block_offsets[block]; begin < end; begin += kHalfChunk) {
+      const std::int32_t count = std::min(kHalfChunk, end - begin);
+      widenHalfWeights(b.half_weights + static_cast<std::ptrdiff_t>(begin) * kPoseBlockRows, scratch, count);
+      accumulate(scratch, b.columns + begin, count, x_tet4, sums);
+    }
+    storeBlock(sums, b.lane_rows + static_cast<std::ptrdiff_t>(block) * kPoseBlockRows, x_fine);
+  }
+}
+
+}  // namespace
+
+void applyPoseTransferBlocked(const BlockedPoseTransferView& b, const float* x_tet4, float* x_fine, std::int32_t block_begin,
+                              std::int32_t block_end) noexcept {
+  if (b.weights != nullptr)
+    applyFloatWeights(b, x_tet4, x_fine, block_begin, block_end);
+  else
+    applyHalfWeights(b, x_tet4, x_fine, block_begin, block_end);
+}
+
+void BlockedPoseTransfer::toHalfWeights() {
+  if (weights.empty()) return;
+  AlignedVector<std::uint16_t> half(weights.size());
+  for (std::size_t i = 0; i < weights.size(); ++i) {
+    if (!(std::abs(weights[i]) <= 65504.0f))
+      throw std::invalid_argument("pose transfer: weight " + std::to_string(weights[i]) + " is beyond half precision's range");
+    half[i] = floatToHalf(weights[i]);
+  }
+  half_weights = std::move(half);
+  weights = AlignedVector<float>();
 }
 
 }  // namespace tetrig

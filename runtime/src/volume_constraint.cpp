@@ -2,6 +2,8 @@
 // (tetrig/volume_constraint.hpp has the equations).
 #include "tetrig/volume_constraint.hpp"
 
+#include "volume_gradient.hpp"
+
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
@@ -9,9 +11,37 @@
 #include <cmath>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 #include <utility>
 
 namespace tetrig {
+namespace {
+
+// The gradient pass (volume_gradient.hpp) holds on a closed, consistently oriented mesh only: every
+// edge walked once each way, as often as the other (then the enclosed volume does not depend on the
+// origin either).
+void requireClosedOriented(std::span<const std::int32_t> triangles) {
+  std::vector<std::uint64_t> forward, backward;
+  forward.reserve(triangles.size());
+  backward.reserve(triangles.size());
+  for (std::size_t f = 0; f + 2 < triangles.size(); f += 3)
+    for (std::size_t k = 0; k < 3; ++k) {
+      const auto from = static_cast<std::uint32_t>(triangles[f + k]), to = static_cast<std::uint32_t>(triangles[f + (k + 1) % 3]);
+      forward.push_back(static_cast<std::uint64_t>(from) << 32 | to);
+      backward.push_back(static_cast<std::uint64_t>(to) << 32 | from);
+    }
+  std::sort(forward.begin(), forward.end());
+  std::sort(backward.begin(), backward.end());
+  const auto [f, b] = std::mismatch(forward.begin(), forward.end(), backward.begin());
+  if (f != forward.end()) {
+    const std::uint64_t edge = std::min(*f, *b);
+    throw std::invalid_argument("volume constraint: the fine mesh is not closed and consistently oriented (edge " +
+                                std::to_string(edge >> 32) + " -> " + std::to_string(edge & 0xffffffffu) +
+                                " has no matching edge the other way); it needs a watertight surface");
+  }
+}
+
+}  // namespace
 
 FineVolumeConstraint::FineVolumeConstraint(const PoseTransferView<double>& b, std::span<const std::int32_t> triangles,
                                            std::span<const double> rest_fine, std::int32_t gradient_entries)
@@ -24,7 +54,9 @@ FineVolumeConstraint::FineVolumeConstraint(const PoseTransferView<double>& b, st
                                 std::to_string(b.rows) + " fine vertices");
   for (const std::int32_t v : triangles)
     if (v < 0 || v >= b.rows) throw std::invalid_argument("volume constraint: triangle corner " + std::to_string(v) + " out of range");
+  requireClosedOriented(triangles);
   fine_gradient4_.assign(4 * static_cast<std::size_t>(b.rows), 0.0);
+  fine_gradient4f_.assign(4 * static_cast<std::size_t>(b.rows), 0.0f);
   rest_volume_ = volume(rest_fine.data());
   // The entries of B that g uses: all, or per row the gradient_entries largest weights rescaled to
   // the row's sum.
@@ -85,7 +117,9 @@ FineVolumeConstraint::FineVolumeConstraint(const PoseTransferView<double>& b, st
         for (std::size_t c = 0; c < 3; ++c) where[3 * static_cast<std::size_t>(j) + c] /= total;
     }
     bt_blocked_ = blockPoseTransfer(bt, where);
-    fine_gradient4f_.assign(4 * static_cast<std::size_t>(b.rows), 0.0f);
+    // g is a direction (the constraint's value comes from the measured volume): weights to 11 bits
+    // tilt it by ~2^-11 and halve the bytes the gather streams.
+    bt_blocked_.toHalfWeights();
     tet_gradient3f_.assign(3 * static_cast<std::size_t>(b.cols), 0.0f);
   } else {
     bt_wide_.rows = bt.rows;
@@ -119,30 +153,20 @@ double FineVolumeConstraint::value(std::span<const double> x_tet, const T* x_fin
 template <typename T>
 double FineVolumeConstraint::linearize(std::span<const double> x_tet, const T* x_fine, std::span<double> g,
                                        double* volume_now) noexcept {
-  // dV/dx_fine: 1/6 (b x c) at a, cyclically (no division per triangle: 9 divides were its cost).
-  std::fill(fine_gradient4_.begin(), fine_gradient4_.end(), 0.0);
-  double six = 0.0;
-  for (std::size_t f = 0; f < triangles_.size(); f += 3) {
-    Eigen::Vector3d p[3];
-    for (std::size_t k = 0; k < 3; ++k) {
-      const T* q = x_fine + 3 * static_cast<std::size_t>(triangles_[f + k]);
-      p[k] = Eigen::Vector3d(q[0], q[1], q[2]);
-    }
-    const Eigen::Vector3d d[3] = {p[1].cross(p[2]), p[2].cross(p[0]), p[0].cross(p[1])};
-    six += p[0].dot(d[0]);
-    for (std::size_t k = 0; k < 3; ++k) {
-      double* out = &fine_gradient4_[4 * static_cast<std::size_t>(triangles_[f + k])];
-      for (int c = 0; c < 3; ++c) out[c] += d[k][c];  // 6 dV/da; the 1/6 is applied to g
-    }
-  }
-  // g = B^T dV/dx_fine (a gather per tet vertex: the pose transfer's kernels), and g . x0. The sums
-  // over a vertex's triangles stay in double: they cancel (|b x c| ~ |x|^2, their sum ~ the ring's
-  // area); the blocked gather then takes them in float.
+  // 6 dV/dx_fine and 6 V: one pass over the triangles (volume_gradient.hpp), in the fine pose's type.
+  constexpr bool kFloat = std::is_same_v<T, float>;
+  const double six = volumeGradientPass(triangles_, x_fine, kFloat ? reinterpret_cast<T*>(fine_gradient4f_.data())
+                                                                   : reinterpret_cast<T*>(fine_gradient4_.data()),
+                                        fine_vertices_);
+  // g = B^T dV/dx_fine (a gather per tet vertex: the pose transfer's kernels), and g . x0.
   if (bt_blocked_.rows > 0) {
-    for (std::size_t i = 0; i < fine_gradient4_.size(); ++i) fine_gradient4f_[i] = static_cast<float>(fine_gradient4_[i]);
+    if (!kFloat)
+      for (std::size_t i = 0; i < fine_gradient4_.size(); ++i) fine_gradient4f_[i] = static_cast<float>(fine_gradient4_[i]);
     applyPoseTransferBlocked(bt_blocked_.view(), fine_gradient4f_.data(), tet_gradient3f_.data());
     for (std::size_t i = 0; i < g.size(); ++i) g[i] = static_cast<double>(tet_gradient3f_[i]);
   } else {
+    if (kFloat)
+      for (std::size_t i = 0; i < fine_gradient4_.size(); ++i) fine_gradient4_[i] = static_cast<double>(fine_gradient4f_[i]);
     applyPoseTransferPadded(bt_wide_.view(), fine_gradient4_.data(), g.data());
   }
   double g_x0 = 0.0;

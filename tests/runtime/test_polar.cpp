@@ -105,6 +105,37 @@ TEST(Polar, NearSingularAndSingularMatricesNeverGiveNaN) {
   EXPECT_LT((closestRotation(half_turn).toRotationMatrix() - half_turn).norm(), 1e-9);
 }
 
+// closestRotation's fast path (Newton on N's characteristic polynomial, the eigenvector from an
+// adjugate column) against the SVD maximiser: taken for almost every generic matrix, inverted or
+// not, with the same trace to rounding; declined where the largest eigenvalue of N is repeated
+// (F = 0, and F = diag(1, 1, -1), whose maximisers form a circle), where the eigensolver answers.
+TEST(Polar, TheQuarticPathAgreesWithTheSvdAndDeclinesRepeatedRoots) {
+  std::mt19937 rng(6);
+  std::normal_distribution<double> normal;
+  int taken = 0;
+  const int samples = 2000;
+  for (int i = 0; i < samples; ++i) {
+    Eigen::Matrix3d f;
+    for (int k = 0; k < 9; ++k) f.data()[k] = normal(rng);
+    if ((i % 2 == 0) != (f.determinant() < 0.0)) f.col(0) *= -1.0;  // half of them inverted
+    Eigen::Quaterniond q(0.0, 0.0, 0.0, 0.0);
+    if (!closestRotationByQuartic(f, q)) continue;
+    ++taken;
+    expectProperRotation(q.toRotationMatrix(), "quartic");
+    EXPECT_NEAR(q.norm(), 1.0, 1e-12);
+    EXPECT_NEAR(traceWith(q.toRotationMatrix(), f), traceWith(svdRotation(f), f), 1e-10 * (1.0 + f.norm())) << "sample " << i;
+  }
+  EXPECT_GE(taken, samples * 99 / 100);
+  Eigen::Quaterniond untouched(0.5, 0.5, 0.5, 0.5);
+  EXPECT_FALSE(closestRotationByQuartic(Eigen::Matrix3d::Zero(), untouched));
+  const Eigen::Matrix3d reflection = Eigen::Vector3d(1.0, 1.0, -1.0).asDiagonal();
+  EXPECT_FALSE(closestRotationByQuartic(reflection, untouched));
+  EXPECT_EQ(untouched.coeffs(), Eigen::Quaterniond(0.5, 0.5, 0.5, 0.5).coeffs());
+  // closestRotation still answers both, through the eigensolver.
+  expectProperRotation(closestRotation(reflection).toRotationMatrix(), "reflection");
+  EXPECT_NEAR(traceWith(closestRotation(reflection).toRotationMatrix(), reflection), 1.0, 1e-12);
+}
+
 TEST(Polar, RefinementNeverLowersTheTrace) {
   std::mt19937 rng(5);
   std::normal_distribution<double> normal;

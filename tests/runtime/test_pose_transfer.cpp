@@ -435,6 +435,91 @@ TEST(BlockedPoseTransfer, WithinItsRoundingBoundOfTheDoubleProduct) {
   EXPECT_EQ(::tetrig::test::allocationCount(), before);
 }
 
+// Half weights (BlockedPoseTransfer::toHalfWeights): half the bytes, every coordinate within the
+// stated bound of the exact product, |dx_ic| <= (n_i + 4) 2^-24 (1 + 2^-11) sum_k |B_ik| |x_kc| +
+// 2^-11 sum_k |B_ik| |x_kc| + 2^-25 sum_k |x_kc|, on blocks of up to ~480 columns (the kernel widens
+// 128 at a time), with weights down in half's subnormal range; the weights' rounding shows (many
+// coordinates beyond the float kernel's bound), and the product allocates nothing.
+TEST(BlockedPoseTransfer, HalfWeightsWithinTheirBoundOfTheDoubleProduct) {
+  const int rows = 1501;
+  const int cols = 3000;
+  Eigen::SparseMatrix<double, Eigen::RowMajor> b = randomRowsB(rows, cols, 60, 37);
+  for (int k = 0; k < b.nonZeros(); k += 7) b.valuePtr()[k] *= 1e-4;  // some weights near and below 2^-14
+  const Positions x = 1.5 * Positions::Random(cols, 3);
+  const Positions expected = b * x;
+  const Positions points = Positions::Random(rows, 3);
+  const PoseTransferCsr<double> bd = makePoseTransferCsr<double>(b);
+  const BlockedPoseTransfer single = blockPoseTransfer(bd, std::span<const double>(points.data(), static_cast<std::size_t>(points.size())));
+  BlockedPoseTransfer half = single;
+  half.toHalfWeights();
+  EXPECT_TRUE(half.weights.empty());
+  EXPECT_EQ(half.half_weights.size(), single.weights.size());
+  EXPECT_EQ(single.bytes() - half.bytes(), static_cast<std::int64_t>(2 * single.weights.size()));
+  EXPECT_EQ(half.view().weights, nullptr);
+  std::int32_t widest = 0;
+  for (std::int32_t k = 0; k < half.blocks; ++k) widest = std::max(widest, half.block_offsets[k + 1] - half.block_offsets[k]);
+  EXPECT_GT(widest, 256);  // several widening chunks in a block
+
+  const std::vector<float> x4 = paddedFloatPositions(x);
+  std::vector<float> out(static_cast<size_t>(rows) * 3, -7.0f);
+  applyPoseTransferBlocked(half.view(), x4.data(), out.data());
+  int beyond_float = 0;
+  for (int i = 0; i < rows; ++i) {
+    const int n = static_cast<int>(b.outerIndexPtr()[i + 1] - b.outerIndexPtr()[i]);
+    for (int c = 0; c < 3; ++c) {
+      double magnitude = 0.0, plain = 0.0;
+      for (Eigen::SparseMatrix<double, Eigen::RowMajor>::InnerIterator it(b, i); it; ++it) {
+        magnitude += std::abs(it.value()) * std::abs(x(it.col(), c));
+        plain += std::abs(x(it.col(), c));
+      }
+      const double float_bound = (n + 4.0) * 0x1p-24 * magnitude;
+      const double bound = float_bound * (1.0 + 0x1p-11) + 0x1p-11 * magnitude + 0x1p-25 * plain;
+      const double error = std::abs(static_cast<double>(out[3 * static_cast<size_t>(i) + static_cast<size_t>(c)]) - expected(i, c));
+      ASSERT_LE(error, bound) << "row " << i << " (" << n << " entries) coordinate " << c;
+      beyond_float += error > float_bound;
+    }
+  }
+  EXPECT_GT(beyond_float, 1000) << "the weights were not rounded to half";
+
+  const std::uint64_t before = ::tetrig::test::allocationCount();
+  for (int frame = 0; frame < 10; ++frame) applyPoseTransferBlocked(half.view(), x4.data(), out.data());
+  EXPECT_EQ(::tetrig::test::allocationCount(), before);
+}
+
+// The rounding to half, bit for bit: to nearest, ties to even, in the normal and the subnormal range
+// (whose top rounds up into the smallest normal); a weight beyond 65504 is refused.
+TEST(BlockedPoseTransfer, HalfWeightsRoundToNearestEven) {
+  const std::vector<std::pair<double, std::uint16_t>> cases = {
+      {1.0, 0x3C00},  {1.0 / 3.0, 0x3555}, {-0.5, 0xB800}, {65504.0, 0x7BFF}, {0x1p-14, 0x0400},
+      {1e-6, 0x0011}, {-1e-6, 0x8011},     {0x1p-25, 0x0000}, {3 * 0x1p-25, 0x0002},
+      {1.0 + 0x1p-11, 0x3C00}, {1.0 + 3 * 0x1p-11, 0x3C02}, {0x1p-14 - 0x1p-25, 0x0400}, {0.0, 0x0000}};
+  PoseTransferCsr<double> b;
+  b.rows = 1;
+  b.cols = static_cast<std::int32_t>(cases.size());
+  b.row_offsets = {0, b.cols};
+  for (std::int32_t j = 0; j < b.cols; ++j) {
+    b.columns.push_back(j);
+    b.weights.push_back(cases[static_cast<std::size_t>(j)].first);
+  }
+  const std::vector<double> point = {0.0, 0.0, 0.0};
+  BlockedPoseTransfer blocked = blockPoseTransfer(b, point);
+  blocked.toHalfWeights();
+  ASSERT_EQ(blocked.columns.size(), cases.size());
+  for (std::size_t j = 0; j < cases.size(); ++j)
+    EXPECT_EQ(blocked.half_weights[kPoseBlockRows * j], cases[j].second) << "weight " << cases[j].first;
+  // Widened back exactly: the product with x = e_j gives each rounded weight.
+  for (std::size_t j = 0; j < cases.size(); ++j) {
+    std::vector<float> x4(4 * cases.size(), 0.0f), out(3, 0.0f);
+    x4[4 * j] = 1.0f;
+    applyPoseTransferBlocked(blocked.view(), x4.data(), out.data());
+    const double w = cases[j].first;
+    EXPECT_LE(std::abs(out[0] - w), std::max(0x1p-11 * std::abs(w), 0x1p-25)) << "weight " << w;
+  }
+  b.weights[3] = 70000.0;
+  BlockedPoseTransfer too_large = blockPoseTransfer(b, point);
+  EXPECT_THROW(too_large.toHalfWeights(), std::invalid_argument);
+}
+
 // Rows are blocked by where their fine vertices lie, not by their order: on a surface grid whose rows
 // take their weights from the nearest coarse grid points, listed in a shuffled order, the blocks hold
 // less than half the weights that blocks of consecutive rows would (those gather 8 unrelated patches).

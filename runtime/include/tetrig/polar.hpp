@@ -7,8 +7,11 @@
 //
 // - closestRotation: exact, by Horn's method: tr(R(q)^T F) = q^T N(F) q for unit quaternions q,
 //   so the maximiser is the eigenvector of the largest eigenvalue of the symmetric 4x4 N(F).
-//   About a microsecond; used at load, for rigid-group averages and as the fallback of the
-//   frame kernel for inverted tets.
+//   The largest eigenvalue by Newton's method on N's characteristic polynomial and its
+//   eigenvector from the adjugate of N - lambda I (closestRotationByQuartic, a few hundred
+//   nanoseconds), else, where the largest eigenvalue is (nearly) repeated, Eigen's eigensolver
+//   (a few microseconds). Used at load, for rigid-group averages, marker-cluster fits and as
+//   the fallback of the frame kernel for inverted tets.
 // - refineRotation: the warm-started iteration of Mueller, Bender, Chentanez and Macklin,
 //   "A Robust Method to Extract the Rotational Part of Deformations" (MIG 2016): rotate q by
 //   omega = sum_i r_i x f_i / (|sum_i r_i . f_i| + eps) (r_i, f_i: columns of R(q) and F), the
@@ -25,6 +28,10 @@
 namespace tetrig {
 
 Eigen::Quaterniond closestRotation(const Eigen::Matrix3d& f);
+
+// The fast path of closestRotation: true and q set when the largest eigenvalue of N(F) converged
+// quadratically and its adjugate column is well conditioned; false (q untouched) otherwise.
+bool closestRotationByQuartic(const Eigen::Matrix3d& f, Eigen::Quaterniond& q);
 
 double refineRotation(const Eigen::Matrix3d& f, Eigen::Quaterniond& q, int max_steps, double tolerance = 1e-12);
 

@@ -35,7 +35,8 @@ class FineVolumeConstraint {
   // rescaled to the row's sum (g is then a direction near the exact one, far cheaper to gather: the
   // constraint's value c still comes from the measured volume, so it holds the volume to first
   // order in the frame's own motion; docs/deformation.md). 0: the exact B^T.
-  // Throws std::invalid_argument on sizes that do not match or an index out of range.
+  // Throws std::invalid_argument on sizes that do not match, an index out of range, or triangles that
+  // do not close (each edge walked once each way: a watertight, consistently oriented surface).
   FineVolumeConstraint(const PoseTransferView<double>& b, std::span<const std::int32_t> triangles,
                        std::span<const double> rest_fine, std::int32_t gradient_entries = 0);
 
@@ -65,15 +66,16 @@ class FineVolumeConstraint {
   // B^T (a row per tet vertex: the fine vertices it moves), built at load, so that g = B^T dV/dx_fine
   // gathers instead of scattering (the scatter over B's rows took about four times the forward pose
   // transfer), with the pose transfer's own kernels: in blocks of 8 nearby tet vertices (each placed
-  // at the |B|-weighted mean of the fine vertices it moves), float weights and sums, when there are
+  // at the |B|-weighted mean of the fine vertices it moves), half-precision weights (BlockedPoseTransfer::
+  // toHalfWeights: g is a direction, 2^-11 of each weight tilts it by as little) and float sums, when there are
   // at most 65536 fine vertices (bt_blocked_), else row by row with float weights and double sums
   // (bt_wide_); the other is empty.
   BlockedPoseTransfer bt_blocked_;
   PoseTransferCsr<float> bt_wide_;
   std::span<const std::int32_t> triangles_;
   double rest_volume_ = 0.0;
-  std::vector<double> fine_gradient4_;  // #fine*4 scratch: 6 dV/dx_fine, padded (x, y, z, 0)
-  std::vector<float> fine_gradient4f_;  // #fine*4 scratch for bt_blocked_: the same in float
+  std::vector<double> fine_gradient4_;  // #fine*4 scratch: 6 dV/dx_fine, padded (x, y, z, 0), in double
+  std::vector<float> fine_gradient4f_;  // #fine*4 scratch: the same in float (bt_blocked_ gathers it)
   std::vector<float> tet_gradient3f_;   // #tetV*3 scratch for bt_blocked_: B^T of it
 };
 
