@@ -175,8 +175,8 @@ namespace {
 struct BlockSums {
   Lanes8f x0{}, y0{}, z0{}, x1{}, y1{}, z1{};
 };
-__attribute__((always_inline)) inline void accumulate(const float* w, const std::uint16_t* cols, std::int32_t count, const float* x_tet4,
-                              BlockSums& s) {
+__attribute__((always_inline)) inline void accumulate(const float* w, const std::uint16_t* cols, std::int32_t count,
+                                                      const float* x_tet4, BlockSums& s) {
   std::int32_t k = 0;
   for (; k + 2 <= count; k += 2) {
     Lanes8f w0, w1;

@@ -155,9 +155,12 @@ double FineVolumeConstraint::linearize(std::span<const double> x_tet, const T* x
                                        double* volume_now) noexcept {
   // 6 dV/dx_fine and 6 V: one pass over the triangles (volume_gradient.hpp), in the fine pose's type.
   constexpr bool kFloat = std::is_same_v<T, float>;
-  const double six = volumeGradientPass(triangles_, x_fine, kFloat ? reinterpret_cast<T*>(fine_gradient4f_.data())
-                                                                   : reinterpret_cast<T*>(fine_gradient4_.data()),
-                                        fine_vertices_);
+  T* gradient4 = nullptr;
+  if constexpr (kFloat)
+    gradient4 = fine_gradient4f_.data();
+  else
+    gradient4 = fine_gradient4_.data();
+  const double six = volumeGradientPass(triangles_, x_fine, gradient4, fine_vertices_);
   // g = B^T dV/dx_fine (a gather per tet vertex: the pose transfer's kernels), and g . x0.
   if (bt_blocked_.rows > 0) {
     if (!kFloat)
