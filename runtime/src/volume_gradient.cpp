@@ -10,45 +10,45 @@
 #include <cstring>
 
 #include "multiversion.hpp"
+#include "vector_lanes.hpp"
 
 namespace tetrig {
 namespace {
 
-// GCC takes no vector attribute on a dependent type: one alias per element type.
-using Float4 = float __attribute__((vector_size(4 * sizeof(float))));
-using Double4 = double __attribute__((vector_size(4 * sizeof(double))));
+// The per-vertex vector types of vector_lanes.hpp, by element type (GCC takes no vector attribute on
+// a dependent type).
 template <typename T>
 struct Vector4;
 template <>
 struct Vector4<float> {
-  using type = Float4;
+  using type = lanes::Vec4f;
 };
 template <>
 struct Vector4<double> {
-  using type = Double4;
+  using type = lanes::Vec4;
 };
 template <typename T>
 using Vec4 = typename Vector4<T>::type;
 
 template <typename T>
-__attribute__((always_inline)) inline Vec4<T> loadPoint(const T* p) {
+TETRIG_INLINE Vec4<T> loadPoint(const T* p) {
   // Lane by lane: the last vertex has nothing after it, and a 12-byte copy into a stack vector
   // reloaded whole stalls store forwarding (measured: 3x slower).
   return Vec4<T>{p[0], p[1], p[2], T(0)};
 }
 
 template <typename V>
-__attribute__((always_inline)) inline V cross(V u, V v) {
+TETRIG_INLINE V cross(V u, V v) {
   const V u_yzx = __builtin_shufflevector(u, u, 1, 2, 0, 3), v_yzx = __builtin_shufflevector(v, v, 1, 2, 0, 3);
   const V w = u * v_yzx - u_yzx * v;  // (u x v) in z, x, y order
   return __builtin_shufflevector(w, w, 1, 2, 0, 3);
 }
 
 template <typename T>
-__attribute__((always_inline)) inline double pass(std::span<const std::int32_t> triangles, const T* x, T* gradient4,
+TETRIG_INLINE double pass(std::span<const std::int32_t> triangles, const T* x, T* gradient4,
                                                   std::int32_t vertex_count) {
   std::memset(gradient4, 0, 4 * sizeof(T) * static_cast<std::size_t>(vertex_count));
-  Double4 six = {0, 0, 0, 0};
+  lanes::Vec4 six = {0, 0, 0, 0};
   if (triangles.size() < 3) return 0.0;
   // 6 V = sum_t (a - o) . n_t for any o (sum_t n_t = 0 on a closed mesh): o, a vertex of the mesh,
   // keeps the terms at the mesh's size, not its distance from the origin.
@@ -66,14 +66,9 @@ __attribute__((always_inline)) inline double pass(std::span<const std::int32_t> 
       const Vec4<T> a = loadPoint(x + 3 * ia), b = loadPoint(x + 3 * ib), c = loadPoint(x + 3 * ic);
       const Vec4<T> n = cross(b - a, c - a);
       run += (a - o) * n;
-      for (const std::size_t i : {ia, ib, ic}) {
-        Vec4<T> sum;
-        std::memcpy(&sum, gradient4 + 4 * i, sizeof sum);
-        sum += n;
-        std::memcpy(gradient4 + 4 * i, &sum, sizeof sum);
-      }
+      for (const std::size_t i : {ia, ib, ic}) lanes::storeAs(gradient4 + 4 * i, lanes::loadAs<Vec4<T>>(gradient4 + 4 * i) + n);
     }
-    six += __builtin_convertvector(run, Double4);
+    six += __builtin_convertvector(run, lanes::Vec4);
   }
   return six[0] + six[1] + six[2];
 }
