@@ -123,20 +123,19 @@ void Deformer::implicitGuardSolve() {
     }
     std::array<double, 3> gamma{};
     for (size_t c = 0; c < 3; ++c) gamma[c] = pap[c] > 0.0 && rz[c] > 0.0 ? rz[c] / pap[c] : 0.0;
-    // u += gamma p; r -= gamma A p (the dense part here, the guarded part below).
-    for (size_t i = 0; i < free4; i += kVectorStride) {
-      for (size_t c = 0; c < 3; ++c) {
-        u_[i + c] += gamma[c] * cg_p_[i + c];
-        cg_r_[i + c] -= gamma[c] * cg_lp_[i + c];
-      }
-    }
+    // u += gamma p; then, unless this was the last step (the live setting S = 1 ends here), r -= gamma
+    // A p (the dense part here, the guarded part below).
+    for (size_t i = 0; i < free4; i += kVectorStride)
+      for (size_t c = 0; c < 3; ++c) u_[i + c] += gamma[c] * cg_p_[i + c];
+    if (step + 1 == options_.inversion_guard_solves) break;
+    for (size_t i = 0; i < free4; i += kVectorStride)
+      for (size_t c = 0; c < 3; ++c) cg_r_[i + c] -= gamma[c] * cg_lp_[i + c];
     const Eigen::DiagonalMatrix<double, 3> minus_gamma(-gamma[0], -gamma[1], -gamma[2]);
     for (size_t i = 0; i < guarded_count_; ++i) {
       const GuardedTet t = tetOf(guarded_slot_[i]);
       scatterGradient(t, guarded_coef_[i] * (minus_gamma * gradientOf(t, cg_p_.data())), cg_r_.data());
     }
     std::fill(cg_r_.begin() + static_cast<std::ptrdiff_t>(free4), cg_r_.end(), 0.0);
-    if (step + 1 == options_.inversion_guard_solves) break;
     std::copy(cg_r_.begin(), cg_r_.end(), cg_z_.begin());
     factor_.solveInPlace(cg_z_.data());
     const std::array<double, 3> rz_next = dot3(cg_r_, cg_z_);
