@@ -538,15 +538,12 @@ void Deformer::writePositions() {
 bool Deformer::setLinearConstraint(std::span<const double> g, double c) noexcept {
   constraint_active_ = false;
   if (constraint_g_.empty() || g.size() != 3 * static_cast<size_t>(vertex_count_) || !std::isfinite(c)) return false;
-  double rest_dot = 0.0;
   for (std::int32_t s = 0; s < vertex_count_; ++s) {
     const double* gv = &g[3 * static_cast<size_t>(mesh_vertex_[static_cast<size_t>(s)])];
     double* out = &constraint_g_[kVectorStride * static_cast<size_t>(s)];
-    for (size_t k = 0; k < 3; ++k) {
-      out[k] = gv[k];
-      rest_dot += gv[k] * rest_solver_[kVectorStride * static_cast<size_t>(s) + k];
-    }
+    for (size_t k = 0; k < 3; ++k) out[k] = gv[k];  // the pad lane stays 0
   }
+  const double rest_dot = paddedDot(constraint_g_.data(), rest_solver_.data(), constraint_g_.size());
   const size_t free4 = static_cast<size_t>(free_count_) * kVectorStride;
   std::copy_n(constraint_g_.data(), free4, constraint_z_.data());
   if (free_count_ > 0) factor_.solveInPlace(constraint_z_.data());

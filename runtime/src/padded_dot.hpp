@@ -24,6 +24,16 @@ inline std::array<double, kVectorStride> paddedDotByLane(const double* a, const 
   return {s[0] + s[4], s[1] + s[5], s[2] + s[6], s[3] + s[7]};
 }
 
+// sum over i < n of a[i] b[i], any n (eight running sums, then the rest).
+inline double dot(const double* a, const double* b, std::size_t n) noexcept {
+  double s[8] = {};
+  std::size_t i = 0;
+  for (; i + 8 <= n; i += 8)
+    for (std::size_t k = 0; k < 8; ++k) s[k] += a[i + k] * b[i + k];
+  for (std::size_t k = 0; i < n; ++i, ++k) s[k] += a[i] * b[i];
+  return ((s[0] + s[1]) + (s[2] + s[3])) + ((s[4] + s[5]) + (s[6] + s[7]));
+}
+
 inline double paddedDot(const double* a, const double* b, std::size_t n) noexcept {
   const std::array<double, kVectorStride> lanes = paddedDotByLane(a, b, n);
   return (lanes[0] + lanes[1]) + (lanes[2] + lanes[3]);
