@@ -107,8 +107,10 @@ void Deformer::implicitGuardSolve() {
     const std::array<double, kVectorStride> d = paddedDotByLane(a, b, free4);
     return std::array<double, 3>{d[0], d[1], d[2]};
   };
+  // r_0 is zero but at the guarded tets' vertices: the forward pass skips the supernodes it does not
+  // reach (about a fifth of the solve on the shipped asset).
   std::copy(cg_r_.begin(), cg_r_.end(), cg_z_.begin());
-  factor_.solveInPlace(cg_z_.data());
+  factor_.solveInPlace(cg_z_.data(), /*skip_zero_nodes=*/true);
   std::array<double, 3> rz = dot3(cg_r_.data(), cg_z_.data());
   // p_0 = z_0 and L p_0 = L z_0 = r_0: the first step reads them where they are; they are copied
   // out only when a further step follows (then z and r change).
