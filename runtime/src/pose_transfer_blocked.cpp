@@ -219,15 +219,24 @@ __attribute__((always_inline)) inline void storeBlock(const BlockSums& s, const 
   }
 }
 
-TETRIG_MULTIVERSION void applyFloatWeights(const BlockedPoseTransferView& b, const float* x_tet4, float* x_fine,
-                                           std::int32_t block_begin, std::int32_t block_end) noexcept {
+// Blocks [block_begin, block_end), each summed whole; weights_at(e): the weights from entry e on.
+template <typename WeightsAt>
+__attribute__((always_inline)) inline void sumBlocks(const BlockedPoseTransferView& b, const WeightsAt& weights_at,
+                                                     const float* x_tet4, float* x_fine, std::int32_t block_begin,
+                                                     std::int32_t block_end) noexcept {
   for (std::int32_t block = block_begin; block < block_end; ++block) {
     BlockSums sums;
     const std::int32_t begin = b.block_offsets[block];
-    accumulate(FloatWeights{b.weights + static_cast<std::ptrdiff_t>(begin) * kPoseBlockRows}, b.columns + begin,
-               b.block_offsets[block + 1] - begin, x_tet4, sums);
+    accumulate(weights_at(begin), b.columns + begin, b.block_offsets[block + 1] - begin, x_tet4, sums);
     storeBlock(sums, b.lane_rows + static_cast<std::ptrdiff_t>(block) * kPoseBlockRows, x_fine);
   }
+}
+
+TETRIG_MULTIVERSION void applyFloatWeights(const BlockedPoseTransferView& b, const float* x_tet4, float* x_fine,
+                                           std::int32_t block_begin, std::int32_t block_end) noexcept {
+  sumBlocks(
+      b, [&b](std::int32_t entry) { return FloatWeights{b.weights + static_cast<std::ptrdiff_t>(entry) * kPoseBlockRows}; },
+      x_tet4, x_fine, block_begin, block_end);
 }
 
 // Half weights. Without F16C each block's weights are widened into a float scratch kHalfChunk
@@ -256,13 +265,9 @@ void applyHalfWeightsPortable(const BlockedPoseTransferView& b, const float* x_t
 __attribute__((target("arch=x86-64-v3"), flatten)) void applyHalfWeights(const BlockedPoseTransferView& b, const float* x_tet4,
                                                                          float* x_fine, std::int32_t block_begin,
                                                                          std::int32_t block_end) noexcept {
-  for (std::int32_t block = block_begin; block < block_end; ++block) {
-    BlockSums sums;
-    const std::int32_t begin = b.block_offsets[block];
-    accumulate(F16cWeights{b.half_weights + static_cast<std::ptrdiff_t>(begin) * kPoseBlockRows}, b.columns + begin,
-               b.block_offsets[block + 1] - begin, x_tet4, sums);
-    storeBlock(sums, b.lane_rows + static_cast<std::ptrdiff_t>(block) * kPoseBlockRows, x_fine);
-  }
+  sumBlocks(
+      b, [&b](std::int32_t entry) { return F16cWeights{b.half_weights + static_cast<std::ptrdiff_t>(entry) * kPoseBlockRows}; },
+      x_tet4, x_fine, block_begin, block_end);
 }
 __attribute__((target("default"))) void applyHalfWeights(const BlockedPoseTransferView& b, const float* x_tet4, float* x_fine,
                                                          std::int32_t block_begin, std::int32_t block_end) noexcept {
