@@ -5,6 +5,7 @@
 #include "tetrig/laplacian.hpp"
 #include "tetrig/rigid_groups.hpp"
 #include "tetrig/rotation_interpolation.hpp"
+#include "padded_dot.hpp"
 
 #include <algorithm>
 #include <functional>
@@ -537,20 +538,16 @@ void Deformer::writePositions() {
 bool Deformer::setLinearConstraint(std::span<const double> g, double c) noexcept {
   constraint_active_ = false;
   if (constraint_g_.empty() || g.size() != 3 * static_cast<size_t>(vertex_count_) || !std::isfinite(c)) return false;
-  double rest_dot = 0.0;
   for (std::int32_t s = 0; s < vertex_count_; ++s) {
     const double* gv = &g[3 * static_cast<size_t>(mesh_vertex_[static_cast<size_t>(s)])];
     double* out = &constraint_g_[kVectorStride * static_cast<size_t>(s)];
-    for (size_t k = 0; k < 3; ++k) {
-      out[k] = gv[k];
-      rest_dot += gv[k] * rest_solver_[kVectorStride * static_cast<size_t>(s) + k];
-    }
+    for (size_t k = 0; k < 3; ++k) out[k] = gv[k];  // the pad lane stays 0
   }
+  const double rest_dot = paddedDot(constraint_g_.data(), rest_solver_.data(), constraint_g_.size());
   const size_t free4 = static_cast<size_t>(free_count_) * kVectorStride;
   std::copy_n(constraint_g_.data(), free4, constraint_z_.data());
   if (free_count_ > 0) factor_.solveInPlace(constraint_z_.data());
-  double gz = 0.0;
-  for (size_t i = 0; i < free4; ++i) gz += constraint_g_[i] * constraint_z_[i];
+  const double gz = paddedDot(constraint_g_.data(), constraint_z_.data(), free4);
   // L_ff is positive definite: g_f . z > 0 unless g_f = 0 (nothing free to move), or not finite.
   if (!(gz > 0.0) || !std::isfinite(gz) || !std::isfinite(rest_dot)) return false;
   constraint_rest_dot_ = rest_dot;
@@ -568,8 +565,7 @@ bool Deformer::setLinearConstraintValue(double c) noexcept {
 
 void Deformer::applyLinearConstraint() {
   // g . x = g . x_rest + g . u: the displacement part over every slot (free and handles).
-  double gu = 0.0;
-  for (size_t i = 0; i < u_.size(); ++i) gu += constraint_g_[i] * u_[i];
+  const double gu = paddedDot(constraint_g_.data(), u_.data(), u_.size());
   const double mu = (constraint_rhs_ - gu) / constraint_gz_;
   const size_t free4 = static_cast<size_t>(free_count_) * kVectorStride;
   for (size_t i = 0; i < free4; ++i) u_[i] += mu * constraint_z_[i];

@@ -246,6 +246,13 @@ TETRIG_INLINE void columnsMinusBlockProduct(double* x, const double* dk, const d
   for (int q = 0; q < Q; ++q) store4(x + kS * q, load4(x + kS * q) * dk[q] - sumLanes(sx[q], sy[q], sz[q]));
 }
 
+// Whether n doubles are all (plus or minus) zero.
+TETRIG_INLINE bool allZero(const double* x, std::int32_t n) {
+  for (std::int32_t i = 0; i < n; ++i)
+    if (x[i] != 0.0) return false;
+  return true;
+}
+
 }  // namespace
 
 // Per supernode of k columns with r rows below: forward z_block = T^-1 z_block, then
@@ -254,7 +261,7 @@ TETRIG_INLINE void columnsMinusBlockProduct(double* x, const double* dk, const d
 // per 8 entries, rows scattered or gathered once per node); single columns (most of them, short)
 // keep one vector (x, y, z, pad) per entry.
 TETRIG_MULTIVERSION
-void SplitLdlt::solveInPlace(double* xyzw) {
+void SplitLdlt::solveInPlace(double* xyzw, bool skip_zero_nodes) {
   const std::int32_t* rows = rows_.data();
   const double* d_inv = d_inv_.data();
   const double* values = values_.data();
@@ -264,6 +271,7 @@ void SplitLdlt::solveInPlace(double* xyzw) {
     const double* block = values + node.block_begin;
     const std::int32_t* r = rows + node.row_begin;
     double* z = xyzw + kS * node.first_column;
+    if (skip_zero_nodes && allZero(z, kS * k)) continue;  // T^-1 0 = 0, and nothing to subtract
     if (k == 1) {
       const Vec4 z0 = load4(z);
       for (std::int32_t i = 0; i < np; ++i) {

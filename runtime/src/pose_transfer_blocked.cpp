@@ -41,7 +41,7 @@ using Bits8 = std::uint32_t __attribute__((vector_size(kPoseBlockRows * sizeof(s
 
 // Widening without F16C: the magnitude's bits moved to float's places and scaled by 2^112 (the
 // exponent bias 15 -> 127; exact, subnormal halves included), the sign put back.
-__attribute__((always_inline)) inline void widenPortable(const std::uint16_t* half, float* out, std::int32_t entries) {
+__attribute__((always_inline)) inline void widenPortable(const std::uint16_t* half, float* out, std::int32_t entries) noexcept {
   for (std::int32_t k = 0; k < entries; ++k) {
     Half8 h;
     std::memcpy(&h, half + static_cast<std::ptrdiff_t>(k) * kPoseBlockRows, sizeof h);
@@ -58,22 +58,6 @@ __attribute__((always_inline)) inline void widenPortable(const std::uint16_t* ha
 }
 
 }  // namespace
-
-// kPoseBlockRows half weights per entry -> floats. x86-64 with GCC: F16C's vcvtph2ps where the CPU
-// has it (function multiversioning: the loader picks), the lane arithmetic elsewhere.
-#if defined(TETRIG_MULTIVERSION_ENABLED)
-__attribute__((target("arch=x86-64-v3"))) void widenHalfWeights(const std::uint16_t* half, float* out, std::int32_t entries) {
-  static_assert(kPoseBlockRows == 8, "one vcvtph2ps per entry");
-  for (std::int32_t k = 0; k < entries; ++k)
-    _mm256_store_ps(out + static_cast<std::ptrdiff_t>(k) * kPoseBlockRows,
-                    _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(half + static_cast<std::ptrdiff_t>(k) * kPoseBlockRows))));
-}
-__attribute__((target("default"))) void widenHalfWeights(const std::uint16_t* half, float* out, std::int32_t entries) {
-  widenPortable(half, out, entries);
-}
-#else
-void widenHalfWeights(const std::uint16_t* half, float* out, std::int32_t entries) { widenPortable(half, out, entries); }
-#endif
 
 namespace {
 
@@ -169,19 +153,42 @@ BlockedPoseTransfer blockPoseTransfer(const PoseTransferCsr<double>& b, std::spa
 
 namespace {
 
-// Sums W(c, l) x_tet[c] over `count` column entries of a block (weights w: kPoseBlockRows floats per
-// entry, columns cols) into two partial sums per coordinate (even and odd entries): the FMA chains'
+// A column entry's kPoseBlockRows weights as float lanes: stored as floats, or as IEEE binary16
+// widened by F16C's vcvtph2ps (callable from x86-64-v3 code only; see applyHalfWeights).
+struct FloatWeights {
+  const float* w;
+  __attribute__((always_inline)) Lanes8f operator()(std::int32_t k) const noexcept {
+    Lanes8f lanes;
+    std::memcpy(&lanes, w + static_cast<std::ptrdiff_t>(k) * kPoseBlockRows, sizeof lanes);
+    return lanes;
+  }
+};
+#if defined(TETRIG_MULTIVERSION_ENABLED)
+struct F16cWeights {
+  const std::uint16_t* half;
+  // Not always_inline: GCC inlines it only into x86-64-v3 code, which the flatten of the caller gives.
+  __attribute__((target("arch=x86-64-v3"))) Lanes8f operator()(std::int32_t k) const noexcept {
+    static_assert(kPoseBlockRows == 8, "one vcvtph2ps per entry");
+    const __m256 f = _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(half + static_cast<std::ptrdiff_t>(k) * kPoseBlockRows)));
+    Lanes8f lanes;
+    std::memcpy(&lanes, &f, sizeof lanes);
+    return lanes;
+  }
+};
+#endif
+
+// Sums W(c, l) x_tet[c] over `count` column entries of a block (weights(k): entry k's kPoseBlockRows
+// weights, columns cols) into two partial sums per coordinate (even and odd entries): the FMA chains'
 // latency, not the loads, would set the pace with one.
 struct BlockSums {
   Lanes8f x0{}, y0{}, z0{}, x1{}, y1{}, z1{};
 };
-__attribute__((always_inline)) inline void accumulate(const float* w, const std::uint16_t* cols, std::int32_t count,
-                                                      const float* x_tet4, BlockSums& s) {
+template <typename Weights>
+__attribute__((always_inline)) inline void accumulate(const Weights& weights, const std::uint16_t* cols, std::int32_t count,
+                                                      const float* x_tet4, BlockSums& s) noexcept {
   std::int32_t k = 0;
   for (; k + 2 <= count; k += 2) {
-    Lanes8f w0, w1;
-    std::memcpy(&w0, w + static_cast<std::ptrdiff_t>(k) * kPoseBlockRows, sizeof w0);
-    std::memcpy(&w1, w + static_cast<std::ptrdiff_t>(k + 1) * kPoseBlockRows, sizeof w1);
+    const Lanes8f w0 = weights(k), w1 = weights(k + 1);
     const float* p = x_tet4 + 4 * static_cast<std::ptrdiff_t>(cols[k]);
     const float* q = x_tet4 + 4 * static_cast<std::ptrdiff_t>(cols[k + 1]);
     s.x0 += w0 * p[0];
@@ -192,8 +199,7 @@ __attribute__((always_inline)) inline void accumulate(const float* w, const std:
     s.z1 += w1 * q[2];
   }
   if (k < count) {
-    Lanes8f w0;
-    std::memcpy(&w0, w + static_cast<std::ptrdiff_t>(k) * kPoseBlockRows, sizeof w0);
+    const Lanes8f w0 = weights(k);
     const float* p = x_tet4 + 4 * static_cast<std::ptrdiff_t>(cols[k]);
     s.x0 += w0 * p[0];
     s.y0 += w0 * p[1];
@@ -213,35 +219,67 @@ __attribute__((always_inline)) inline void storeBlock(const BlockSums& s, const 
   }
 }
 
-TETRIG_MULTIVERSION void applyFloatWeights(const BlockedPoseTransferView& b, const float* x_tet4, float* x_fine,
-                                           std::int32_t block_begin, std::int32_t block_end) noexcept {
+// Blocks [block_begin, block_end), each summed whole; weights_at(e): the weights from entry e on.
+template <typename WeightsAt>
+__attribute__((always_inline)) inline void sumBlocks(const BlockedPoseTransferView& b, const WeightsAt& weights_at,
+                                                     const float* x_tet4, float* x_fine, std::int32_t block_begin,
+                                                     std::int32_t block_end) noexcept {
   for (std::int32_t block = block_begin; block < block_end; ++block) {
     BlockSums sums;
     const std::int32_t begin = b.block_offsets[block];
-    accumulate(b.weights + static_cast<std::ptrdiff_t>(begin) * kPoseBlockRows, b.columns + begin,
-               b.block_offsets[block + 1] - begin, x_tet4, sums);
+    accumulate(weights_at(begin), b.columns + begin, b.block_offsets[block + 1] - begin, x_tet4, sums);
     storeBlock(sums, b.lane_rows + static_cast<std::ptrdiff_t>(block) * kPoseBlockRows, x_fine);
   }
 }
 
-// Half weights: each block's weights are widened into a float scratch kHalfChunk entries at a time
-// (exactly: every binary16 value is a float), then summed as above.
+TETRIG_MULTIVERSION void applyFloatWeights(const BlockedPoseTransferView& b, const float* x_tet4, float* x_fine,
+                                           std::int32_t block_begin, std::int32_t block_end) noexcept {
+  sumBlocks(
+      b, [&b](std::int32_t entry) { return FloatWeights{b.weights + static_cast<std::ptrdiff_t>(entry) * kPoseBlockRows}; },
+      x_tet4, x_fine, block_begin, block_end);
+}
+
+// Half weights. Without F16C each block's weights are widened into a float scratch kHalfChunk
+// entries at a time (exactly: every binary16 value is a float), then summed as above.
 constexpr std::int32_t kHalfChunk = 128;
 
-TETRIG_MULTIVERSION void applyHalfWeights(const BlockedPoseTransferView& b, const float* x_tet4, float* x_fine,
-                                          std::int32_t block_begin, std::int32_t block_end) noexcept {
+void applyHalfWeightsPortable(const BlockedPoseTransferView& b, const float* x_tet4, float* x_fine, std::int32_t block_begin,
+                              std::int32_t block_end) noexcept {
   alignas(32) float scratch[kHalfChunk * kPoseBlockRows];
   for (std::int32_t block = block_begin; block < block_end; ++block) {
     BlockSums sums;
     const std::int32_t end = b.block_offsets[block + 1];
     for (std::int32_t begin = b.block_offsets[block]; begin < end; begin += kHalfChunk) {
       const std::int32_t count = std::min(kHalfChunk, end - begin);
-      widenHalfWeights(b.half_weights + static_cast<std::ptrdiff_t>(begin) * kPoseBlockRows, scratch, count);
-      accumulate(scratch, b.columns + begin, count, x_tet4, sums);
+      widenPortable(b.half_weights + static_cast<std::ptrdiff_t>(begin) * kPoseBlockRows, scratch, count);
+      accumulate(FloatWeights{scratch}, b.columns + begin, count, x_tet4, sums);
     }
     storeBlock(sums, b.lane_rows + static_cast<std::ptrdiff_t>(block) * kPoseBlockRows, x_fine);
   }
 }
+
+// With F16C (x86-64-v3 and up; GCC function multiversioning, the loader picks) each entry's weights
+// are widened as they are loaded: 0.55-0.6x the time of widening a chunk into scratch and summing
+// it (the shipped asset's B^T; docs/fidelity.md, "The volume constraint's frame, cheaper again").
+// flatten inlines F16cWeights into this v3 code.
+#if defined(TETRIG_MULTIVERSION_ENABLED)
+__attribute__((target("arch=x86-64-v3"), flatten)) void applyHalfWeights(const BlockedPoseTransferView& b, const float* x_tet4,
+                                                                         float* x_fine, std::int32_t block_begin,
+                                                                         std::int32_t block_end) noexcept {
+  sumBlocks(
+      b, [&b](std::int32_t entry) { return F16cWeights{b.half_weights + static_cast<std::ptrdiff_t>(entry) * kPoseBlockRows}; },
+      x_tet4, x_fine, block_begin, block_end);
+}
+__attribute__((target("default"))) void applyHalfWeights(const BlockedPoseTransferView& b, const float* x_tet4, float* x_fine,
+                                                         std::int32_t block_begin, std::int32_t block_end) noexcept {
+  applyHalfWeightsPortable(b, x_tet4, x_fine, block_begin, block_end);
+}
+#else
+void applyHalfWeights(const BlockedPoseTransferView& b, const float* x_tet4, float* x_fine, std::int32_t block_begin,
+                      std::int32_t block_end) noexcept {
+  applyHalfWeightsPortable(b, x_tet4, x_fine, block_begin, block_end);
+}
+#endif
 
 }  // namespace
 

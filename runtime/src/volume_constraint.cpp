@@ -2,6 +2,7 @@
 // (tetrig/volume_constraint.hpp has the equations).
 #include "tetrig/volume_constraint.hpp"
 
+#include "padded_dot.hpp"
 #include "volume_gradient.hpp"
 
 #include <Eigen/Core>
@@ -172,11 +173,8 @@ double FineVolumeConstraint::linearize(std::span<const double> x_tet, const T* x
       for (std::size_t i = 0; i < fine_gradient4_.size(); ++i) fine_gradient4_[i] = static_cast<double>(fine_gradient4f_[i]);
     applyPoseTransferPadded(bt_wide_.view(), fine_gradient4_.data(), g.data());
   }
-  double g_x0 = 0.0;
-  for (std::size_t i = 0; i < x_tet.size(); ++i) {
-    g[i] *= 1.0 / 6.0;
-    g_x0 += g[i] * x_tet[i];
-  }
+  for (double& v : g) v *= 1.0 / 6.0;
+  const double g_x0 = dot(g.data(), x_tet.data(), x_tet.size());
   const double now = six / 6.0;
   if (volume_now != nullptr) *volume_now = now;
   return rest_volume_ - now + g_x0;

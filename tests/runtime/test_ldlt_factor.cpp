@@ -6,8 +6,11 @@
 #include <Eigen/SparseCholesky>
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
+#include <cmath>
 #include <random>
+#include <vector>
 
 namespace tetrig {
 namespace {
@@ -56,6 +59,39 @@ TEST_P(SplitLdltBars, MatchesEigenSolveForThreeInterleavedColumns) {
 
 INSTANTIATE_TEST_SUITE_P(Bars, SplitLdltBars,
                          ::testing::Values(std::array<int, 3>{3, 3, 12}, std::array<int, 3>{6, 6, 24}));
+
+// skip_zero_nodes (the implicit guard's first solve, whose right-hand side is zero but at a few
+// tets' vertices): the same solution as the full solve, to the bit, and Eigen's to 1e-10, for a
+// right-hand side with three non-zero rows (one node's ancestors fill in) and for a dense one.
+TEST(SplitLdlt, SkippingZeroNodesSolvesTheSame) {
+  const Eigen::SparseMatrix<double> a = spdFromBar(6, 6, 24);
+  SplitLdlt factor;
+  factor.factorize(a);
+  constexpr size_t kS = kVectorStride;
+  std::mt19937 rng(5);
+  std::normal_distribution<double> normal;
+  for (const int nonzero_rows : {3, static_cast<int>(a.rows())}) {
+    Eigen::MatrixXd b = Eigen::MatrixXd::Zero(a.rows(), 3);
+    for (int j = 0; j < nonzero_rows; ++j) {
+      const auto row = nonzero_rows == a.rows() ? j : std::uniform_int_distribution<int>(0, static_cast<int>(a.rows()) - 1)(rng);
+      for (int c = 0; c < 3; ++c) b(row, c) = normal(rng);
+    }
+    std::vector<double> full(static_cast<size_t>(a.rows()) * kS, 0.0);
+    for (std::int32_t i = 0; i < factor.size(); ++i)
+      for (int c = 0; c < 3; ++c) full[kS * static_cast<size_t>(factor.position(i)) + static_cast<size_t>(c)] = b(i, c);
+    std::vector<double> skipping = full;
+    factor.solveInPlace(full.data());
+    factor.solveInPlace(skipping.data(), /*skip_zero_nodes=*/true);
+    EXPECT_EQ(full, skipping) << nonzero_rows << " non-zero rows";
+    const Eigen::MatrixXd expected = Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>>(a).solve(b);
+    double worst = 0.0;
+    for (std::int32_t i = 0; i < factor.size(); ++i)
+      for (int c = 0; c < 3; ++c)
+        worst = std::max(worst, std::abs(skipping[kS * static_cast<size_t>(factor.position(i)) + static_cast<size_t>(c)] - expected(i, c)));
+    EXPECT_LT(worst, 1e-10 * expected.cwiseAbs().maxCoeff());
+    EXPECT_GT(expected.cwiseAbs().minCoeff(), 0.0) << "the backward pass fills every row, skipped nodes too";
+  }
+}
 
 TEST(SplitLdlt, PositionsArePermutation) {
   const Eigen::SparseMatrix<double> a = spdFromBar(2, 2, 8);

@@ -49,8 +49,10 @@ class SplitLdlt {
   // Solves A x = b in place for 3 interleaved right-hand sides held in factor order:
   // xyzw[kVectorStride * position(i) + c] is component c (0..2) of row i; lane 3 is carried along
   // (keep it 0). No allocation, no exceptions; uses the factor's own scratch, so one SplitLdlt
-  // solves on one thread at a time.
-  void solveInPlace(double* xyzw);
+  // solves on one thread at a time. skip_zero_nodes: the forward pass passes over supernodes whose
+  // values are still all zero when reached, for right-hand sides that are zero but at a few rows
+  // (only the rows' ancestors in the elimination tree fill in); the result is the same.
+  void solveInPlace(double* xyzw, bool skip_zero_nodes = false);
 
  private:
   void buildSupernodes(const std::vector<std::int32_t>& col_start, const std::vector<std::int32_t>& row,
