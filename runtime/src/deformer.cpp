@@ -543,11 +543,11 @@ bool Deformer::setLinearConstraint(std::span<const double> g, double c) noexcept
     double* out = &constraint_g_[kVectorStride * static_cast<size_t>(s)];
     for (size_t k = 0; k < 3; ++k) out[k] = gv[k];  // the pad lane stays 0
   }
-  const double rest_dot = paddedDot(constraint_g_.data(), rest_solver_.data(), constraint_g_.size());
+  const double rest_dot = dot(constraint_g_.data(), rest_solver_.data(), constraint_g_.size());
   const size_t free4 = static_cast<size_t>(free_count_) * kVectorStride;
   std::copy_n(constraint_g_.data(), free4, constraint_z_.data());
   if (free_count_ > 0) factor_.solveInPlace(constraint_z_.data());
-  const double gz = paddedDot(constraint_g_.data(), constraint_z_.data(), free4);
+  const double gz = dot(constraint_g_.data(), constraint_z_.data(), free4);
   // L_ff is positive definite: g_f . z > 0 unless g_f = 0 (nothing free to move), or not finite.
   if (!(gz > 0.0) || !std::isfinite(gz) || !std::isfinite(rest_dot)) return false;
   constraint_rest_dot_ = rest_dot;
@@ -565,7 +565,7 @@ bool Deformer::setLinearConstraintValue(double c) noexcept {
 
 void Deformer::applyLinearConstraint() {
   // g . x = g . x_rest + g . u: the displacement part over every slot (free and handles).
-  const double gu = paddedDot(constraint_g_.data(), u_.data(), u_.size());
+  const double gu = dot(constraint_g_.data(), u_.data(), u_.size());
   const double mu = (constraint_rhs_ - gu) / constraint_gz_;
   const size_t free4 = static_cast<size_t>(free_count_) * kVectorStride;
   for (size_t i = 0; i < free4; ++i) u_[i] += mu * constraint_z_[i];

@@ -1,7 +1,8 @@
-// Dot products over the solver's per-vertex vectors (x, y, z, pad; kVectorStride doubles a vertex),
-// private to runtime/src. Eight running sums instead of one: the compiler keeps them in vector
-// registers, where a single sum would wait on each addition's latency (a 6000-entry product: ~8 us
-// as one chain, ~1 us as eight). The order of the additions is fixed, so results are deterministic.
+// Dot products of double arrays, among them the solver's per-vertex vectors (x, y, z, pad;
+// kVectorStride doubles a vertex), private to runtime/src. Eight running sums instead of one: the
+// compiler keeps them in vector registers, where a single sum would wait on each addition's latency
+// (a 6000-entry product: ~8 us as one chain, ~1 us as eight). The order of the additions is fixed,
+// so results are deterministic.
 #pragma once
 
 #include "tetrig/ldlt_factor.hpp"
@@ -32,11 +33,6 @@ inline double dot(const double* a, const double* b, std::size_t n) noexcept {
     for (std::size_t k = 0; k < 8; ++k) s[k] += a[i + k] * b[i + k];
   for (std::size_t k = 0; i < n; ++i, ++k) s[k] += a[i] * b[i];
   return ((s[0] + s[1]) + (s[2] + s[3])) + ((s[4] + s[5]) + (s[6] + s[7]));
-}
-
-inline double paddedDot(const double* a, const double* b, std::size_t n) noexcept {
-  const std::array<double, kVectorStride> lanes = paddedDotByLane(a, b, n);
-  return (lanes[0] + lanes[1]) + (lanes[2] + lanes[3]);
 }
 
 }  // namespace tetrig

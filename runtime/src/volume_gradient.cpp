@@ -50,8 +50,7 @@ TETRIG_INLINE V cross(V u, V v) {
 }
 
 template <typename T>
-TETRIG_INLINE double pass(std::span<const std::int32_t> triangles, const T* x, T* gradient4,
-                                                  std::int32_t vertex_count) {
+TETRIG_INLINE double pass(std::span<const std::int32_t> triangles, const T* x, T* gradient4, std::int32_t vertex_count) {
   std::memset(gradient4, 0, 4 * sizeof(T) * static_cast<std::size_t>(vertex_count));
   lanes::Vec4 six = {0, 0, 0, 0};
   if (triangles.size() < 3) return 0.0;
