@@ -155,6 +155,36 @@ int checkRegions(const Rig& rig, const nlohmann::json& run) {
   return with_inversions;
 }
 
+// Every body tet the budgeted pose inverted in any played frame (`inverted_body_tets_any_frame`):
+// listed once, a body tet, in as many frames as the run has frames with any (or fewer), first
+// <= last within the run, inverted (lowest det F <= 0), named by its region; and on a reference
+// frame every inverted tet the regions list is in it. Returns the entries.
+nlohmann::json checkAnyFrame(const Rig& rig, const nlohmann::json& run, std::size_t first_frame) {
+  const nlohmann::json& list = run["inverted_body_tets_any_frame"];
+  std::set<int> tets;
+  std::size_t most = 0;
+  for (const auto& t : list) {
+    const int id = t["tet"].get<int>();
+    EXPECT_TRUE(tets.insert(id).second) << "tet " << id << " listed twice";
+    EXPECT_GE(id, 0);
+    EXPECT_LT(id, rig.body_tet_count);
+    const std::size_t frames = t["frames"].get<std::size_t>();
+    EXPECT_GE(frames, 1u);
+    most = std::max(most, frames);
+    EXPECT_GE(t["first_frame"].get<std::size_t>(), first_frame);
+    EXPECT_LE(t["first_frame"].get<std::size_t>(), t["last_frame"].get<std::size_t>());
+    EXPECT_LT(t["last_frame"].get<std::size_t>(), first_frame + run["frames"].get<std::size_t>());
+    EXPECT_LE(t["last_frame"].get<std::size_t>() - t["first_frame"].get<std::size_t>() + 1, run["frames"].get<std::size_t>());
+    EXPECT_LE(t["lowest_volume_ratio"].get<double>(), 0.0);
+    EXPECT_FALSE(t["near"].get<std::string>().empty());
+  }
+  EXPECT_LE(most, run["frames_with_inverted_body_tets"].get<std::size_t>());
+  EXPECT_EQ(list.empty(), run["frames_with_inverted_body_tets"].get<std::size_t>() == 0);
+  for (const auto& f : run["reference"])
+    for (const auto& tet : f["regions"]["budgeted"]["inverted_tets"]) EXPECT_TRUE(tets.count(tet["tet"].get<int>())) << tet["tet"];
+  return list;
+}
+
 TEST_F(FidelityTool, MoreIterationsLandNearerAndTheReferenceIsConverged) {
   const TempDir dir;
   const auto json = dir.path() / "f.json";
@@ -203,7 +233,10 @@ TEST_F(FidelityTool, MoreIterationsLandNearerAndTheReferenceIsConverged) {
     EXPECT_LT((*run)["reference_iterations"]["max"].get<double>(), 3000);
   }
   const Rig rig = loadRigFile(*rig_);
-  for (const auto* run : {&one, &five}) checkRegions(rig, *run);
+  for (const auto* run : {&one, &five}) {
+    checkRegions(rig, *run);
+    checkAnyFrame(rig, *run, 0);
+  }
   EXPECT_LT(five["rms_error_mm"]["median"].get<double>(), one["rms_error_mm"]["median"].get<double>());
   EXPECT_LT(five["energy_excess"]["median"].get<double>(), one["energy_excess"]["median"].get<double>());
   EXPECT_GT(one["rms_error_mm"]["median"].get<double>(), 0.0);
@@ -220,7 +253,19 @@ TEST_F(FidelityTool, TheRegionsNameWhereTetsInvertAndVolumeIsLost) {
   ASSERT_EQ(r.status, 0) << r.err;
   const nlohmann::json run = readJson(json)["runs"][0];
   ASSERT_GT(run["reference"][0]["inverted_body_tets"].get<int>(), 0) << "the jump must invert tets for the test to mean anything";
-  EXPECT_GT(checkRegions(loadRigFile(*rig_), run), 0);
+  const Rig rig = loadRigFile(*rig_);
+  EXPECT_GT(checkRegions(rig, run), 0);
+  // The one frame's inverted tets are the whole list, each in that frame, its det F the volume ratio.
+  const nlohmann::json any = checkAnyFrame(rig, run, 1600);
+  const auto& listed = run["reference"][0]["regions"]["budgeted"]["inverted_tets"];
+  ASSERT_EQ(any.size(), listed.size());
+  for (std::size_t i = 0; i < any.size(); ++i) {
+    EXPECT_EQ(any[i]["tet"], listed[i]["tet"]);
+    EXPECT_EQ(any[i]["frames"].get<std::size_t>(), 1u);
+    EXPECT_EQ(any[i]["first_frame"].get<std::size_t>(), 1600u);
+    EXPECT_NEAR(any[i]["lowest_volume_ratio"].get<double>(), listed[i]["volume_ratio"].get<double>(), 1e-9);
+    EXPECT_EQ(any[i]["near"], listed[i]["near"]);
+  }
 }
 
 // The feet driven by their markers (assets/human_man_feet.json: each foot an oriented region
