@@ -305,7 +305,7 @@ ExportReport exportClip(const ExportOptions& o) {
     throw std::invalid_argument("--predict needs --iterations N: it predicts where a frame starts, and a frame solved to convergence "
                                 "lands where it lands from any start");
   LiveRigOptions live_options;
-  setRelaxAndGuard(o.relax, o.inversion_guard, o.inversion_guard_solves, live_options);  // checked before anything is written
+  setRelaxAndGuard(o.relax, o.inversion_guard, o.inversion_guard_solves, o.inversion_guard_threshold, live_options);  // checked before anything is written
   ExportReport report;
   report.target = parseExportTarget(o.out);
   const ExportTarget& target = report.target;

@@ -62,6 +62,7 @@ struct ExportOptions {
   double relax = LiveRigOptions{}.rotation_relaxation;   // as `tetrig run --relax`
   double inversion_guard = LiveRigOptions{}.inversion_guard;  // as `tetrig run --inversion-guard`
   int inversion_guard_solves = LiveRigOptions{}.inversion_guard_solves;  // as `tetrig run --inversion-guard-solves`
+  double inversion_guard_threshold = LiveRigOptions{}.inversion_guard_threshold;  // as `tetrig run --inversion-guard-threshold`
   double rate_hz = 0;                   // > 0: overrides the clip's frame rate (needed for glTF without one)
   bool keep_zero_markers = false;       // as `tetrig run --keep-zero-markers`: samples at x = y = z = 0 with
                                         // residual 0 stay valid (default: gaps)

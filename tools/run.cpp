@@ -92,7 +92,7 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
   live_options.volume_constraint = options.keep_volume;
   if (options.after_publish_iterations < 0) throw std::invalid_argument("--after-publish-iterations must be >= 0");
   live_options.after_publish_iterations = options.after_publish_iterations;
-  setRelaxAndGuard(options.relax, options.inversion_guard, options.inversion_guard_solves, live_options);
+  setRelaxAndGuard(options.relax, options.inversion_guard, options.inversion_guard_solves, options.inversion_guard_threshold, live_options);
   std::optional<Rig> coarse;
   if (!options.coarse_rig_path.empty()) coarse = loadRigFile(options.coarse_rig_path);
   LiveRig live(rig, live_options, coarse ? &*coarse : nullptr);
@@ -150,10 +150,12 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
     if (options.relax != LiveRigOptions{}.rotation_relaxation)
       std::printf("  over-relaxation of the rotation update: omega %.3g\n", options.relax);
     if (options.inversion_guard > 0.0 && options.inversion_guard_solves > 0)
-      std::printf("  inversion guard: squashed body tets up to %.3g times stiffer, implicit (%d conjugate-gradient steps per iteration)\n",
-                  1.0 + options.inversion_guard, options.inversion_guard_solves);
+      std::printf("  inversion guard: body tets squashed below %.3g of their volume up to %.3g times stiffer, implicit (%d "
+                  "conjugate-gradient steps per iteration)\n",
+                  options.inversion_guard_threshold, 1.0 + options.inversion_guard, options.inversion_guard_solves);
     else if (options.inversion_guard > 0.0)
-      std::printf("  inversion guard: squashed body tets up to %.3g times stiffer\n", 1.0 + options.inversion_guard);
+      std::printf("  inversion guard: body tets squashed below %.3g of their volume up to %.3g times stiffer\n",
+                  options.inversion_guard_threshold, 1.0 + options.inversion_guard);
     if (!binding.missing.empty())
       std::printf("  note: %zu rig markers the source never names are treated as occluded: %s\n", binding.missing.size(),
                   joinLabels(binding.missing).c_str());
@@ -327,6 +329,7 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
                    {"relax", options.relax},
                    {"inversion_guard", options.inversion_guard},
                    {"inversion_guard_solves", options.inversion_guard_solves},
+                   {"inversion_guard_threshold", options.inversion_guard_threshold},
                    {"coarse_level", live.coarseLevel() != nullptr},
                    {"pose_threads", pose_threads},
                    {"compact_pose_transfer", !options.double_pose_transfer}};

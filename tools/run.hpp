@@ -29,6 +29,7 @@ struct RunOptions {
   double relax = LiveRigOptions{}.rotation_relaxation;   // omega in [1, 2) (solver_flags.hpp)
   double inversion_guard = LiveRigOptions{}.inversion_guard;  // k in [0, 1], or [0, 1000] when implicit (solver_flags.hpp)
   int inversion_guard_solves = LiveRigOptions{}.inversion_guard_solves;  // > 0: the implicit guard (solver_flags.hpp)
+  double inversion_guard_threshold = LiveRigOptions{}.inversion_guard_threshold;  // volume ratio below which it holds a tet
   std::optional<tetrig::Rig> rig;       // an already built rig (tetrig demo)
   std::string source = "synthetic";     // c3d:PATH, replay:PATH, synthetic[:N], hid:VID:PID, usb:VID:PID, hydra[:SERIAL]
   std::string publish = "tetrig";       // shared-memory segment name (without the leading '/')

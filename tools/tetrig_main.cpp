@@ -202,6 +202,11 @@ int main(int argc, char** argv) {
                       "(docs/deformation.md); with --inversion-guard 2, 1 (or 2, at twice the solves) kept every body tet the right way out on HDM05")
       ->capture_default_str()
       ->check(CLI::Range(0, 64));
+  run_cmd->add_option("--inversion-guard-threshold", run.inversion_guard_threshold,
+                      "The volume ratio below which the inversion guard holds a body tet (docs/deformation.md); 0.7 with "
+                      "--keep-volume kept every body tet the right way out on HDM05")
+      ->capture_default_str()
+      ->check(CLI::Range(0.01, 1.0));
   run_cmd->add_flag("--no-coarse", run.no_coarse, "Do not use the rig's own coarse level (built with --coarse-tet-vertices)");
   run_cmd->add_option("--coarse-rig", run.coarse_rig_path,
                       "Coarse level: the same mesh and markers built with fewer --tet-vertices (e.g. 300), solved first every "
@@ -284,6 +289,10 @@ int main(int argc, char** argv) {
                          "The inversion guard implicit, S conjugate-gradient steps per iteration (as tetrig run)")
       ->capture_default_str()
       ->check(CLI::Range(0, 64));
+  export_cmd->add_option("--inversion-guard-threshold", exp.inversion_guard_threshold,
+                         "The volume ratio below which the guard holds a body tet (as tetrig run)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.01, 1.0));
   export_cmd->add_flag("--keep-zero-markers", exp.keep_zero_markers,
                        "Samples at x = y = z = 0 with residual 0 are valid points, not gaps (as tetrig run)");
   export_cmd->add_option("--rate", exp.rate_hz, "Frame rate in Hz instead of the clip's (glTF sample times)")->check(CLI::Range(0.001, 100000.0));

@@ -40,6 +40,9 @@
 //   s conjugate-gradient steps per iteration; docs/deformation.md) and no iterations after publishing.
 //   BM_LiveRigFrame/smpl_hdm05_landing_implicit_volume/<s>: that and the volume constraint (its
 //   linearization after publishing, in the frame's time and apart as prepare_us): every mechanism.
+//   BM_LiveRigFrame/smpl_hdm05_landing_kept_volume/1: that (S = 1) with omega 1.8 and the guard
+//   holding tets from 0.7 of their volume (inversion_guard_threshold): the configuration recommended
+//   with the volume kept (docs/live.md).
 //   BM_PoseTransfer/smpl_hdm05/<layout>/<cache>: the pose transfer alone, from the padded positions of
 //   one posed frame into a float buffer; layout 0 = the rig's B (double weights, 32-bit columns, 12
 //   bytes per entry), 1 = the compact copy (float, 16-bit, 6 bytes: narrowPoseTransfer) from double
@@ -247,7 +250,7 @@ void BM_RigFrameCoarsePredictedRelaxed(benchmark::State& state) { rigFrame(state
 BENCHMARK(BM_RigFrameCoarsePredictedRelaxed)->Name("BM_RigFrame/smpl_hdm05_coarse_predicted_relaxed")->Unit(benchmark::kMicrosecond);
 
 void liveRigFrame(benchmark::State& state, bool feet, bool volume_constraint = false, bool after_publish = false,
-                  bool landing = false, bool implicit_guard = false) {
+                  bool landing = false, bool implicit_guard = false, bool kept_volume_flags = false) {
   const RigScene* scene = sceneOrSkip(state, feet);
   if (scene == nullptr) return;
   tetrig::LiveRigOptions live_options;
@@ -262,6 +265,12 @@ void liveRigFrame(benchmark::State& state, bool feet, bool volume_constraint = f
       // The implicit guard instead (docs/deformation.md): k 3, range(0) conjugate-gradient steps.
       live_options.inversion_guard = 3.0;
       live_options.inversion_guard_solves = static_cast<int>(state.range(0));
+      if (kept_volume_flags) {
+        // The configuration recommended with the volume kept (docs/live.md): omega 1.8 and the guard
+        // holding tets from 0.7 of their volume.
+        live_options.rotation_relaxation = 1.8;
+        live_options.inversion_guard_threshold = 0.7;
+      }
     } else {
       live_options.after_publish_iterations = static_cast<int>(state.range(0));
     }
@@ -317,6 +326,10 @@ BENCHMARK(BM_LiveRigFrameLandingImplicit)->Name("BM_LiveRigFrame/smpl_hdm05_land
 void BM_LiveRigFrameLandingImplicitVolume(benchmark::State& state) { liveRigFrame(state, false, true, false, true, true); }
 // The same with the volume constraint too (its after-publish work in the frame's time): all of it.
 BENCHMARK(BM_LiveRigFrameLandingImplicitVolume)->Name("BM_LiveRigFrame/smpl_hdm05_landing_implicit_volume")->DenseRange(1, 2)->Unit(benchmark::kMicrosecond);
+void BM_LiveRigFrameLandingKeptVolume(benchmark::State& state) { liveRigFrame(state, false, true, false, true, true, true); }
+// The same with omega 1.8 and the guard's threshold at 0.7: the configuration recommended with the
+// volume kept (docs/live.md, "Landing near the converged pose").
+BENCHMARK(BM_LiveRigFrameLandingKeptVolume)->Name("BM_LiveRigFrame/smpl_hdm05_landing_kept_volume")->Arg(1)->Unit(benchmark::kMicrosecond);
 // Argument: iterations after publishing (LiveRigOptions::after_publish_iterations).
 BENCHMARK(BM_LiveRigFrameAfterPublish)->Name("BM_LiveRigFrame/smpl_hdm05_after_publish")->Arg(1)->Arg(2)->Unit(benchmark::kMicrosecond);
 // Argument: entries of each row of B the constraint's gradient uses (0 = all).

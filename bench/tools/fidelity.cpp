@@ -47,6 +47,7 @@
 #include <cstdlib>
 #include <exception>
 #include <limits>
+#include <map>
 #include <memory>
 #include <span>
 #include <sstream>
@@ -88,6 +89,7 @@ nlohmann::json toJson(const Percentiles& p) {
 struct PoseMeasure {
   double energy = 0.0;
   int inverted_body_tets = 0;
+  std::vector<std::pair<std::int32_t, double>> inverted;  // each inverted body tet and its det F
 };
 
 // The rig marker nearest to a rest point (its index in rig.markers), -1 without markers: a body
@@ -162,6 +164,12 @@ class RegionTally {
     return {{"volume_change_near", std::move(lost)}, {"inverted_near", std::move(inv)}, {"inverted_tets", std::move(inverted_tets)}};
   }
 
+  // The label of a body tet's region (its rest centroid's nearest marker), "" without markers.
+  std::string label(std::int32_t t) const {
+    const std::int32_t r = region_[static_cast<std::size_t>(t)];
+    return r < 0 ? std::string() : rig_.markers[static_cast<std::size_t>(r)].label;
+  }
+
  private:
   const Rig& rig_;
   std::vector<double> rest_volume_;
@@ -209,7 +217,10 @@ class Measurer {
       e.col(1) = p(c[1]) - p4;
       e.col(2) = p(c[2]) - p4;
       const Eigen::Matrix3d f = e * frames_.edge_inverse[static_cast<std::size_t>(t)];
-      if (t < rig_.body_tet_count && f.determinant() <= 0.0) ++m.inverted_body_tets;
+      if (t < rig_.body_tet_count && f.determinant() <= 0.0) {
+        ++m.inverted_body_tets;
+        m.inverted.emplace_back(t, f.determinant());
+      }
       if (energy) {
         const Eigen::Matrix3d r = tetrig::closestRotation(f).toRotationMatrix();
         const double w = f.determinant() > 1e-6 ? volume_weight_[static_cast<std::size_t>(t)] : 0.0;  // as the kernel
@@ -318,6 +329,13 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
   int inverted_budget_max = 0, inverted_conv_max = 0;
   std::size_t inverted_budget_max_frame = 0, inverted_budget_frames = 0;
   std::vector<int> ref_inverted, ref_inverted_conv;
+  // Every body tet the budgeted pose inverts in any frame (not only reference frames): its frames,
+  // the first and last of them and its lowest det F.
+  struct InvertedTet {
+    std::size_t frames = 0, first = 0, last = 0;
+    double lowest = 0.0;
+  };
+  std::map<std::int32_t, InvertedTet> inverted_any;
   std::size_t held = 0, predicted = 0, rejected = 0;
   double step_us = 0.0;
   const double rest_volume = measurer.fineRestVolume();
@@ -337,6 +355,15 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
       inverted_budget_max_frame = f;
     }
     if (mb.inverted_body_tets > 0) ++inverted_budget_frames;
+    for (const auto& [t, det] : mb.inverted) {
+      InvertedTet& it = inverted_any[t];
+      if (it.frames++ == 0) {
+        it.first = f;
+        it.lowest = det;
+      }
+      it.last = f;
+      it.lowest = std::min(it.lowest, det);
+    }
     volume_budget.push_back(measurer.fineVolume(fine.data()) / rest_volume - 1.0);
     if (!is_reference) continue;
 
@@ -434,6 +461,14 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
       {"inverted_body_tets_max", inverted_budget_max},
       {"inverted_body_tets_max_frame", inverted_budget_max_frame},
       {"frames_with_inverted_body_tets", inverted_budget_frames},
+      {"inverted_body_tets_any_frame", [&] {
+         nlohmann::json list = nlohmann::json::array();
+         for (const auto& [t, it] : inverted_any)
+           list.push_back({{"tet", t}, {"frames", it.frames}, {"first_frame", it.first}, {"last_frame", it.last},
+                           {"lowest_volume_ratio", it.lowest}, {"near", regions.label(t)},
+                           {"rest_radius_ratio", tetrig::rigbuild::tetRadiusRatio(rig.tet_mesh, t)}});
+         return list;
+       }()},
       {"inverted_body_tets_converged_max", inverted_conv_max},
       {"volume_change", toJson(volume)},
       {"volume_change_max", volume.max},
@@ -549,7 +584,8 @@ int main(int argc, char** argv) {
   cfg.live.use_coarse_level = !no_coarse;
   try {
     // The same checks as tetrig run and tetrig export (K above 1 only with the implicit guard).
-    tetrig::tools::setRelaxAndGuard(cfg.live.rotation_relaxation, cfg.live.inversion_guard, cfg.live.inversion_guard_solves, cfg.live);
+    tetrig::tools::setRelaxAndGuard(cfg.live.rotation_relaxation, cfg.live.inversion_guard, cfg.live.inversion_guard_solves,
+                                    cfg.live.inversion_guard_threshold, cfg.live);
     if (cfg.reference_guard_solves > 0 && cfg.live.inversion_guard_solves == 0)
       throw std::invalid_argument("--reference-guard-solves needs the implicit inversion guard: give --inversion-guard-solves too");
     if (cfg.reference_guard_solves == 0) cfg.reference_guard_solves = cfg.live.inversion_guard_solves;

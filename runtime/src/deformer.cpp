@@ -599,11 +599,15 @@ StepStats Deformer::step(const HandleTargets& targets, const StepBudget& budget)
     const auto t0 = Clock::now();
     for (size_t i = 0; i < free4; ++i) u_[i] = delta_[i] + rhs_constant_[i];
     if (free_count_ > 0) factor_.solveInPlace(u_.data());
+    // The constraint's multiplier first, so that the guard's step solves (L + G) u = b + mu g: the
+    // held tets' stiffness bears on the constraint's displacement too; then the little the guard's
+    // step moved g . u is projected out again (docs/deformation.md, "Volume constraint").
+    if (constraint_active_) applyLinearConstraint();
     if (guarded_count_ > 0) {
       implicitGuardSolve();
       ++stats.guarded_solves;
+      if (constraint_active_) applyLinearConstraint();
     }
-    if (constraint_active_) applyLinearConstraint();
     const auto t1 = Clock::now();
     stats.solve_ns += nanosecondsBetween(t0, t1);
     ++stats.iterations;

@@ -429,6 +429,63 @@ TEST(Deformer, ImplicitInversionGuardHoldsWhereTheExplicitOneCannot) {
   EXPECT_NO_THROW(Deformer(bar.mesh, setup));
 }
 
+// The implicit guard and the linear constraint together (deformer.cpp, step): the constraint's
+// multiplier goes in before the guard's conjugate-gradient step, which then solves the held tets'
+// stiffness against the constraint's displacement too, and the little that step moves g . x is
+// projected out after it. So (1) every step's result lies on the constraint's plane, held tets or
+// not, and (2) the bar pushed 3 units deep keeps every tet the right way out with its volume held.
+TEST(Deformer, LinearConstraintHoldsWithTheImplicitGuard) {
+  const auto bar = scenes::makeBarScene(4, 4, 12);
+  const std::int32_t pushed = middleOfTopFace(bar);
+  const TetRestFrames frames = computeRestFrames(bar.mesh);
+  DeformerSetup setup = test::endVertexHandles(bar);
+  setup.vertex_handles.push_back(pushed);
+  setup.options.inversion_guard = 4.0;
+  setup.options.inversion_guard_solves = 1;
+  setup.options.linear_constraint = true;
+  Deformer deformer(bar.mesh, setup);
+  auto targets = test::endTargets(bar, Eigen::Isometry3d::Identity());
+  targets.push_back(bar.mesh.vertices.row(pushed).transpose() - Eigen::Vector3d(0.0, 3.0, 0.0));
+  std::vector<double> g;
+  const double rest_volume = tetVolumeAndGradient(bar.mesh, bar.mesh.vertices, g);
+  const auto gDot = [&](const Vertices& x) {
+    double sum = 0.0;
+    for (std::int32_t v = 0; v < bar.mesh.vertexCount(); ++v)
+      for (int j = 0; j < 3; ++j) sum += g[3 * static_cast<std::size_t>(v) + static_cast<std::size_t>(j)] * x(v, j);
+    return sum;
+  };
+  double worst_plane = 0.0;
+  int held_steps = 0;
+  for (int iteration = 0; iteration < 600; ++iteration) {
+    const Vertices x0 = test::deformedVertices(deformer);
+    const double v0 = tetVolumeAndGradient(bar.mesh, x0, g);
+    const double c = rest_volume - v0 + gDot(x0);
+    ASSERT_TRUE(deformer.setLinearConstraint(g, c));
+    const StepStats stats = deformer.step(vertexTargets(targets), StepBudget{1});
+    if (stats.guarded_tets > 0 && stats.guarded_solves > 0) {
+      ++held_steps;
+      worst_plane = std::max(worst_plane, std::abs(gDot(test::deformedVertices(deformer)) - c) / rest_volume);
+    }
+  }
+  const Vertices x = test::deformedVertices(deformer);
+  int inverted = 0;
+  double smallest_det = std::numeric_limits<double>::infinity();
+  for (std::int32_t t = 0; t < bar.mesh.tetCount(); ++t) {
+    const double det = deformationGradient(bar.mesh, frames, x, t).determinant();
+    inverted += det <= 0.0;
+    smallest_det = std::min(smallest_det, det);
+  }
+  std::vector<double> unused;
+  const double change = tetVolumeAndGradient(bar.mesh, x, unused) / rest_volume - 1.0;
+  std::printf("pushed 3 with the constraint, implicit guard k 4: %d steps held tets, largest distance to the plane %.1e of the "
+              "volume; smallest det F %.3f, %d inverted, volume %+.2e\n",
+              held_steps, worst_plane, smallest_det, inverted, change);
+  ASSERT_GT(held_steps, 0) << "the push must squash tets below the guard's threshold for the test to mean anything";
+  EXPECT_LT(worst_plane, 1e-9);
+  EXPECT_EQ(inverted, 0);
+  EXPECT_LT(std::abs(change), 1e-6);
+}
+
 TEST(Deformer, EnergyNeverIncreasesWithoutInterpolationOrRigidGroups) {
   const auto bar = scenes::makeBarScene(4, 4, 33);
   Deformer deformer(bar.mesh, test::endVertexHandles(bar));

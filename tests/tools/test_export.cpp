@@ -403,9 +403,10 @@ TEST(Export, PredictRelaxAndTheGuardAreTheLiveRigs) {
   live.inversion_guard = 1.0;
   expectTheLiveRigsFrames(out.path() / "tuned.pc2", 3, live);
   // Each option on its own changes the frames (so none of them is dropped on the way); the fourth
-  // is the implicit guard (k 3, 2 solves) against the explicit one on the crushed block.
+  // is the implicit guard (k 3, 2 solves) against the explicit one on the crushed block, the fifth
+  // that guard holding tets from 0.9 of their volume instead of 0.5.
   constexpr int kGuardIterations = 200;
-  for (int which = 0; which < 4; ++which) {
+  for (int which = 0; which < 5; ++which) {
     auto one = options(out.path() / ("one" + std::to_string(which) + ".pc2"), 3);
     LiveRigOptions o;
     std::filesystem::path clip;
@@ -443,14 +444,20 @@ TEST(Export, PredictRelaxAndTheGuardAreTheLiveRigs) {
       one.iterations = kGuardIterations;  // enough to squash it
       one.inversion_guard = which == 2 ? 1.0 : 3.0;
       o.inversion_guard = one.inversion_guard;
-      if (which == 3) {
+      if (which >= 3) {
         one.inversion_guard_solves = 2;
         o.inversion_guard_solves = 2;
+      }
+      if (which == 4) {
+        one.inversion_guard_threshold = 0.9;
+        o.inversion_guard_threshold = 0.9;
       }
     }
     (void)tools::exportClip(one);
     expectTheLiveRigsFrames(one.out, one.iterations, o, clip);
   }
+  // The threshold on its own changes the frames (the same guard holding from 0.9 against 0.5).
+  EXPECT_NE(readPc2(out.path() / "one4.pc2").frames, readPc2(out.path() / "one3.pc2").frames);
   auto converging = options(out.path() / "converging.pc2", 0);
   converging.predict = true;
   EXPECT_THROW_CONTAINS(tools::exportClip(converging), "--predict needs --iterations N");
@@ -464,6 +471,9 @@ TEST(Export, PredictRelaxAndTheGuardAreTheLiveRigs) {
   bad.inversion_guard_solves = 2;
   bad.inversion_guard = 1001.0;
   EXPECT_THROW_CONTAINS(tools::exportClip(bad), "--inversion-guard must be in [0, 1000] with --inversion-guard-solves");
+  bad.inversion_guard = 2.0;
+  bad.inversion_guard_threshold = 0.0;
+  EXPECT_THROW_CONTAINS(tools::exportClip(bad), "--inversion-guard-threshold must be in [0.01, 1]");
   EXPECT_FALSE(std::filesystem::exists(out.path() / "bad.pc2"));
 }
 

@@ -184,13 +184,15 @@ TEST(TetrigCli, RunPlaysAClipAndRefusesBadInput) {
   one_line_error(run("run --rig /nonexistent/x.rig --source synthetic", dir), "/nonexistent/x.rig");
   // The coarse level (here the rig as its own coarse level): announced, and a missing file refused.
   const std::string coarse_stats = (dir.path() / "coarse.json").string();
-  const CliRun coarse = run("run --rig '" + rig + "' --coarse-rig '" + rig + "' --predict --relax 1.9 --inversion-guard 2 --inversion-guard-solves 2 --source 'c3d:" +
+  const CliRun coarse = run("run --rig '" + rig + "' --coarse-rig '" + rig + "' --predict --relax 1.9 --inversion-guard 2 --inversion-guard-solves 2 --inversion-guard-threshold 0.7 --source 'c3d:" +
                                 clip.string() + "' --publish " + name + " --stats-json '" + coarse_stats + "'",
                             dir);
   ASSERT_EQ(coarse.status, 0) << coarse.err;
   // The over-relaxation and the inversion guard: announced when not the defaults, and in the stats.
   EXPECT_CONTAINS(coarse.out, "over-relaxation of the rotation update: omega 1.9");
-  EXPECT_CONTAINS(coarse.out, "inversion guard: squashed body tets up to 3 times stiffer, implicit (2 conjugate-gradient steps per iteration)");
+  EXPECT_CONTAINS(coarse.out,
+                  "inversion guard: body tets squashed below 0.7 of their volume up to 3 times stiffer, implicit (2 conjugate-gradient "
+                  "steps per iteration)");
   EXPECT_EQ(ok.out.find("over-relaxation"), std::string::npos);
   EXPECT_EQ(ok.out.find("inversion guard"), std::string::npos);
   const nlohmann::json jc = nlohmann::json::parse(std::ifstream(coarse_stats));
@@ -202,6 +204,8 @@ TEST(TetrigCli, RunPlaysAClipAndRefusesBadInput) {
   EXPECT_EQ(j["solver"]["inversion_guard"].get<double>(), 0.0);
   EXPECT_EQ(j["solver"]["inversion_guard_solves"].get<int>(), 0);
   EXPECT_EQ(jc["solver"]["inversion_guard_solves"].get<int>(), 2);
+  EXPECT_EQ(j["solver"]["inversion_guard_threshold"].get<double>(), 0.5);
+  EXPECT_EQ(jc["solver"]["inversion_guard_threshold"].get<double>(), 0.7);
   EXPECT_CONTAINS(coarse.out, "coarse level: ");
   EXPECT_CONTAINS(coarse.out, "temporal prediction of each frame's start: on");
   EXPECT_EQ(ok.out.find("temporal prediction"), std::string::npos);
