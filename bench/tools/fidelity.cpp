@@ -88,8 +88,8 @@ nlohmann::json toJson(const Percentiles& p) {
 // The exact energy and the inverted body tets of a tet-mesh pose (#V*3 doubles).
 struct PoseMeasure {
   double energy = 0.0;
-  int inverted_body_tets = 0;
   std::vector<std::pair<std::int32_t, double>> inverted;  // each inverted body tet and its det F
+  int invertedBodyTets() const { return static_cast<int>(inverted.size()); }
 };
 
 // The rig marker nearest to a rest point (its index in rig.markers), -1 without markers: a body
@@ -148,7 +148,7 @@ class RegionTally {
         inverted_tets.push_back({{"tet", t},
                                  {"volume_ratio", volume / rest},
                                  {"rest_radius_ratio", tetrig::rigbuild::tetRadiusRatio(rig_.tet_mesh, t)},
-                                 {"near", rig_.markers[static_cast<std::size_t>(r)].label},
+                                 {"near", label(t)},
                                  {"corners", {c[0], c[1], c[2], c[3]}}});
       }
     }
@@ -217,17 +217,15 @@ class Measurer {
       e.col(1) = p(c[1]) - p4;
       e.col(2) = p(c[2]) - p4;
       const Eigen::Matrix3d f = e * frames_.edge_inverse[static_cast<std::size_t>(t)];
-      if (t < rig_.body_tet_count && f.determinant() <= 0.0) {
-        ++m.inverted_body_tets;
-        m.inverted.emplace_back(t, f.determinant());
-      }
+      const double det = f.determinant();
+      if (t < rig_.body_tet_count && det <= 0.0) m.inverted.emplace_back(t, det);
       if (energy) {
         const Eigen::Matrix3d r = tetrig::closestRotation(f).toRotationMatrix();
-        const double w = f.determinant() > 1e-6 ? volume_weight_[static_cast<std::size_t>(t)] : 0.0;  // as the kernel
+        const double w = det > 1e-6 ? volume_weight_[static_cast<std::size_t>(t)] : 0.0;  // as the kernel
         const double s = w > 0.0 ? tetrig::unitVolumeShift(f, r) : 0.0;
         const double off = (f - r).norm();
         const double guard =
-            tetrig::inversionGuardTerm(guard_[static_cast<std::size_t>(t)], guard_threshold_, f.determinant(), off, guard_push_cap_).extra;
+            tetrig::inversionGuardTerm(guard_[static_cast<std::size_t>(t)], guard_threshold_, det, off, guard_push_cap_).extra;
         m.energy += weights_[static_cast<std::size_t>(t)] * ((1.0 - w) * off * off + guard + 3.0 * w * s * s);
       }
     }
@@ -350,11 +348,11 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
     const std::span<const double> x = live.deformer().positions();
     const bool is_reference = (f - first) % static_cast<std::size_t>(cfg.reference_every) == 0;
     const PoseMeasure mb = measurer.measure(x, is_reference);
-    if (mb.inverted_body_tets > inverted_budget_max) {
-      inverted_budget_max = mb.inverted_body_tets;
+    if (mb.invertedBodyTets() > inverted_budget_max) {
+      inverted_budget_max = mb.invertedBodyTets();
       inverted_budget_max_frame = f;
     }
-    if (mb.inverted_body_tets > 0) ++inverted_budget_frames;
+    if (!mb.inverted.empty()) ++inverted_budget_frames;
     for (const auto& [t, det] : mb.inverted) {
       InvertedTet& it = inverted_any[t];
       if (it.frames++ == 0) {
@@ -391,9 +389,9 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
     ref_iterations.push_back(done);
     const std::span<const double> xc = reference.positions();
     const PoseMeasure mc = measurer.measure(xc, true);
-    inverted_conv_max = std::max(inverted_conv_max, mc.inverted_body_tets);
-    ref_inverted.push_back(mb.inverted_body_tets);
-    ref_inverted_conv.push_back(mc.inverted_body_tets);
+    inverted_conv_max = std::max(inverted_conv_max, mc.invertedBodyTets());
+    ref_inverted.push_back(mb.invertedBodyTets());
+    ref_inverted_conv.push_back(mc.invertedBodyTets());
     ref_regions.push_back({{"budgeted", regions.tally(x, 3)}, {"converged", regions.tally(xc, 3)}});
     double sum2 = 0.0, w = 0.0;
     std::int32_t worst_v = 0;

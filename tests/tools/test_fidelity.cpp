@@ -103,6 +103,13 @@ nlohmann::json readJson(const std::filesystem::path& p) {
   return nlohmann::json::parse(in);
 }
 
+// A tet's centroid in the rig's rest pose.
+Eigen::Vector3d restCentroid(const Rig& rig, std::int32_t t) {
+  Eigen::Vector3d c = Eigen::Vector3d::Zero();
+  for (int k = 0; k < 4; ++k) c += 0.25 * rig.tet_mesh.vertices.row(rig.tet_mesh.tets(t, k)).transpose();
+  return c;
+}
+
 // Where the volume goes and the tets invert (each reference frame's `regions`), by the rig marker
 // nearest each body tet: the regions' inverted tets add up to the frame's count (counted apart, by
 // the energy's measure), and the regions that lost the most volume come first, each a few percent of
@@ -361,8 +368,7 @@ TEST_F(FidelityTool, TheFittedAssetPutsItsVolumeTermAtTheJoints) {
     const double w = rig.setup.volume_weights[static_cast<std::size_t>(t)];
     if (w == 0.0) continue;
     ASSERT_LT(t, rig.body_tet_count) << "an invisible tet took the volume term";
-    Eigen::Vector3d c = Eigen::Vector3d::Zero();
-    for (int k = 0; k < 4; ++k) c += 0.25 * rig.tet_mesh.vertices.row(rig.tet_mesh.tets(t, k)).transpose();
+    const Eigen::Vector3d c = restCentroid(rig, t);
     lowest = std::min(lowest, c.y());
     if (c.y() < 0.8) {
       ++knees;
@@ -590,9 +596,8 @@ TEST_F(FidelityTool, WithTheVolumeKeptTheKneesLandNearerWithoutTheirTerm) {
   knees.setup.volume_weights.resize(static_cast<std::size_t>(knees.tet_mesh.tetCount()), 0.0);
   int banded = 0;
   for (std::int32_t t = 0; t < knees.body_tet_count; ++t) {
-    Eigen::Vector3d c = Eigen::Vector3d::Zero();
-    for (int k = 0; k < 4; ++k) c += 0.25 * knees.tet_mesh.vertices.row(knees.tet_mesh.tets(t, k)).transpose();
-    if (c.y() >= 0.30 && c.y() <= 0.60) {
+    const double height = restCentroid(knees, t).y();
+    if (height >= 0.30 && height <= 0.60) {
       knees.setup.volume_weights[static_cast<std::size_t>(t)] = 0.5;
       ++banded;
     }
