@@ -309,13 +309,25 @@ class C3DParser {
                           " (expected -1 char, 1 byte, 2 int16 or 4 float)");
         }
         inSection(q + 4, ndims, end, "the dimensions of parameter '" + printable(name) + "'");
-        std::uint64_t count = 1;
-        for (std::size_t k = 0; k < ndims; ++k) {
-          param.dimensions.push_back(d_[q + 4 + k]);
-          count *= d_[q + 4 + k];
-        }
         const std::size_t elem = static_cast<std::size_t>(std::abs(param.type));
         const std::size_t data = q + 4 + ndims;
+        for (std::size_t k = 0; k < ndims; ++k) param.dimensions.push_back(d_[q + 4 + k]);
+        // Up to 255 dimensions of up to 255 each: the product overflows any integer type, so
+        // it is checked at every step against what the rest of the file could hold (a zero
+        // dimension makes the parameter empty, whatever the others say); a product that fits
+        // the file is then checked against the section by inSection below.
+        const bool empty = std::find(param.dimensions.begin(), param.dimensions.end(), 0) != param.dimensions.end();
+        const std::size_t room = data <= d_.size() ? (d_.size() - data) / elem : 0;
+        std::uint64_t count = empty ? 0 : 1;
+        for (std::size_t k = 0; k < ndims && count > 0; ++k) {
+          const std::uint64_t dim = param.dimensions[k];
+          if (count > room / dim) {
+            fail(q + 4 + k, "corrupt parameter '" + printable(name) + "': its dimensions (" + dimensionsText(param.dimensions) +
+                                ") give more " + std::to_string(elem) + "-byte elements than the " + std::to_string(d_.size() - data) +
+                                " bytes left in the file");
+          }
+          count *= dim;
+        }
         const std::uint64_t bytes = count * elem;
         inSection(data, bytes, end, "the data of parameter '" + printable(name) + "'");
         content_end = data + static_cast<std::size_t>(bytes);
@@ -378,6 +390,13 @@ class C3DParser {
     }
   }
 
+  static std::string dimensionsText(const std::vector<int>& dims) {
+    std::string out;
+    for (std::size_t k = 0; k < dims.size() && k < 8; ++k) out += (k ? " x " : "") + std::to_string(dims[k]);
+    if (dims.size() > 8) out += " x ... (" + std::to_string(dims.size()) + " dimensions)";
+    return out;
+  }
+
   // "parameter 'NAME'" or "group 'NAME'" for the entry at byte `p` (whose name was bounds-checked
   // when it was read), the name escaped and cut, for messages.
   std::string describeEntry(std::size_t p) const {
@@ -388,7 +407,7 @@ class C3DParser {
 
   void inSection(std::size_t offset, std::uint64_t count, std::size_t end, const std::string& what) const {
     if (offset > end || count > end - offset) {
-      if (end >= d_.size() || offset + count > d_.size()) {
+      if (end >= d_.size() || offset > d_.size() || count > d_.size() - offset) {
         need(offset, static_cast<std::size_t>(std::min<std::uint64_t>(count, std::numeric_limits<std::size_t>::max() / 2)),
              what);
       }
@@ -756,6 +775,8 @@ C3DClip C3DClip::parse(std::span<const std::uint8_t> bytes, std::string_view sou
 }
 
 C3DClip C3DClip::load(const std::filesystem::path& path, const C3DReadOptions& options) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec)) throw C3DError(path.string() + ": is a folder, not a C3D file (give the .c3d clip)");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw C3DError(path.string() + ": cannot open the file for reading");
   in.seekg(0, std::ios::end);

@@ -55,10 +55,6 @@ constexpr std::uint32_t kTagMarkerRegions = tag("MKRG");  // regions driven by m
 constexpr std::uint32_t kTagVolumeWeights = tag("VOLW");  // per-tet volume-term weights (DeformerSetup::volume_weights)
 constexpr std::size_t kPoseSensorMinBytes = 4 + 4 + 1 + 1 + 8;  // empty label, region, mode, buttons, scale
 
-constexpr std::array<std::uint32_t, 13> kRequiredTags = {
-    kTagMeta,       kTagTetVertices, kTagTets,      kTagFine,    kTagPoseTransfer, kTagVertexHandles, kTagRegionHandles,
-    kTagPointHandles, kTagRigidGroups, kTagStiffness, kTagMarkers, kTagAlignment,    kTagOptions};
-
 std::string tagName(std::uint32_t t) {
   std::string s;
   for (int i = 0; i < 4; ++i) {
@@ -983,6 +979,9 @@ Rig parseRigAt(std::span<const std::uint8_t> bytes, std::string_view source_name
 }  // namespace
 
 Rig loadRigFile(const std::filesystem::path& path) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec))
+    throw RigFileError(path.string() + ": is a folder, not a rig file (give the .rig file that tetrig build-rig wrote)");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw RigFileError(path.string() + ": cannot open the rig file (missing or unreadable)");
   std::vector<std::uint8_t> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());

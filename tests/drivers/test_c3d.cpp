@@ -519,6 +519,53 @@ TEST(C3DReader, CorruptParameterChainsAreRefused) {
   }
 }
 
+TEST(C3DReader, ParameterDimensionsThatOverflowAreRefused) {
+  // Nine dimensions of 128 give 2^63 elements; times 4 bytes that wraps to 0 in 64 bits, which
+  // once passed the range check and read the parameter's "data" far past the buffer (the 1.2 KB
+  // file libFuzzer found in fuzz_c3d). Every step of the product is checked against the section.
+  for (const C3DProcessor proc : {C3DProcessor::kIntel, C3DProcessor::kDec, C3DProcessor::kMips}) {
+    SCOPED_TRACE(static_cast<int>(proc));
+    const TestC3DSpec s = smallSpec(proc, true);
+    const std::vector<std::uint8_t> good = writeTestC3D(s);
+    const std::size_t rate = offsetFieldOf(good, "RATE");  // then type, ndims, dims...
+    ASSERT_LT(rate + 4 + 9, good.size());
+    for (const std::int8_t type : {std::int8_t{4}, std::int8_t{2}, std::int8_t{-1}}) {
+      std::vector<std::uint8_t> bad = good;
+      bad[rate + 2] = static_cast<std::uint8_t>(type);
+      bad[rate + 3] = 9;
+      for (std::size_t k = 0; k < 9; ++k) bad[rate + 4 + k] = 128;
+      const std::string m = errorOf(bad);
+      EXPECT_EQ(m.rfind("bad.c3d: corrupt parameter 'RATE': its dimensions (128 x 128 x 128 x 128 x 128 x 128 x 128 x 128 x ... "
+                        "(9 dimensions)) give more ", 0), 0u) << m;
+      EXPECT_NE(m.find("-byte elements than the "), std::string::npos) << m;
+    }
+    // The largest product that fits: 255 x 255 ... of one-byte elements is refused at the step
+    // that passes the bytes left, not after the product wrapped.
+    std::vector<std::uint8_t> wide = good;
+    wide[rate + 2] = 1;
+    wide[rate + 3] = 255;
+    const std::size_t dims_end = std::min(good.size(), rate + 4 + 255);
+    for (std::size_t k = rate + 4; k < dims_end; ++k) wide[k] = 255;
+    const std::string m = errorOf(wide);
+    EXPECT_NE(m.find("corrupt parameter"), std::string::npos) << m;
+    EXPECT_EQ(m.find("(parsed)"), std::string::npos) << m;
+  }
+  // A zero dimension makes the parameter empty, whatever the other dimensions say.
+  const TestC3DSpec s = smallSpec(C3DProcessor::kIntel, true);
+  std::vector<std::uint8_t> empty = writeTestC3D(s);
+  const std::size_t rate = offsetFieldOf(empty, "RATE");
+  // RATE becomes a 2-dimensional float parameter 128 x 0 (its data, 0 bytes); the next entry now
+  // starts before the old float's bytes, which the next-entry offset still skips.
+  empty[rate + 3] = 2;
+  empty[rate + 4] = 128;
+  empty[rate + 5] = 0;
+  const C3DClip clip = parseBytes(empty);
+  const C3DParameter* p = clip.findParameter("POINT", "RATE");
+  ASSERT_NE(p, nullptr);
+  EXPECT_EQ(p->dimensions, (std::vector<int>{128, 0}));
+  EXPECT_TRUE(p->numbers.empty());
+}
+
 // ---- no raw bytes in messages ----
 
 TEST(C3DReader, NamesInMessagesAreEscapedAndCut) {
