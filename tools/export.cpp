@@ -10,7 +10,7 @@
 // dropout offset, and every call re-predicts the occluded markers from the newest pose.
 //
 // Atomic output: every file is first written under a temporary name in its own directory and
-// renamed into place only after every frame was solved and written. PC2: FILE.pc2 and FILE.obj
+// renamed into place only after every frame was solved and written. PC2: FILE.pc2 and FILE.rest.obj
 // are two tetrig::AtomicFile (the point cache is streamed frame by frame, never held in memory),
 // committed after the last frame, the OBJ first. Sequences: the frames go into a temporary
 // directory beside them (one AtomicFile per frame would make each frame appear as it is written);
@@ -29,7 +29,10 @@
 #include "tetrig/live_rig.hpp"
 #include "tetrig/rig_file.hpp"
 #include "tetrig/rigbuild/progress.hpp"
+#include "tetrig/rigbuild/output_guard.hpp"
 #include "tetrig/rigbuild/write_file_atomic.hpp"
+
+#include <nlohmann/json.hpp>
 
 #include <fcntl.h>
 #include <unistd.h>
@@ -207,11 +210,40 @@ std::string rateText(double hz) {
   return buf;
 }
 
+nlohmann::json percentilesJson(const rigbuild::Percentiles& p) {
+  return {{"median", p.median}, {"p90", p.p90}, {"p99", p.p99}, {"max", p.max}, {"count", p.count}};
+}
+
+// --report: what the export did and how well the skin followed the markers (docs/export.md).
+nlohmann::json reportJson(const ExportReport& r, const ExportOptions& o, const Rig& rig) {
+  nlohmann::json per = nlohmann::json::object();
+  for (const auto& [label, p] : r.tracking_per_marker_mm) per[label] = percentilesJson(p);
+  nlohmann::json tracking = percentilesJson(r.tracking_mm);
+  tracking["per_marker"] = std::move(per);
+  nlohmann::json files = nlohmann::json::array();
+  for (const auto& f : r.files) files.push_back(f.string());
+  return {{"generator", "tetrig export"},
+          {"rig", o.rig_path.string()},
+          {"rig_name", rig.name},
+          {"clip", o.clip_path.string()},
+          {"first_frame", r.first_frame},
+          {"frames", r.frame_count},
+          {"rate_hz", r.rate_hz},
+          {"iterations_per_frame", o.iterations},
+          {"iterations", r.iterations},
+          {"markers_bound", r.markers_bound},
+          {"markers_missing", r.markers_missing},
+          {"frames_held", r.held_frames},
+          {"frames_with_predicted_markers", r.predicted_frames},
+          {"files", std::move(files)},
+          {"tracking_mm", std::move(tracking)}};
+}
+
 }  // namespace
 
 ExportTarget parseExportTarget(const std::filesystem::path& out) {
   static const char* kForms =
-      "FILE.pc2 (+ FILE.obj beside it), NAME_####.obj or NAME_####.ply (a sequence: the #s become the frame number), "
+      "FILE.pc2 (+ FILE.rest.obj beside it), NAME_####.obj or NAME_####.ply (a sequence: the #s become the frame number), "
       "FILE.gltf or FILE.glb";
   if (out.empty()) throw std::invalid_argument("--out is empty; give " + std::string(kForms));
   const std::string text = out.string();
@@ -244,8 +276,7 @@ ExportTarget parseExportTarget(const std::filesystem::path& out) {
     throw std::invalid_argument("--out " + text + ": '#' frame patterns are for OBJ and PLY sequences only");
   if (ext == ".pc2") {
     t.format = ExportFormat::kPc2;
-    t.rest_obj = out;
-    t.rest_obj.replace_extension(".obj");
+    t.rest_obj = rigbuild::pc2RestObjPath(out);
     return t;
   }
   if (ext == ".gltf") {
@@ -329,6 +360,33 @@ ExportReport exportClip(const ExportOptions& o) {
     throw std::invalid_argument("glTF holds one morph target per frame and frames x frames animated weights: " +
                                 std::to_string(report.frame_count) + " frames is more than " + std::to_string(kMaxGltfFrames) +
                                 "; export a range with --frames A:B, or use FILE.pc2 or an OBJ/PLY sequence");
+  {
+    // Every file this export would write, checked before any work: no input and no file tetrig
+    // did not write is replaced (without --force).
+    const std::filesystem::path inputs[] = {o.rig_path, o.clip_path};
+    switch (target.format) {
+      case ExportFormat::kPc2:
+        rigbuild::checkOutputPath(target.path, rigbuild::OutputKind::kPc2, inputs, o.force);
+        rigbuild::checkOutputPath(target.rest_obj, rigbuild::OutputKind::kObj, inputs, o.force, "--out's rest mesh");
+        break;
+      case ExportFormat::kObjSequence:
+      case ExportFormat::kPlySequence: {
+        const auto kind = target.format == ExportFormat::kObjSequence ? rigbuild::OutputKind::kObj : rigbuild::OutputKind::kPly;
+        for (std::size_t f = range.first; f < range.end; ++f)
+          rigbuild::checkOutputPath(sequenceFramePath(target, f), kind, inputs, o.force, "--out's frame");
+        break;
+      }
+      case ExportFormat::kGltf:
+      case ExportFormat::kGlb:
+        rigbuild::checkOutputPath(target.path, target.format == ExportFormat::kGlb ? rigbuild::OutputKind::kGlb : rigbuild::OutputKind::kGltf,
+                                  inputs, o.force);
+        break;
+    }
+    if (!o.report.empty()) {
+      rigbuild::checkOutputPath(o.report, rigbuild::OutputKind::kJson, inputs, o.force, "--report");
+      requireDirectory(o.report);
+    }
+  }
   if (gltf) {
     std::vector<float> probe(3, 0.0f);
     rotateUpToY(rig.alignment.rig_up, probe);  // an unknown up axis is refused before any work
@@ -416,6 +474,7 @@ ExportReport exportClip(const ExportOptions& o) {
   std::vector<std::uint8_t> sample;
   MarkerFrame frame{};
   std::size_t measured_frames = 0;
+  rigbuild::TrackingMeasure tracking(rig);
   for (std::size_t f = range.first; f < range.end; ++f) {
     playback.fillFrame(f, f, frame);
     std::int32_t frame_iterations = 0;
@@ -445,6 +504,7 @@ ExportReport exportClip(const ExportOptions& o) {
       throw std::runtime_error("clip frame " + std::to_string(f) + ": the solver produced a non-finite or implausible pose (far outside its marker targets; a bug: please report it with the rig and the clip)");
     if (s.flags & kLiveTargetsRejected)
       throw std::runtime_error("clip frame " + std::to_string(f) + ": the solver rejected the marker targets as non-finite or absurd");
+    tracking.addFrame(x, live);
     report.iterations += static_cast<std::uint64_t>(frame_iterations);
     report.max_frame_iterations = std::max(report.max_frame_iterations, frame_iterations);
 
@@ -520,6 +580,14 @@ ExportReport exportClip(const ExportOptions& o) {
       break;
     }
   }
+  report.tracking_mm = tracking.all();
+  for (std::size_t m = 0; m < rig.markers.size(); ++m) report.tracking_per_marker_mm.emplace_back(rig.markers[m].label, tracking.marker(m));
+  if (!o.report.empty()) {
+    const std::string text = reportJson(report, o, rig).dump(2) + "\n";
+    rigbuild::writeFileAtomically(o.report, std::span<const std::uint8_t>(reinterpret_cast<const std::uint8_t*>(text.data()), text.size()));
+    report.files.push_back(o.report);
+    report.bytes += text.size();
+  }
   report.write_seconds = write_seconds + std::chrono::duration<double>(std::chrono::steady_clock::now() - finish_start).count();
   progress.end(std::to_string(report.files.size()) + (report.files.size() == 1 ? " file, " : " files, ") + megabytes(report.bytes));
   return report;
@@ -557,6 +625,9 @@ int runExport(const ExportOptions& options) {
   } else {
     std::printf("  wrote %zu files %s .. %s\n", r.files.size(), r.files.front().string().c_str(), r.files.back().string().c_str());
   }
+  std::printf("  tracking (change of each measured marker's distance to its skin point): median %.1f mm, p90 %.1f, p99 %.1f, max %.1f "
+              "over %zu marker-frames\n",
+              r.tracking_mm.median, r.tracking_mm.p90, r.tracking_mm.p99, r.tracking_mm.max, r.tracking_mm.count);
   std::printf("  %s in all, written in %.2f s\n", megabytes(r.bytes).c_str(), r.write_seconds);
   return 0;
 }

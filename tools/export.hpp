@@ -1,7 +1,7 @@
 // `tetrig export`: a C3D clip run offline through the live rig at full quality (no deadline; a fixed
 // iteration count, or every frame iterated until the fine mesh stops moving) and the fine-mesh
 // animation written in formats other tools read (docs/export.md):
-//   FILE.pc2           PC2 point cache + FILE.obj (the rest fine mesh) beside it
+//   FILE.pc2           PC2 point cache + FILE.rest.obj (the rest fine mesh) beside it
 //   NAME_####.obj|ply  one OBJ or binary PLY per frame ('#'s: the clip frame index, zero-padded)
 //   FILE.gltf|glb      glTF 2.0: one mesh, one morph target per frame, animated weights
 // The clip is bound to the rig by label exactly as `tetrig run` binds a c3d: source, frames are
@@ -16,6 +16,8 @@
 
 #include <cstddef>
 #include <cstdint>
+#include "tetrig/rigbuild/tracking_measure.hpp"
+
 #include <filesystem>
 #include <functional>
 #include <string>
@@ -30,7 +32,7 @@ enum class ExportFormat { kPc2, kObjSequence, kPlySequence, kGltf, kGlb };
 struct ExportTarget {
   ExportFormat format = ExportFormat::kPc2;
   std::filesystem::path path;      // as given (PC2, glTF) or the pattern (sequences)
-  std::filesystem::path rest_obj;  // PC2 only: the rest mesh, FILE with the extension .obj
+  std::filesystem::path rest_obj;  // PC2 only: the rest mesh, FILE.rest.obj (rigbuild::pc2RestObjPath)
   std::string prefix, suffix;      // sequences: file name = prefix + zero-padded frame + suffix
   int digits = 0;                  // sequences: the length of the '#' run
 };
@@ -66,6 +68,8 @@ struct ExportOptions {
   double rate_hz = 0;                   // > 0: overrides the clip's frame rate (needed for glTF without one)
   bool keep_zero_markers = false;       // as `tetrig run --keep-zero-markers`: samples at x = y = z = 0 with
                                         // residual 0 stay valid (default: gaps)
+  std::filesystem::path report;         // optional: write the run's report here (JSON: the tracking measure, counts)
+  bool force = false;                   // replace existing files tetrig did not write (never an input)
   bool quiet = false;                   // no progress and no summary
   bool simple_progress = false;         // plain progress lines even on a terminal
   // Called after each solved frame (done of total) on the calling thread; may throw to cancel (tests).
@@ -90,6 +94,10 @@ struct ExportReport {
   std::size_t held_frames = 0;                // no rig marker measured: last pose kept
   std::size_t predicted_frames = 0;           // some rig marker predicted (occluded or never named)
   double solve_seconds = 0, write_seconds = 0;
+  // The tracking measure over every exported frame (rigbuild/tracking_measure.hpp): the change of
+  // each measured marker's distance to its skin point, mm; per rig marker in rig.markers order.
+  rigbuild::Percentiles tracking_mm;
+  std::vector<std::pair<std::string, rigbuild::Percentiles>> tracking_per_marker_mm;
 };
 
 // Runs the export. Throws (one clear line) on bad input: unknown format, frames out of range, a rig

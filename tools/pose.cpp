@@ -3,6 +3,7 @@
 
 #include "tetrig/printable_text.hpp"
 #include "tetrig/rig_file.hpp"
+#include "tetrig/rigbuild/output_guard.hpp"
 #include "tetrig/rigbuild/pose_rig.hpp"
 
 #include <algorithm>
@@ -31,6 +32,9 @@ int runPose(const PoseOptions& options) {
   }
   std::vector<std::pair<std::string, RigidTransform>> regions;
   for (const auto& [name, path] : named) regions.emplace_back(name, rigbuild::readDefFile(path).rigid);
+  std::vector<std::filesystem::path> inputs = {options.rig_path};
+  for (const auto& named_def : named) inputs.emplace_back(named_def.second);
+  rigbuild::checkOutputPath(options.out, rigbuild::OutputKind::kObj, inputs, options.force);
 
   const Rig rig = loadRigFile(options.rig_path);
   rigbuild::PoseOptions pose;

@@ -18,6 +18,7 @@ struct PoseOptions {
   int iterations = 0;                 // > 0: exactly this many; 0: to convergence
   int max_iterations = 20000;         // bound when running to convergence
   double volume_weight = 0.0;         // the volume term's share of each tet's energy (DeformerOptions::volume_weight)
+  bool force = false;                 // replace an existing --out that tetrig did not write (never an input)
   bool quiet = false;
 };
 

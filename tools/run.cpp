@@ -8,6 +8,7 @@
 #include "tetrig/frame_loop.hpp"
 #include "tetrig/live_rig.hpp"
 #include "tetrig/printable_text.hpp"
+#include "tetrig/rigbuild/output_guard.hpp"
 #include "tetrig/rigbuild/write_file_atomic.hpp"
 #include "tetrig/shm_publisher.hpp"
 
@@ -77,6 +78,10 @@ int reapConsumer(pid_t pid, std::chrono::milliseconds timeout) {
 
 int runLive(const RunOptions& options, RunOutcome* outcome) {
   if (options.iterations < 1) throw std::invalid_argument("--iterations must be at least 1");
+  if (!options.final_obj.empty()) {
+    const std::filesystem::path inputs[] = {options.rig_path, options.coarse_rig_path};
+    rigbuild::checkOutputPath(options.final_obj, rigbuild::OutputKind::kObj, inputs, false);
+  }
   // 1. The rig and the live rig (load time: allocation, factorization).
   std::optional<Rig> loaded;
   if (!options.rig) loaded = loadRigFile(options.rig_path);
@@ -136,6 +141,27 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
                              "; source: " + (named.empty() ? std::string("none") : joinLabels(named)) +
                              "): build the rig from a clip of the same marker set");
   }
+  // 3. The segment.
+  ShmPublisherOptions shm_options;
+  shm_options.name = options.publish.empty() || options.publish.front() == '/' ? options.publish : "/" + options.publish;
+  shm_options.normals = options.normals;
+  shm_options.permissions = options.shm_permissions;
+  std::vector<std::string> rig_labels;
+  for (const RigMarker& m : rig.markers) rig_labels.push_back(m.label);
+  ShmStaticData static_data;
+  static_data.triangles = live.fineTriangles();
+  static_data.rest_positions = live.restPositions();
+  static_data.rig_name = rig.name;
+  static_data.marker_labels = rig_labels;
+  std::unique_ptr<ShmPublisher> publisher;
+  try {
+    publisher = std::make_unique<ShmPublisher>(shm_options, live.fineVertexCount(), static_data);
+  } catch (...) {
+    source->stop();
+    throw;
+  }
+
+  // The banner once the segment exists (a refused segment is one error line, nothing before it).
   if (!options.quiet) {
     std::printf("tetrig run: %s\n", printableText(source->describe()).c_str());
     std::printf("  rig: %s: %d tet vertices, %d tets, %d fine vertices, %zu markers; %d bound by label\n", printableText(rig.name, 256).c_str(),
@@ -166,26 +192,6 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
     if (!binding.unknown.empty())
       std::printf("  note: %zu source markers the rig does not know are ignored: %s\n", binding.unknown.size(),
                   joinLabels(binding.unknown).c_str());
-  }
-
-  // 3. The segment.
-  ShmPublisherOptions shm_options;
-  shm_options.name = options.publish.empty() || options.publish.front() == '/' ? options.publish : "/" + options.publish;
-  shm_options.normals = options.normals;
-  shm_options.permissions = options.shm_permissions;
-  std::vector<std::string> rig_labels;
-  for (const RigMarker& m : rig.markers) rig_labels.push_back(m.label);
-  ShmStaticData static_data;
-  static_data.triangles = live.fineTriangles();
-  static_data.rest_positions = live.restPositions();
-  static_data.rig_name = rig.name;
-  static_data.marker_labels = rig_labels;
-  std::unique_ptr<ShmPublisher> publisher;
-  try {
-    publisher = std::make_unique<ShmPublisher>(shm_options, live.fineVertexCount(), static_data);
-  } catch (...) {
-    source->stop();
-    throw;
   }
 
   // 4. The solver thread.

@@ -11,17 +11,22 @@
 #include "tetrig/rig_file.hpp"
 #include "tetrig/rigbuild/build_rig.hpp"
 #include "tetrig/rigbuild/describe_rig.hpp"
+#include "tetrig/rigbuild/output_guard.hpp"
 #include "tetrig/rigbuild/progress.hpp"
 #include "tetrig/rigbuild/rig_description.hpp"
 #include "tetrig/rigbuild/write_file_atomic.hpp"
 
 #include <CLI/CLI.hpp>
+#include <unistd.h>
 
+#include <algorithm>
 #include <cstdio>
+#include <cstdlib>
 #include <exception>
 #include <filesystem>
 #include <optional>
 #include <string>
+#include <vector>
 
 namespace {
 
@@ -37,8 +42,14 @@ struct BuildArgs {
   double min_fit_scale = 0, max_fit_scale = 0;
   bool accept_implausible_alignment = false, accept_pose_mismatch = false;
   std::string mesh_unit, mesh_up, device_up, alignment;
-  bool quiet = false, simple = false, list_markers = false, keep_zero_markers = false;
+  bool quiet = false, simple = false, list_markers = false, keep_zero_markers = false, force = false;
 };
+
+std::string joinWords(const std::vector<std::string>& words) {
+  std::string out;
+  for (const std::string& w : words) out += (out.empty() ? "" : ", ") + w;
+  return out;
+}
 
 int buildRigCommand(const BuildArgs& a) {
   RigDescription desc;
@@ -51,6 +62,20 @@ int buildRigCommand(const BuildArgs& a) {
   if (!a.device_up.empty()) desc.markers.device_up = a.device_up;
   if (!a.alignment.empty()) desc.markers.alignment = a.alignment;
   if (a.keep_zero_markers) desc.markers.keep_zero_points = true;
+  {
+    // The rig is written only at the end: its path is checked before minutes of work.
+    const std::filesystem::path inputs[] = {a.mesh, a.rig_json, a.markers, desc.markers.clip};
+    checkOutputPath(a.out, OutputKind::kRig, inputs, a.force);
+    const std::filesystem::path out(a.out);
+    const std::filesystem::path dir = out.has_parent_path() ? out.parent_path() : std::filesystem::path(".");
+    std::error_code ec;
+    if (!std::filesystem::is_directory(dir, ec))
+      throw std::invalid_argument("--out " + printableText(a.out) + ": the folder " + printableText(dir.string()) +
+                                  " does not exist (create it first)");
+    if (::access(dir.c_str(), W_OK) != 0)
+      throw std::invalid_argument("--out " + printableText(a.out) + ": the folder " + printableText(dir.string()) +
+                                  " is not writable");
+  }
   BuildRigInputs in;
   in.mesh = a.mesh;
   in.description = desc;
@@ -85,6 +110,108 @@ int inspectCommand(const std::string& path, bool list_markers) {
   const Rig rig = loadRigFile(path);
   std::printf("%s", describeRig(rig, static_cast<std::int64_t>(std::filesystem::file_size(path)), list_markers).c_str());
   return 0;
+}
+
+// Edit distance (insertions, deletions, substitutions) between two short words.
+std::size_t editDistance(const std::string& a, const std::string& b) {
+  std::vector<std::size_t> row(b.size() + 1);
+  for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
+  for (std::size_t i = 1; i <= a.size(); ++i) {
+    std::size_t diagonal = row[0];
+    row[0] = i;
+    for (std::size_t j = 1; j <= b.size(); ++j) {
+      const std::size_t up = row[j];
+      row[j] = std::min({row[j] + 1, row[j - 1] + 1, diagonal + (a[i - 1] == b[j - 1] ? 0u : 1u)});
+      diagonal = up;
+    }
+  }
+  return row[b.size()];
+}
+
+// The known word nearest to `word` when it is near enough to be a slip (a third of its length),
+// else "".
+std::string nearestWord(const std::string& word, const std::vector<std::string>& known) {
+  std::string best;
+  std::size_t best_distance = std::max<std::size_t>(1, word.size() / 3) + 1;
+  for (const std::string& k : known) {
+    const std::size_t d = editDistance(word, k);
+    if (d < best_distance) {
+      best_distance = d;
+      best = k;
+    }
+  }
+  return best;
+}
+
+bool looksLikeNumber(const std::string& s) {
+  char* end = nullptr;
+  (void)std::strtod(s.c_str(), &end);
+  return !s.empty() && end == s.c_str() + s.size();
+}
+
+// A mistake on the command line: one line that names it (a misspelt option or command with the
+// nearest known one, else the parser's own words) and how to see the rest, exit status 2.
+// --help and --version print as usual and exit 0.
+int commandLineError(CLI::App& app, const CLI::ParseError& e, int argc, char** argv) {
+  if (e.get_exit_code() == 0) return app.exit(e);
+  CLI::App* sub = nullptr;
+  int sub_at = argc;
+  std::vector<std::string> commands;
+  for (CLI::App* s : app.get_subcommands([](CLI::App*) { return true; })) commands.push_back(s->get_name());
+  for (int i = 1; i < argc && sub == nullptr; ++i) {
+    for (CLI::App* s : app.get_subcommands([](CLI::App*) { return true; })) {
+      if (s->get_name() == argv[i]) {
+        sub = s;
+        sub_at = i;
+      }
+    }
+  }
+  if (sub == nullptr) {
+    for (int i = 1; i < argc; ++i) {
+      const std::string word = argv[i];
+      if (word.empty() || word[0] == '-') continue;
+      const std::string near = nearestWord(word, commands);
+      std::fprintf(stderr, "tetrig: unknown command '%s'%s; the commands: %s (tetrig --help)\n", printableText(word, 60).c_str(),
+                   near.empty() ? "" : (" (did you mean " + near + "?)").c_str(), joinWords(commands).c_str());
+      return 2;
+    }
+    std::fprintf(stderr, "tetrig: give a command: %s (tetrig --help)\n", joinWords(commands).c_str());
+    return 2;
+  }
+  const std::string prefix = "tetrig " + sub->get_name();
+  // Every option the command knows, and whether it takes a value (a value may start with '-').
+  std::vector<std::string> names;
+  std::vector<bool> takes_value;
+  for (const CLI::Option* o : sub->get_options()) {
+    for (const std::string& n : o->get_lnames()) {
+      names.push_back("--" + n);
+      takes_value.push_back(o->get_items_expected_min() > 0);
+    }
+    for (const std::string& n : o->get_snames()) {
+      names.push_back("-" + n);
+      takes_value.push_back(o->get_items_expected_min() > 0);
+    }
+  }
+  for (int i = sub_at + 1; i < argc; ++i) {
+    const std::string token = argv[i];
+    if (token.size() < 2 || token[0] != '-' || looksLikeNumber(token)) continue;
+    const std::string name = token.substr(0, token.find('='));
+    const auto known = std::find(names.begin(), names.end(), name);
+    if (known != names.end()) {
+      if (takes_value[static_cast<std::size_t>(known - names.begin())] && token.find('=') == std::string::npos) ++i;  // its value
+      continue;
+    }
+    const std::string near = nearestWord(name, names);
+    std::fprintf(stderr, "%s: unknown option '%s'%s (%s --help lists them)\n", prefix.c_str(), printableText(name, 60).c_str(),
+                 near.empty() ? "" : (" (did you mean " + near + "?)").c_str(), prefix.c_str());
+    return 2;
+  }
+  std::string what = e.what();
+  for (char& c : what) {
+    if (c == '\n') c = ' ';
+  }
+  std::fprintf(stderr, "%s: error: %s (%s --help)\n", prefix.c_str(), printableText(what, 300).c_str(), prefix.c_str());
+  return 2;
 }
 
 }  // namespace
@@ -140,6 +267,7 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({"auto", "units", "matrix"}));
   build_cmd->add_flag("--list-markers", build.list_markers, "List every marker in the summary");
   build_cmd->add_flag("--simple-progress", build.simple, "Plain progress lines even on a terminal");
+  build_cmd->add_flag("--force", build.force, "Replace an existing --out that is not a tetrig rig (an input is never replaced)");
   build_cmd->add_flag("-q,--quiet", build.quiet, "No progress and no summary");
 
   std::string inspect_path;
@@ -215,7 +343,8 @@ int main(int argc, char** argv) {
                       "Marker source: c3d:PATH, replay:PATH, synthetic[:N], synthetic:character, hid:VID:PID, usb:VID:PID (hex ids), hydra[:SERIAL]")
       ->required();
   run_cmd->add_option("--publish", run.publish, "Shared-memory segment name (docs/shm.md)")->capture_default_str();
-  run_cmd->add_option("--frames", run.frames, "Stop after this many solved frames (default: until the source ends or Ctrl-C)");
+  run_cmd->add_option("--frames", run.frames, "Stop after this many solved frames (default: until the source ends or Ctrl-C)")
+      ->check(CLI::NonNegativeNumber);
   run_cmd->add_option("--iterations", run.iterations, "Iterations per frame (also bounded by the budget)")
       ->capture_default_str()
       ->check(CLI::Range(1, 1000));
@@ -249,7 +378,7 @@ int main(int argc, char** argv) {
   bool no_mlock = false;
   run_cmd->add_flag("--no-mlock", no_mlock, "Do not lock the process's memory");
   std::string shm_mode;
-  run_cmd->add_option("--shm-mode", shm_mode, "Segment permissions in octal (default 600: owner only)");
+  run_cmd->add_option("--shm-mode", shm_mode, "Segment permissions in octal (default 600: owner only; read bits for group/others, e.g. 640 or 644, but no write bits)");
   run_cmd->add_flag("-q,--quiet", run.quiet, "Only errors");
 
   tetrig::tools::ExportOptions exp;
@@ -258,7 +387,7 @@ int main(int argc, char** argv) {
   export_cmd->add_option("--rig", exp.rig_path, "Rig file (tetrig build-rig)")->required();
   export_cmd->add_option("--c3d", exp.clip_path, "C3D clip that drives the rig (bound by marker label, as tetrig run binds it)")->required();
   export_cmd->add_option("--out", exp.out,
-                         "Output, format from the extension: FILE.pc2 (+ FILE.obj, the rest mesh), NAME_####.obj or NAME_####.ply "
+                         "Output, format from the extension: FILE.pc2 (+ FILE.rest.obj, the rest mesh), NAME_####.obj or NAME_####.ply "
                          "(one file per frame; the #s become the clip frame number), FILE.gltf or FILE.glb (docs/export.md)")
       ->required();
   export_cmd->add_option("--frames", exp.frames, "Clip frames A:B (0-based, B exclusive; A: or :B), default the whole clip");
@@ -297,6 +426,9 @@ int main(int argc, char** argv) {
                        "Samples at x = y = z = 0 with residual 0 are valid points, not gaps (as tetrig run)");
   export_cmd->add_option("--rate", exp.rate_hz, "Frame rate in Hz instead of the clip's (glTF sample times)")->check(CLI::Range(0.001, 100000.0));
   export_cmd->add_flag("--simple-progress", exp.simple_progress, "Plain progress lines even on a terminal");
+  export_cmd->add_option("--report", exp.report,
+                         "Also write a JSON report: how closely the skin followed the markers (tracking_mm, docs/fidelity.md) and counts");
+  export_cmd->add_flag("--force", exp.force, "Replace existing output files that tetrig did not write (an input is never replaced)");
   export_cmd->add_flag("-q,--quiet", exp.quiet, "No progress and no summary");
 
   tetrig::tools::ViewOptions view;
@@ -338,6 +470,7 @@ int main(int argc, char** argv) {
                        "nearest unit-volume shape (docs/deformation.md); 0 = as rigid as possible")
       ->capture_default_str()
       ->check(CLI::Range(0.0, 0.99));
+  pose_cmd->add_flag("--force", pose.force, "Replace an existing --out that tetrig did not write (an input is never replaced)");
   pose_cmd->add_flag("-q,--quiet", pose.quiet, "No summary");
 
   std::string character_out;
@@ -349,7 +482,7 @@ int main(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e);
+    return commandLineError(app, e, argc, argv);
   }
 
   const std::string cmd = app.get_subcommands().empty() ? std::string() : app.get_subcommands().front()->get_name();
@@ -371,9 +504,15 @@ int main(int argc, char** argv) {
     if (cmd == "run") {
       run.lock_memory = !no_mlock;
       if (!shm_mode.empty()) {
-        std::size_t used = 0;
-        const unsigned long mode = std::stoul(shm_mode, &used, 8);
-        if (used != shm_mode.size() || mode > 0777) throw std::invalid_argument("--shm-mode must be octal permissions such as 600 or 660");
+        // Octal digits only (std::stoul would take spaces and signs, and throw "stoul" on other text).
+        if (shm_mode.size() > 4 || shm_mode.find_first_not_of("01234567") != std::string::npos || std::stoul(shm_mode, nullptr, 8) > 0777) {
+          throw std::invalid_argument("--shm-mode '" + shm_mode + "' is not octal permissions such as 600, 640 or 644");
+        }
+        const unsigned long mode = std::stoul(shm_mode, nullptr, 8);
+        if ((mode & 022) != 0) {
+          throw std::invalid_argument("--shm-mode " + shm_mode + " lets group or others write the segment: any such user could rewrite or "
+                                      "truncate it and crash its readers, which refuse it; use 600, 640 or 644");
+        }
         run.shm_permissions = static_cast<unsigned>(mode);
       }
       return tetrig::tools::runLive(run);

@@ -34,6 +34,7 @@
 #include "tetrig/tet_mesh.hpp"
 #include "tetrig/volume_constraint.hpp"
 #include "tetrig/rigbuild/tet_quality.hpp"
+#include "tetrig/rigbuild/tracking_measure.hpp"
 #include "tetrig/rigbuild/write_file_atomic.hpp"
 #include "solver_flags.hpp"
 
@@ -59,30 +60,20 @@ namespace {
 
 using tetrig::Rig;
 
-struct Percentiles {
-  double median = 0, p90 = 0, p99 = 0, max = 0;
-  std::size_t count = 0;
-};
-
-Percentiles percentiles(std::vector<double> v) {
-  Percentiles p;
-  p.count = v.size();
-  if (v.empty()) return p;
-  std::sort(v.begin(), v.end());
-  const auto at = [&v](double q) {
-    // Nearest rank: the smallest value with at least q of the samples at or below it.
-    const auto rank = static_cast<std::size_t>(std::ceil(q * static_cast<double>(v.size())));
-    return v[std::min(v.size() - 1, rank == 0 ? 0 : rank - 1)];
-  };
-  p.median = at(0.5);
-  p.p90 = at(0.9);
-  p.p99 = at(0.99);
-  p.max = v.back();
-  return p;
-}
+using tetrig::rigbuild::Percentiles;
+Percentiles percentiles(std::vector<double> v) { return tetrig::rigbuild::percentilesOf(std::move(v)); }
 
 nlohmann::json toJson(const Percentiles& p) {
   return {{"median", p.median}, {"p90", p.p90}, {"p99", p.p99}, {"max", p.max}, {"count", p.count}};
+}
+
+// tracking_mm: the whole clip's percentiles, and each marker's under "per_marker" (by label).
+nlohmann::json trackingJson(const tetrig::rigbuild::TrackingMeasure& t, const Rig& rig) {
+  nlohmann::json j = toJson(t.all());
+  nlohmann::json per = nlohmann::json::object();
+  for (std::size_t m = 0; m < rig.markers.size(); ++m) per[rig.markers[m].label] = toJson(t.marker(m));
+  j["per_marker"] = std::move(per);
+  return j;
 }
 
 // The exact energy and the inverted body tets of a tet-mesh pose (#V*3 doubles).
@@ -335,6 +326,10 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
   };
   std::map<std::int32_t, InvertedTet> inverted_any;
   std::size_t held = 0, predicted = 0, rejected = 0;
+  // The skin following the markers: every frame's published pose, and each reference frame's
+  // converged one.
+  tetrig::rigbuild::TrackingMeasure tracking(rig), tracking_conv(rig);
+  std::vector<float> fine_conv_f(fine_n);
   double step_us = 0.0;
   const double rest_volume = measurer.fineRestVolume();
   const auto wall0 = std::chrono::steady_clock::now();
@@ -345,6 +340,7 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
     if ((s.flags & tetrig::kLivePoseHeld) != 0) ++held;
     if ((s.flags & tetrig::kLiveMarkersPredicted) != 0) ++predicted;
     if ((s.flags & tetrig::kLivePoseRejected) != 0) ++rejected;  // the live rig reset itself: reported below
+    tracking.addFrame(fine, live);
     const std::span<const double> x = live.deformer().positions();
     const bool is_reference = (f - first) % static_cast<std::size_t>(cfg.reference_every) == 0;
     const PoseMeasure mb = measurer.measure(x, is_reference);
@@ -418,6 +414,8 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
     e_budget.push_back(mb.energy);
     e_conv.push_back(mc.energy);
     tetrig::applyPoseTransfer(b, xc.data(), fine_conv.data());
+    std::copy(fine_conv.begin(), fine_conv.end(), fine_conv_f.begin());
+    tracking_conv.addFrame(fine_conv_f, live);
     volume_conv.push_back(measurer.fineVolume(fine_conv.data()) / rest_volume - 1.0);
     ref_frame.push_back(f);
     if (!cfg.quiet) {
@@ -452,6 +450,8 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
       {"iterations", k},
       {"frames", end - first},
       {"reference_frames", rms.size()},
+      {"tracking_mm", trackingJson(tracking, rig)},
+      {"tracking_converged_mm", trackingJson(tracking_conv, rig)},
       {"rms_error_mm", toJson(percentiles(rms))},
       {"max_error_mm", toJson(percentiles(worst))},
       {"energy_excess", toJson(percentiles(excess))},

@@ -13,6 +13,7 @@
 #include <cstdint>
 #include <cstdio>
 #include <exception>
+#include <limits>
 #include <mutex>
 #include <span>
 #include <stdexcept>
@@ -45,6 +46,9 @@ std::string formatHz(double hz) {
   std::snprintf(buffer, sizeof(buffer), "%.6g Hz", hz);
   return buffer;
 }
+
+// The rate frames arrive at: a paced playback at `speed` delivers `rate` x speed frames a second.
+double arrivalRate(double rate, Pacing pacing, double speed) { return pacing == Pacing::kRealTime ? rate * speed : rate; }
 
 std::string pacingText(Pacing pacing, double speed) {
   if (pacing == Pacing::kAsFastAsPossible) return ", as fast as possible";
@@ -327,7 +331,16 @@ ReplayKind classifyRecording(const RawRecording& recording) {
 double medianRate(std::vector<std::int64_t> frame_times) {
   if (frame_times.size() < 2) return 0.0;
   std::vector<std::int64_t> gaps;
-  for (std::size_t i = 1; i < frame_times.size(); ++i) gaps.push_back(frame_times[i] - frame_times[i - 1]);
+  for (std::size_t i = 1; i < frame_times.size(); ++i) {
+    // The times come from the recording: their difference may not fit (5e18 then -5e18). Such a
+    // gap saturates, keeping its sign (a backwards step stays negative and gives no rate).
+    std::int64_t gap = 0;
+    if (__builtin_sub_overflow(frame_times[i], frame_times[i - 1], &gap)) {
+      gap = frame_times[i] > frame_times[i - 1] ? std::numeric_limits<std::int64_t>::max()
+                                                : std::numeric_limits<std::int64_t>::min();
+    }
+    gaps.push_back(gap);
+  }
   std::sort(gaps.begin(), gaps.end());
   const std::size_t m = gaps.size() / 2;
   const double median = gaps.size() % 2 == 1 ? static_cast<double>(gaps[m])
@@ -448,7 +461,8 @@ std::unique_ptr<MarkerSource> makeC3DSource(std::shared_ptr<const C3DClip> clip,
   std::string description = "c3d:" + name + ", " + std::to_string(count) + " markers, " +
                             (rate > 0.0 ? formatHz(rate) : std::string("no frame rate")) + pacingText(pacing, speed) +
                             (loop ? ", loop" : "");
-  return std::make_unique<PlaybackSource>(std::move(producer), std::move(description), rate, true, std::move(labels));
+  return std::make_unique<PlaybackSource>(std::move(producer), std::move(description), arrivalRate(rate, pacing, speed), true,
+                                          std::move(labels));
 }
 
 std::unique_ptr<MarkerSource> makeSyntheticSource(SyntheticOptions options, std::vector<std::string> labels) {
@@ -464,7 +478,7 @@ std::unique_ptr<MarkerSource> makeSyntheticSource(SyntheticOptions options, std:
   const SyntheticOptions& o = source.options();
   std::string description = "synthetic, " + std::to_string(count) + " markers, " + formatHz(o.rate_hz) +
                             pacingText(o.pacing, o.speed);
-  return std::make_unique<PlaybackSource>(std::move(producer), std::move(description), o.rate_hz, true,
+  return std::make_unique<PlaybackSource>(std::move(producer), std::move(description), arrivalRate(o.rate_hz, o.pacing, o.speed), true,
                                           std::move(labels));
 }
 
@@ -485,7 +499,8 @@ std::unique_ptr<MarkerSource> makeReplaySource(std::filesystem::path recording, 
                  (scan.rate_hz > 0.0 ? formatHz(scan.rate_hz) : std::string("rate unknown")) +
                  pacingText(pacing, speed);
   auto producer = std::make_unique<ReplayProducer>(std::move(loaded), kind, pacing, speed);
-  return std::make_unique<PlaybackSource>(std::move(producer), std::move(description), scan.rate_hz, scan.has_labels,
+  return std::make_unique<PlaybackSource>(std::move(producer), std::move(description), arrivalRate(scan.rate_hz, pacing, speed),
+                                          scan.has_labels,
                                           std::move(scan.labels));
 }
 

@@ -134,6 +134,8 @@ void checkCountFits(const LineTokenizer& in, std::int64_t count, std::int64_t to
 }
 
 std::string readWholeFile(const std::filesystem::path& path) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec)) throw MeshFileError(path.string() + ": is a folder, not a mesh file");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw MeshFileError(path.string() + ": cannot open file for reading");
   std::ostringstream buffer;

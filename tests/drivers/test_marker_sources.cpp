@@ -181,6 +181,23 @@ TEST(C3DSource, FileWithoutLabelsUsesTheRigBuilderNames) {
   EXPECT_EQ(labels, (std::vector<std::string>{"point0", "point1", "point2"}));
 }
 
+// The rate frames arrive at sets tetrig run's default budget: a clip paced at speed 2 delivers
+// twice its rate; as fast as possible, the clip's rate stands (there is no arrival rate to give).
+TEST(C3DSource, NominalRateIsTheArrivalRateAtItsSpeed) {
+  const TestC3DSpec s = clipSpec({"A", "B"}, 4);
+  C3DPlaybackOptions options;
+  options.speed = 2.0;
+  EXPECT_DOUBLE_EQ(makeC3DSource(clipOf(s), options, "clip.c3d")->nominalRateHz(), 200.0);
+  options.speed = 0.5;
+  EXPECT_DOUBLE_EQ(makeC3DSource(clipOf(s), options, "clip.c3d")->nominalRateHz(), 50.0);
+  options.pacing = Pacing::kAsFastAsPossible;
+  EXPECT_DOUBLE_EQ(makeC3DSource(clipOf(s), options, "clip.c3d")->nominalRateHz(), 100.0);
+  SyntheticOptions synthetic;
+  synthetic.rate_hz = 120.0;
+  synthetic.speed = 3.0;
+  EXPECT_DOUBLE_EQ(makeSyntheticSource(synthetic)->nominalRateHz(), 360.0);
+}
+
 TEST(C3DSource, DeliversTheClipInOrderAndFinishes) {
   const TestC3DSpec s = clipSpec({"A", "B", "C"}, 40);
   C3DPlaybackOptions options;
@@ -658,6 +675,22 @@ TEST(ReplaySource, MarkerStreamWithoutDescriptorHasNoLabels) {
   EXPECT_NE(source->describe().find("no descriptor"), std::string::npos) << source->describe();
   EXPECT_DOUBLE_EQ(source->nominalRateHz(), 1000.0);
   expectReplayMatchesDirectDecoding(path, 5, *source);
+}
+
+// Issue 37: the receive times come from the file. A step from +5e18 to -5e18 ns does not fit
+// in int64: the rate scan subtracted them unchecked (signed overflow, UBSan aborts) and the
+// wrapped difference, +8.4e18, read as a frame gap: a tiny positive rate. A backwards step
+// gives no rate.
+TEST(ReplaySource, ReceiveTimesWhoseDifferenceOverflowsGiveNoRate) {
+  TempDir dir;
+  std::vector<TimedBytes> records;
+  records.push_back({5'000'000'000'000'000'000, 0x81, encodeFrame(streamFrame(0, 2))});
+  records.push_back({-5'000'000'000'000'000'000, 0x81, encodeFrame(streamFrame(1, 2))});
+  const auto path = writeRecording(dir.path() / "wild_times.trr", {}, records);
+  auto source = makeReplaySource(path, Pacing::kAsFastAsPossible);
+  EXPECT_EQ(source->nominalRateHz(), 0.0);
+  EXPECT_NE(source->describe().find("rate unknown"), std::string::npos) << source->describe();
+  expectReplayMatchesDirectDecoding(path, 2, *source);
 }
 
 std::vector<TimedBytes> hydraRecords(int count, std::int64_t gap_ns, std::vector<HydraRawReport>* raw_out = nullptr) {

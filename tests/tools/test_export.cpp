@@ -237,16 +237,16 @@ TEST(Export, Pc2HeaderAndSamplesAreTheLiveRigFrames) {
   EXPECT_EQ(r.held_frames, 0u);
   EXPECT_EQ(r.iterations, 3u * kFrames);
   // The rest mesh beside it, in the same vertex order, with the machine-readable comment.
-  const TextMesh obj = readObj(out.path() / "anim.obj");
+  const TextMesh obj = readObj(out.path() / "anim.rest.obj");
   EXPECT_EQ(obj.v, rigRest());
   EXPECT_EQ(obj.f, rigTriangles());
   bool keys = false;
   for (const std::string& c : obj.comments)
     keys |= c.find("tetrig-export first_frame=0 frames=12 rate_hz=100 unit=m up=y vertices=" + std::to_string(pc2.points)) == 0;
   EXPECT_TRUE(keys);
-  EXPECT_EQ(r.files, (std::vector<std::filesystem::path>{out.path() / "anim.obj", out.path() / "anim.pc2"}));
-  EXPECT_EQ(listDir(out.path()), (std::vector<std::string>{"anim.obj", "anim.pc2"}));  // no temporary left
-  EXPECT_EQ(r.bytes, std::filesystem::file_size(out.path() / "anim.obj") + std::filesystem::file_size(out.path() / "anim.pc2"));
+  EXPECT_EQ(r.files, (std::vector<std::filesystem::path>{out.path() / "anim.rest.obj", out.path() / "anim.pc2"}));
+  EXPECT_EQ(listDir(out.path()), (std::vector<std::string>{"anim.pc2", "anim.rest.obj"}));  // no temporary left
+  EXPECT_EQ(r.bytes, std::filesystem::file_size(out.path() / "anim.rest.obj") + std::filesystem::file_size(out.path() / "anim.pc2"));
 }
 
 TEST(Export, RangeStartsFromTheRestPoseAtItsFirstFrame) {
@@ -676,13 +676,14 @@ TEST(Export, CancelledExportTouchesNothing) {
     const char* out;
     std::vector<std::string> existing;  // sorted
   };
-  const Case cases[] = {{"anim.pc2", {"anim.obj", "anim.pc2"}}, {"anim_##.obj", {"anim_05.obj"}}, {"anim_##.ply", {"anim_05.ply"}},
+  const Case cases[] = {{"anim.pc2", {"anim.pc2", "anim.rest.obj"}}, {"anim_##.obj", {"anim_05.obj"}}, {"anim_##.ply", {"anim_05.ply"}},
                         {"anim.glb", {"anim.glb"}}, {"anim.gltf", {"anim.gltf"}}};
   for (const Case& c : cases) {
     SCOPED_TRACE(c.out);
     const TempDir out;
     for (const std::string& e : c.existing) out.write(e, "old " + e + "\n");
     auto o = options(out.path() / c.out);
+    o.force = true;  // the old files are not tetrig's: without it they are refused before any work
     o.on_frame = [](std::size_t done, std::size_t) {
       if (done == 6) throw std::runtime_error("cancelled at frame 6");
     };
@@ -693,6 +694,78 @@ TEST(Export, CancelledExportTouchesNothing) {
       EXPECT_EQ(std::string(bytes.begin(), bytes.end()), "old " + e + "\n");
     }
   }
+}
+
+// The user's files are never lost: the rest mesh beside a point cache has a name of its own, an
+// existing file tetrig did not write is refused before any work (unless --force), a file tetrig
+// wrote is replaced, and an input is never an output, even with --force.
+TEST(Export, NeverReplacesAUsersFile) {
+  const TempDir out;
+  auto user = [&](const std::string& name) {
+    const std::string text = "# Blender v3.4 OBJ File: '" + name + "'\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
+    out.write(name, text);
+    return text;
+  };
+  auto content = [&](const std::string& name) {
+    const auto b = slurp(out.path() / name);
+    return std::string(b.begin(), b.end());
+  };
+  auto noWork = [](tools::ExportOptions o) {
+    o.on_frame = [](std::size_t, std::size_t) { ADD_FAILURE() << "a frame was solved before the refusal"; };
+    return o;
+  };
+  // FILE.pc2 beside the user's FILE.obj (the mesh they made the cache for): the OBJ stays.
+  const std::string mesh = user("human.obj");
+  const tools::ExportReport r = tools::exportClip(options(out.path() / "human.pc2"));
+  EXPECT_EQ(content("human.obj"), mesh);
+  EXPECT_EQ(r.files, (std::vector<std::filesystem::path>{out.path() / "human.rest.obj", out.path() / "human.pc2"}));
+  // Exported again: both files are tetrig's and are replaced.
+  (void)tools::exportClip(options(out.path() / "human.pc2", 2));
+  EXPECT_EQ(readPc2(out.path() / "human.pc2").frames, liveRigFrames(0, kFrames, 2));
+  EXPECT_EQ(content("human.obj"), mesh);
+
+  // Files tetrig did not write, each format: refused in one line, nothing written, nothing solved.
+  const std::string walk_rest = user("walk.rest.obj");
+  EXPECT_THROW_CONTAINS(tools::exportClip(noWork(options(out.path() / "walk.pc2"))),
+                        "walk.rest.obj exists and tetrig did not write it: refusing to replace it; give another name, or add --force");
+  EXPECT_FALSE(std::filesystem::exists(out.path() / "walk.pc2"));
+  out.write("cache.pc2", "POINTCACHE2");  // a point cache with no rest mesh of tetrig's beside it
+  EXPECT_THROW_CONTAINS(tools::exportClip(noWork(options(out.path() / "cache.pc2"))), "cache.pc2 exists and tetrig did not write it");
+  user("seq_05.obj");
+  EXPECT_THROW_CONTAINS(tools::exportClip(noWork(options(out.path() / "seq_##.obj"))), "seq_05.obj exists and tetrig did not write it");
+  EXPECT_FALSE(std::filesystem::exists(out.path() / "seq_00.obj"));
+  out.write("seq_07.ply", "ply\nformat ascii 1.0\ncomment made by hand\nend_header\n");
+  EXPECT_THROW_CONTAINS(tools::exportClip(noWork(options(out.path() / "seq_##.ply"))), "seq_07.ply exists and tetrig did not write it");
+  out.write("scene.gltf", "{\"asset\":{\"generator\":\"Khronos glTF Blender I/O\",\"version\":\"2.0\"}}");
+  EXPECT_THROW_CONTAINS(tools::exportClip(noWork(options(out.path() / "scene.gltf"))), "scene.gltf exists and tetrig did not write it");
+  EXPECT_EQ(content("walk.rest.obj"), walk_rest);
+
+  // With --force the user's file is replaced.
+  auto forced = options(out.path() / "walk.pc2");
+  forced.force = true;
+  (void)tools::exportClip(forced);
+  EXPECT_NE(content("walk.rest.obj"), walk_rest);
+  EXPECT_EQ(readPc2(out.path() / "walk.pc2").frames, liveRigFrames(0, kFrames, 3));
+
+  // Every format tetrig wrote is replaced without --force on a second export.
+  for (const char* name : {"again_##.obj", "again_##.ply", "again.gltf", "again.glb"}) {
+    SCOPED_TRACE(name);
+    (void)tools::exportClip(options(out.path() / name));
+    EXPECT_NO_THROW((void)tools::exportClip(options(out.path() / name, 2)));
+  }
+
+  // An input is never an output, whatever its name and even with --force.
+  const std::filesystem::path rig_as_glb = out.path() / "rig.glb";
+  std::filesystem::copy_file(scene().rig_path, rig_as_glb);
+  auto onto_input = noWork(options(rig_as_glb));
+  onto_input.rig_path = rig_as_glb;
+  onto_input.force = true;
+  EXPECT_THROW_CONTAINS(tools::exportClip(onto_input), "rig.glb is also an input of this command: writing it would lose the input");
+  const std::filesystem::path clip_frame = out.path() / "take_03.obj";
+  std::filesystem::create_hard_link(scene().clip_path, clip_frame);
+  auto onto_clip = noWork(options(out.path() / "take_##.obj"));
+  onto_clip.force = true;
+  EXPECT_THROW_CONTAINS(tools::exportClip(onto_clip), "take_03.obj is the same file as the input ");
 }
 
 TEST(Export, FormatsFromBytes) {
@@ -747,7 +820,7 @@ TEST(Export, TargetsAndRanges) {
   EXPECT_EQ(tools::sequenceFramePath(seq, 123456), std::filesystem::path("out/anim_123456.ply"));
   const auto pc2 = tools::parseExportTarget("x/walk.PC2");
   EXPECT_EQ(pc2.format, tools::ExportFormat::kPc2);
-  EXPECT_EQ(pc2.rest_obj, std::filesystem::path("x/walk.obj"));
+  EXPECT_EQ(pc2.rest_obj, std::filesystem::path("x/walk.rest.obj"));
   EXPECT_EQ(tools::parseExportTarget("a.GLB").format, tools::ExportFormat::kGlb);
   EXPECT_EQ(tools::parseExportTarget("a.gltf").format, tools::ExportFormat::kGltf);
   EXPECT_THROW_CONTAINS((void)tools::parseExportTarget("d#/a_#.obj"), "not in a directory");

@@ -53,6 +53,64 @@ TEST(TetrigCli, HelpForEveryCommand) {
   EXPECT_NE(run("build-rig --out x.rig", dir).status, 0);  // --mesh is required
 }
 
+// A slip on the command line: one line naming it, the nearest known word, exit status 2 (not the
+// parser's "is required" for an option that was only misspelt).
+TEST(TetrigCli, CommandLineMistakesSayWhatToDo) {
+  const TempDir dir;
+  auto oneLine = [](const CliRun& r, const std::string& first_line) {
+    EXPECT_EQ(r.status, 2) << r.err;
+    EXPECT_EQ(r.err, first_line + "\n");
+    EXPECT_EQ(r.out, "");
+  };
+  oneLine(run("run --rig x.rig --sorce synthetic", dir), "tetrig run: unknown option '--sorce' (did you mean --source?) (tetrig run --help lists them)");
+  oneLine(run("export --rig x.rig --c3d c.c3d --out a.pc2 --iteration 3", dir),
+          "tetrig export: unknown option '--iteration' (did you mean --iterations?) (tetrig export --help lists them)");
+  oneLine(run("build-rig --mesh m.obj --out r.rig --frobnicate", dir), "tetrig build-rig: unknown option '--frobnicate' (tetrig build-rig --help lists them)");
+  oneLine(run("rn --rig x.rig", dir),
+          "tetrig: unknown command 'rn' (did you mean run?); the commands: build-rig, inspect, demo, run, export, view, pose, make-character "
+          "(tetrig --help)");
+  // A value that starts with '-' is a value, not an option; a wrong value is the parser's words on one line.
+  const CliRun negative = run("run --rig x.rig --source synthetic --frames -5", dir);
+  EXPECT_EQ(negative.status, 2);
+  EXPECT_EQ(negative.err.rfind("tetrig run: error: ", 0), 0u) << negative.err;
+  EXPECT_CONTAINS(negative.err, "--frames");
+  EXPECT_EQ(std::count(negative.err.begin(), negative.err.end(), '\n'), 1) << negative.err;
+  const CliRun missing = run("export --rig x.rig --c3d c.c3d", dir);
+  EXPECT_EQ(missing.status, 2);
+  EXPECT_EQ(missing.err, "tetrig export: error: --out is required (tetrig export --help)\n");
+  EXPECT_EQ(run("run --help", dir).status, 0);
+  EXPECT_EQ(run("--version", dir).status, 0);
+}
+
+// A folder where a file belongs is named as such (not std::bad_alloc or a stream error).
+TEST(TetrigCli, AFolderWhereAFileBelongsIsSaidSo) {
+  const TempDir dir;
+  const std::string folder = dir.path().string();
+  const std::string rig = dir.writeBytes("small.rig", serializeRig(test::buildSmallRig(dir))).string();
+  const std::string out = (dir.path() / "x.rig").string();
+  const std::string clip = test::writeSmallClip(dir).string();
+  struct Case {
+    std::string args, command;
+  };
+  const Case cases[] = {
+      {"inspect '" + folder + "'", "inspect"},
+      {"export --rig '" + folder + "' --c3d '" + folder + "' --out '" + (dir.path() / "a.pc2").string() + "'", "export"},
+      {"export --rig '" + rig + "' --c3d '" + folder + "' --out '" + (dir.path() / "a.pc2").string() + "'", "export"},
+      {"build-rig --mesh '" + folder + "' --markers '" + clip + "' --out '" + out + "' -q", "build-rig"},
+      {"build-rig --mesh '" + (dir.path() / "m.obj").string() + "' --rig '" + folder + "' --out '" + out + "' -q", "build-rig"},
+      {"run --rig '" + folder + "' --source synthetic", "run"},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.args);
+    const CliRun r = run(c.args, dir);
+    EXPECT_EQ(r.status, 1);
+    EXPECT_EQ(r.err.rfind("tetrig " + c.command + ": error: ", 0), 0u) << r.err;
+    EXPECT_CONTAINS(r.err, "is a folder, not a");
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+  }
+  EXPECT_FALSE(std::filesystem::exists(out));
+}
+
 TEST(TetrigCli, BadInputIsOneLineNonZeroAndNoFile) {
   const TempDir dir;
   const std::string out = (dir.path() / "bad.rig").string();
@@ -236,13 +294,34 @@ TEST(TetrigCli, RunPlaysAClipAndRefusesBadInput) {
             0);
   for (int i = 0; i < 500 && !std::filesystem::exists("/dev/shm/" + busy); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
   ASSERT_TRUE(std::filesystem::exists("/dev/shm/" + busy));
-  one_line_error(run("run --rig '" + rig + "' --source synthetic --publish " + busy, dir), "pid");
+  const CliRun second = run("run --rig '" + rig + "' --source synthetic --publish " + busy, dir);
+  one_line_error(second, "pid");
+  EXPECT_EQ(second.out, "") << "a refused producer prints no banner before its error";
   pid_t producer = 0;
   std::ifstream(pid_file) >> producer;
   ASSERT_GT(producer, 0);
   kill(producer, SIGINT);  // ends cleanly: summary, segment unlinked
   for (int i = 0; i < 500 && std::filesystem::exists("/dev/shm/" + busy); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
   EXPECT_FALSE(std::filesystem::exists("/dev/shm/" + busy)) << "SIGINT ends the producer cleanly";
+
+  // SIGHUP (the terminal or ssh session closed) ends it as cleanly: segment unlinked, stats written.
+  const std::string hup = "tetrig-cli-hup-" + std::to_string(getpid());
+  const std::string hup_stats = (dir.path() / "hup.json").string();
+  ASSERT_EQ(std::system(("'" + std::string(TETRIG_EXE) + "' run --rig '" + rig + "' --source synthetic --publish " + hup +
+                         " --stats-json '" + hup_stats + "' -q >/dev/null 2>&1 & echo $! > '" + pid_file + "'")
+                            .c_str()),
+            0);
+  for (int i = 0; i < 500 && !std::filesystem::exists("/dev/shm/" + hup); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  ASSERT_TRUE(std::filesystem::exists("/dev/shm/" + hup));
+  std::ifstream(pid_file) >> producer;
+  ASSERT_GT(producer, 0);
+  kill(producer, SIGHUP);
+  for (int i = 0; i < 500 && (std::filesystem::exists("/dev/shm/" + hup) || !std::filesystem::exists(hup_stats)); ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  EXPECT_FALSE(std::filesystem::exists("/dev/shm/" + hup)) << "SIGHUP ends the producer cleanly";
+  ASSERT_TRUE(std::filesystem::exists(hup_stats));
+  const nlohmann::json hup_json = nlohmann::json::parse(std::ifstream(hup_stats));
+  EXPECT_EQ(hup_json.value("end", std::string()), "hung up (SIGHUP)");
 }
 
 // tetrig demo, the README's run command: the whole live path on the project's own data, with a

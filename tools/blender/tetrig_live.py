@@ -123,11 +123,17 @@ def pid_alive(pid):
 
 
 class Segment:
-    """A read-only mapping of one segment with its header checked as tetrig_shm_attach checks it."""
+    """A read-only mapping of one segment with its header checked as tetrig_shm_attach checks it.
 
-    def __init__(self, name):
+    Like tetrig_shm_open, it requires the segment to belong to `owner` (default: this process's
+    effective uid) and not to be writable by group or others, copies every header field it uses
+    once at open, checks the copies, and reads from the live header only latest_frame_id, state
+    and heartbeat_ns (the slot index is latest_frame_id modulo the copied slot count)."""
+
+    def __init__(self, name, owner=None):
         self.name = name
         self.path = segment_path(name)
+        self.owner = os.geteuid() if owner is None else int(owner)
         try:
             fd = os.open(self.path, os.O_RDONLY | os.O_CLOEXEC)
         except FileNotFoundError:
@@ -137,6 +143,12 @@ class Segment:
                                "or start the producer with --shm-mode 644)" % self.path)
         try:
             st = os.fstat(fd)
+            if st.st_uid != self.owner:
+                raise SegmentError("%s belongs to uid %d, not %d: refused (another user could have taken the name; "
+                                   "connect with owner=%d to accept it)" % (self.path, st.st_uid, self.owner, st.st_uid))
+            if st.st_mode & 0o022:
+                raise SegmentError("%s has mode %04o: group or others may write it, so it is refused (the producer "
+                                   "must not widen write permission)" % (self.path, st.st_mode & 0o7777))
             if st.st_size < HEADER_SIZE:
                 raise SegmentNotReady("%s is still being created" % self.path)
             self.mm = mmap.mmap(fd, st.st_size, mmap.MAP_SHARED, mmap.PROT_READ)
@@ -207,7 +219,8 @@ class Segment:
             raise bad("%s: slot layout inconsistent" % self.path)
         if self.flags & HAS_NORMALS:
             n = self.slot_normals_offset
-            if n % ALIGNMENT or n < SLOT_HEADER_SIZE or n > self.slot_stride or v * 12 > self.slot_stride - n:
+            if n % ALIGNMENT or n < SLOT_HEADER_SIZE or n > self.slot_stride or v * 12 > self.slot_stride - n or \
+                    not (self.slot_positions_offset + v * 12 <= n or n + v * 12 <= self.slot_positions_offset):
                 raise bad("%s: normals layout inconsistent" % self.path)
         elif self.slot_normals_offset != 0:
             raise bad("%s: normals offset without normals" % self.path)
@@ -345,10 +358,11 @@ def _ensure_object(name, segment, up):
 class LiveLink:
     """One segment driving one mesh object. poll() is what the timer calls."""
 
-    def __init__(self, segment_name, object_name="", up="Y"):
+    def __init__(self, segment_name, object_name="", up="Y", owner=None):
         self.segment_name = segment_name
         self.object_name = object_name
         self.up = up
+        self.owner = owner        # uid the segment must belong to (None: ours)
         self.segment = None
         self.positions = None
         self.frames = 0           # frames applied to the object
@@ -371,7 +385,7 @@ class LiveLink:
         if now < self._retry_ns:
             return False
         try:
-            self.segment = Segment(self.segment_name)
+            self.segment = Segment(self.segment_name, self.owner)
         except SegmentNotReady as e:
             self.status = str(e)
             self._retry_ns = now + 50_000_000
@@ -434,11 +448,12 @@ class LiveLink:
         return False
 
 
-def connect(segment_name="tetrig", object_name="", up="Y"):
+def connect(segment_name="tetrig", object_name="", up="Y", owner=None):
     """Starts (or restarts) the link of `segment_name`; the object appears with the first poll
-    that finds the segment. Returns the LiveLink."""
+    that finds the segment. `owner`: the uid the segment must belong to (default: Blender's own
+    effective uid). Returns the LiveLink."""
     disconnect(segment_name)
-    link = LiveLink(segment_name, object_name, up)
+    link = LiveLink(segment_name, object_name, up, owner)
     _links[segment_name] = link
     link.poll()
     if bpy is not None and not bpy.app.timers.is_registered(_timer):
@@ -528,11 +543,15 @@ def _import_obj(path):
 
 
 def import_export(pc2_path, set_scene=True):
-    """Imports FILE.obj (the rest mesh) beside `pc2_path` and plays FILE.pc2 on it through a Mesh
-    Cache modifier. Scene frame = clip frame (the modifier's frame_start = the PC2's start frame);
-    with set_scene the scene's frame range and rate follow the export. Returns the object."""
+    """Imports FILE.rest.obj (the rest mesh; FILE.obj from exports before it had its own name)
+    beside `pc2_path` and plays FILE.pc2 on it through a Mesh Cache modifier. Scene frame = clip
+    frame (the modifier's frame_start = the PC2's start frame); with set_scene the scene's frame
+    range and rate follow the export. Returns the object."""
     pc2_path = os.path.abspath(pc2_path)
-    obj_path = os.path.splitext(pc2_path)[0] + ".obj"
+    stem = os.path.splitext(pc2_path)[0]
+    obj_path = stem + ".rest.obj"
+    if not os.path.exists(obj_path) and os.path.exists(stem + ".obj") and read_export_keys(stem + ".obj"):
+        obj_path = stem + ".obj"
     if not os.path.exists(obj_path):
         raise ValueError("%s: the rest mesh %s is missing (tetrig export writes it beside the .pc2)" % (pc2_path, obj_path))
     points, start, _rate, samples = read_pc2_header(pc2_path)

@@ -209,6 +209,9 @@ std::string readWholeFile(const std::filesystem::path& path) {
 
 SurfaceMesh importSurface(const std::filesystem::path& path, const ImportOptions& options, ImportStats* stats) {
   std::error_code ec;
+  if (std::filesystem::is_directory(path, ec)) {
+    throw RigBuildError(path.string() + ": is a folder, not a mesh file (give an OBJ, PLY, OFF, STL, glTF or FBX file)");
+  }
   if (!std::filesystem::is_regular_file(path, ec)) {
     throw RigBuildError(path.string() + ": no such file (check the path)");
   }

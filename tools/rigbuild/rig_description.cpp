@@ -415,6 +415,9 @@ RigDescription parseRigDescription(const std::string& json_text, const std::file
 }
 
 RigDescription readRigDescription(const std::filesystem::path& path) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec))
+    throw RigBuildError(path.string() + ": is a folder, not a rig description (give a .json file; docs/rig-format.md)");
   std::ifstream in(path);
   if (!in) throw RigBuildError(path.string() + ": cannot open the rig description (missing or unreadable)");
   std::stringstream s;

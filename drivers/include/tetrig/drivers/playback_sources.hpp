@@ -53,7 +53,8 @@ namespace tetrig::drivers {
 // to a rig marker "LFHD"); a point without a label (files without a POINT:LABELS parameter, or
 // selected unlabelled points) is named "point<p>", the name `tetrig build-rig` gives it, so a rig
 // built from such a clip binds to its playback. Ids that are not selected have "" (unnamed).
-// nominalRateHz() = the clip's rate, or options.rate_override_hz when > 0.
+// nominalRateHz() = the clip's rate, or options.rate_override_hz when > 0, times options.speed with
+// real-time pacing (the rate frames arrive at, which sets tetrig run's default budget).
 // Throws std::invalid_argument for a null clip and whatever C3DPlayback's constructor throws
 // (unknown label, speed <= 0, real-time pacing without a rate). Allocates; control thread.
 std::unique_ptr<MarkerSource> makeC3DSource(std::shared_ptr<const C3DClip> clip, C3DPlaybackOptions options,
@@ -61,7 +62,8 @@ std::unique_ptr<MarkerSource> makeC3DSource(std::shared_ptr<const C3DClip> clip,
 
 // Synthetic source (synthetic_source.hpp) with options.pacing / speed / max_frames (0: endless,
 // finished() never becomes true). Markers have ids 0..n-1; labels[i] = labels[i] as given, or
-// "M0".."M<n-1>" when `labels` is empty. nominalRateHz() = options.rate_hz.
+// "M0".."M<n-1>" when `labels` is empty. nominalRateHz() = options.rate_hz (times options.speed with
+// real-time pacing).
 // Throws std::invalid_argument for what SyntheticSource rejects and for a non-empty `labels`
 // whose size is not the marker count. Allocates; control thread.
 std::unique_ptr<MarkerSource> makeSyntheticSource(SyntheticOptions options, std::vector<std::string> labels = {});
@@ -84,7 +86,8 @@ std::unique_ptr<MarkerSource> makeSyntheticSource(SyntheticOptions options, std:
 //    not change the labels the source reported.
 // Records the decoder rejects are counted in stats().decode_errors; frames_lost is the decoder's
 // count of sequence gaps. nominalRateHz() = 1e9 / the median interval between the recorded
-// receive times of the records that completed the first 64 frames (0 with fewer than 2 frames).
+// receive times of the records that completed the first 64 frames (0 with fewer than 2 frames),
+// times `speed` with real-time pacing.
 // Throws RawRecordingError (a std::runtime_error naming the file) when the recording cannot be
 // read, std::invalid_argument for speed <= 0, an empty recording or an unknown kind.
 // Allocates (the whole recording is held in memory); control thread.
