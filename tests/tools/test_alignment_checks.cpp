@@ -153,6 +153,26 @@ TEST(AlignmentChecks, ABodyOfAnotherSizeIsRefusedByTheFitScale) {
   EXPECT_EQ(buildError(cm), "");
 }
 
+// --mesh-unit auto with markers: the unit that makes the mesh about as tall as the performer's
+// markers (a 180-unit body is centimetres, not millimetres); without markers, the height alone.
+TEST(AlignmentChecks, AutoMeshUnitFollowsThePerformersHeight) {
+  const TempDir dir;
+  const std::filesystem::path clip = test::writeTClip(dir, "t.c3d", repeat(test::tPoseMarkers(), 2));
+  for (const auto& [scale, unit] : {std::pair{1.0, "m"}, std::pair{100.0, "cm"}, std::pair{1000.0, "mm"}}) {
+    SCOPED_TRACE(unit);
+    rigbuild::BuildRigInputs in = tInputs(dir, clip);
+    in.mesh = test::writeTTetMesh(dir, std::string("t_") + unit, scale);
+    in.description.mesh_unit = "auto";
+    rigbuild::BuildRigReport report;
+    const Rig rig = rigbuild::buildRig(in, &report);
+    EXPECT_EQ(rig.unit, unit);
+    EXPECT_TRUE(hasNote(report, std::string("mesh unit taken as ") + unit + ": the mesh is ")) << report.notes.size();
+    EXPECT_TRUE(hasNote(report, "the performer's markers 17"));
+    ASSERT_TRUE(report.alignment_check.has_value());
+    EXPECT_TRUE(report.alignment_check->ok());
+  }
+}
+
 TEST(AlignmentChecks, CheckAlignmentMeasuresEachCriterion) {
   const TempDir dir;
   const rigbuild::SurfaceMesh surface = tSurface(dir);

@@ -112,6 +112,30 @@ bool markersAt(const MarkerClip& mc, std::int64_t frame, std::vector<Eigen::Vect
   return true;
 }
 
+// The performer's height as the markers show it: per frame, the extent of the valid markers
+// along the device's up axis (mm); the median over frames (a crouch or a glitch moves it little).
+// 0 when no frame has two valid markers.
+double medianMarkerHeightMm(const MarkerClip& mc, const Eigen::Vector3d& up) {
+  std::vector<double> heights;
+  const double k = mc.clip.unitsToMm();
+  for (std::size_t f = 0; f < mc.clip.frameCount(); ++f) {
+    const float* pos = mc.clip.positions(f);
+    double lo = INFINITY, hi = -INFINITY;
+    int valid = 0;
+    for (const int p : mc.points) {
+      if (!mc.clip.isValid(f, p)) continue;
+      const double h = k * (up[0] * pos[3 * p] + up[1] * pos[3 * p + 1] + up[2] * pos[3 * p + 2]);
+      lo = std::min(lo, h);
+      hi = std::max(hi, h);
+      ++valid;
+    }
+    if (valid >= 2) heights.push_back(hi - lo);
+  }
+  if (heights.empty()) return 0.0;
+  std::nth_element(heights.begin(), heights.begin() + static_cast<std::ptrdiff_t>(heights.size() / 2), heights.end());
+  return heights[heights.size() / 2];
+}
+
 MarkerSet readMarkers(const MarkerClip& mc, std::int64_t frame) {
   if (frame < 0 || static_cast<std::size_t>(frame) >= mc.clip.frameCount()) {
     throw RigBuildError(mc.path.string() + ": rest frame " + std::to_string(frame) + " is outside the clip (0.." +
@@ -464,8 +488,24 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
   if (unit == "auto") {
     const Eigen::Vector3d up = axisVector(desc.mesh_up).cwiseAbs();
     const double height = (fine.vertices.colwise().maxCoeff() - fine.vertices.colwise().minCoeff()).dot(up);
-    unit = height > 100 ? "mm" : height > 10 ? "cm" : "m";
-    report.notes.push_back("mesh unit taken as " + unit + " from its height " + fmt("%.4g", height));
+    const double performer_mm = clip ? medianMarkerHeightMm(openMarkerClip(*clip, mopt), axisVector(mopt.device_up).cwiseAbs()) : 0.0;
+    if (performer_mm > 0.0) {
+      // The unit that makes the mesh about as tall as the performer's markers (a factor of 10
+      // between candidates, so the nearest ratio is unambiguous for any plausible body).
+      double best = INFINITY;
+      for (const char* candidate : {"m", "cm", "mm"}) {
+        const double ratio = std::abs(std::log(height / rigUnitsPerMm(candidate) / performer_mm));
+        if (ratio < best) {
+          best = ratio;
+          unit = candidate;
+        }
+      }
+      report.notes.push_back("mesh unit taken as " + unit + ": the mesh is " + fmt("%.4g", height) + " units tall, the performer's markers " +
+                             fmt("%.0f", performer_mm) + " mm (--mesh-unit to say otherwise)");
+    } else {
+      unit = height > 100 ? "mm" : height > 10 ? "cm" : "m";
+      report.notes.push_back("mesh unit taken as " + unit + " from its height " + fmt("%.4g", height) + " (--mesh-unit to say otherwise)");
+    }
   }
   rig.unit = unit;
   rig.alignment.rig_units_per_mm = rigUnitsPerMm(unit);
