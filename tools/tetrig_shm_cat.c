@@ -7,11 +7,15 @@
  * position in rig units), read with the frame's mesh in one read.
  *
  *   tetrig-shm-cat NAME [--frames N] [--timeout-ms T] [--json FILE] [--dump FILE]
- *                       [--follow] [--quiet] [--markers] [--poll-us U] [--stale-ms S]
+ *                       [--follow] [--quiet] [--markers] [--poll-us U] [--stale-ms S] [--owner UID]
+ *
+ * The segment must belong to this process's effective uid (--owner UID accepts that user's
+ * segment instead) and must not be writable by group or others.
  *
  * Exit status: 0 after N frames or when the producer stopped cleanly; 1 usage or file error;
  * 2 timeout (no segment / no new frame for T ms); 3 producer died (without --follow);
- * 4 segment unusable (not a tetrig segment, unknown major version, inconsistent sizes).
+ * 4 segment unusable (not a tetrig segment, unknown major version, inconsistent sizes, another
+ * owner, writable by group or others).
  *
  * --dump format (little-endian): the 8 bytes "TSHMDMP1", then one record per frame seen:
  * uint64 instance_id, uint64 frame_id, uint32 vertex_count, uint32 reserved (0),
@@ -42,6 +46,7 @@ typedef struct Options {
   int markers; /* a line per marker under each frame line (layout 1.1) */
   long poll_us;
   int64_t stale_ms;
+  uid_t owner; /* the uid the segment must belong to (default: geteuid()) */
 } Options;
 
 typedef struct Samples {
@@ -110,7 +115,7 @@ static int parseInteger(const char* text, long long min, long long* out) {
 static void usage(void) {
   fprintf(stderr,
           "usage: tetrig-shm-cat NAME [--frames N] [--timeout-ms T] [--json FILE] [--dump FILE]\n"
-          "                      [--follow] [--quiet] [--markers] [--poll-us U] [--stale-ms S]\n"
+          "                      [--follow] [--quiet] [--markers] [--poll-us U] [--stale-ms S] [--owner UID]\n"
           "  NAME          segment name, e.g. /tetrig (a leading '/' is added when missing)\n"
           "  --frames N    exit 0 after N new frames (default: until the producer stops)\n"
           "  --timeout-ms  give up (exit 2) after T ms without a segment or a new frame (default 5000)\n"
@@ -120,7 +125,8 @@ static void usage(void) {
           "  --quiet       no line per frame\n"
           "  --markers     under each frame line, each marker's label, state and position (layout 1.1)\n"
           "  --poll-us U   sleep between polls (default 100; 0 = yield)\n"
-          "  --stale-ms S  heartbeat age that counts as stale (default 1000)\n");
+          "  --stale-ms S  heartbeat age that counts as stale (default 1000)\n"
+          "  --owner UID   accept a segment of this user (default: only our own effective uid's)\n");
 }
 
 static int parseOptions(int argc, char** argv, Options* o, char* name_buf, size_t name_cap) {
@@ -130,6 +136,7 @@ static int parseOptions(int argc, char** argv, Options* o, char* name_buf, size_
   o->timeout_ms = 5000;
   o->poll_us = 100;
   o->stale_ms = 1000;
+  o->owner = geteuid();
   for (i = 1; i < argc; ++i) {
     const char* a = argv[i];
     const int has_value = i + 1 < argc;
@@ -144,6 +151,10 @@ static int parseOptions(int argc, char** argv, Options* o, char* name_buf, size_
       ++i;
     } else if (strcmp(a, "--stale-ms") == 0 && has_value && parseInteger(argv[i + 1], 1, &v)) {
       o->stale_ms = (int64_t)v;
+      ++i;
+    } else if (strcmp(a, "--owner") == 0 && has_value && parseInteger(argv[i + 1], 0, &v) &&
+               (long long)(uid_t)v == v && (uid_t)v != (uid_t)-1) {
+      o->owner = (uid_t)v;
       ++i;
     } else if (strcmp(a, "--json") == 0 && has_value) {
       o->json_path = argv[++i];
@@ -241,9 +252,22 @@ static void closeReader(Run* run) {
 
 /* Returns EXIT_OK when opened, -1 to keep waiting, or an exit status. */
 static int tryOpen(Run* run) {
-  const int rc = tetrig_shm_open(&run->reader, run->opt.name);
+  const int rc = tetrig_shm_open_as(&run->reader, run->opt.name, run->opt.owner);
   size_t need;
+  char rig_name[256];
   if (rc == TETRIG_SHM_E_NOT_FOUND || rc == TETRIG_SHM_E_NOT_READY) return -1;
+  if (rc == TETRIG_SHM_E_OWNER) {
+    fprintf(stderr, "tetrig-shm-cat: cannot use segment %s: it belongs to uid %lu, not %lu (--owner %lu accepts it)\n",
+            run->opt.name, (unsigned long)run->reader.owner_uid, (unsigned long)run->opt.owner,
+            (unsigned long)run->reader.owner_uid);
+    return EXIT_UNUSABLE;
+  }
+  if (rc == TETRIG_SHM_E_MODE) {
+    fprintf(stderr, "tetrig-shm-cat: cannot use segment %s: mode %04lo lets group or others write it (rewrite or "
+            "truncate it under its readers); the producer must not widen write permission\n",
+            run->opt.name, (unsigned long)run->reader.mode);
+    return EXIT_UNUSABLE;
+  }
   if (rc != TETRIG_SHM_OK) {
     fprintf(stderr, "tetrig-shm-cat: cannot use segment %s: %s%s%s\n", run->opt.name, tetrig_shm_status_string(rc),
             rc == TETRIG_SHM_E_SYSTEM || rc == TETRIG_SHM_E_ACCESS ? ": " : "",
@@ -285,7 +309,8 @@ static int tryOpen(Run* run) {
             run->previous_instance, (long)run->previous_pid, run->reader.instance_id, (long)run->reader.producer_pid);
   }
   fprintf(stderr, "tetrig-shm-cat: %s: rig '", run->opt.name);
-  writePrintable(stderr, tetrig_shm_rig_name(&run->reader));
+  tetrig_shm_copy_rig_name(&run->reader, rig_name, sizeof rig_name);
+  writePrintable(stderr, rig_name);
   fprintf(stderr, "', %lu vertices, %lu triangles, %lu slots%s, instance %016" PRIx64 ", pid %ld, state %s\n",
           (unsigned long)tetrig_shm_vertex_count(&run->reader),
           (unsigned long)tetrig_shm_triangle_count(&run->reader), (unsigned long)tetrig_shm_slot_count(&run->reader),
@@ -293,7 +318,7 @@ static int tryOpen(Run* run) {
           (long)run->reader.producer_pid, stateName(tetrig_shm_state(&run->reader)));
   if (run->opt.markers && !run->with_markers) {
     fprintf(stderr, "tetrig-shm-cat: %s has no marker positions (layout %u.%u, %lu marker labels): no marker lines\n",
-            run->opt.name, (unsigned)run->reader.header->version_major, (unsigned)run->reader.header->version_minor,
+            run->opt.name, (unsigned)run->reader.header_copy.version_major, (unsigned)run->reader.header_copy.version_minor,
             (unsigned long)tetrig_shm_marker_count(&run->reader));
   }
   run->instances += 1;
@@ -356,8 +381,10 @@ static int takeFrame(Run* run) {
       for (k = 0; k < tetrig_shm_marker_count(&run->reader); ++k) {
         const float* xyz = run->marker_positions + 3u * k;
         const uint8_t st = run->marker_states[k];
+        char label[256];
+        tetrig_shm_copy_marker_label(&run->reader, k, label, sizeof label); /* "" if the block was rewritten */
         fputs("  marker ", stdout);
-        writePrintable(stdout, tetrig_shm_marker_label(&run->reader, k));
+        writePrintable(stdout, label);
         printf(" %s %.9g %.9g %.9g\n", st < 4u ? kStateNames[st] : "unknown", (double)xyz[0], (double)xyz[1], (double)xyz[2]);
       }
     }

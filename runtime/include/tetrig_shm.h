@@ -24,6 +24,13 @@
  * processes), each with its own TetrigShmReader, may read one segment at once. Readers never
  * write to the segment (read-only mapping) and never block the writer.
  *
+ * Trust: tetrig_shm_open() requires the segment to belong to the reader's effective uid
+ * (tetrig_shm_open_as() names another owner) and refuses one that group or others may write. The
+ * owner can still rewrite any byte at any time: the reader copies and checks the header once at
+ * open and never re-reads a static field (see TetrigShmReader), so no rewrite makes it divide by
+ * zero or read outside its mapping. Truncating the segment (ftruncate by its owner) makes
+ * accesses past the new end fault with SIGBUS: that is why the owner must be one you trust.
+ *
  * Allocation: none. tetrig_shm_open() makes system calls (shm_open, fstat, mmap);
  * tetrig_shm_read_latest() and the accessors make none; tetrig_shm_producer_status() calls
  * kill(pid, 0) and on Linux reads /proc/<pid>/stat; tetrig_shm_name_status() calls shm_open and
@@ -128,6 +135,11 @@
 #define TETRIG_SHM_E_ARGUMENT (-8)   /* bad name, NULL reader or a buffer too small */
 #define TETRIG_SHM_NO_MARKERS 3      /* read markers: the segment has no marker positions (a 1.0
                                         producer, no markers, or the producer left them out) */
+#define TETRIG_SHM_E_OWNER (-9)      /* the segment belongs to another user than the one required
+                                        (tetrig_shm_open: the reader's effective uid; see
+                                        tetrig_shm_open_as); TetrigShmReader.owner_uid says whose */
+#define TETRIG_SHM_E_MODE (-10)      /* the segment is writable by group or others: any such user
+                                        could rewrite or truncate it under its readers */
 
 /* tetrig_shm_producer_status() */
 #define TETRIG_SHM_PRODUCER_ALIVE 0   /* pid alive and heartbeat fresh */
@@ -228,11 +240,19 @@ TETRIG_SHM_STATIC_ASSERT(TETRIG_SHM_SLOT_INFO_OFFSET + sizeof(TetrigShmFrameInfo
 
 /* ---- reader ------------------------------------------------------------------------------- */
 
+/* The reader trusts nothing it reads from the segment after the checks at open: whoever can
+ * write the segment (its owner) may rewrite any byte at any time. tetrig_shm_attach copies the
+ * whole header into `header_copy` (relaxed word loads after the magic's acquire load), checks the
+ * copy, and from then on every count, offset, stride and flag comes from the copy only; the live
+ * header is read again only for its live words (state, heartbeat_ns, latest_frame_id), which are
+ * never used as a divisor, an index or an offset unchecked (latest_frame_id is reduced modulo the
+ * copied slot count, and a slot's frame id and sequence only decide whether a copy is kept). */
 typedef struct TetrigShmReader {
   const unsigned char* base;      /* the segment (read-only) */
-  uint64_t size;                  /* bytes of the segment */
+  uint64_t size;                  /* bytes of the segment (the mapping's length) */
   void* mapping;                  /* what tetrig_shm_open mapped (NULL when attached) */
-  const TetrigShmHeader* header;  /* == base */
+  const TetrigShmHeader* header;  /* == base: the LIVE header, which the segment's owner can rewrite;
+                                     read static fields from header_copy, not from here */
   int owns_mapping;               /* 1: opened by name (close unmaps); 0: attached */
   int error;                      /* errno of the last TETRIG_SHM_E_SYSTEM / E_ACCESS */
   uint64_t instance_id;           /* copied at open */
@@ -245,6 +265,11 @@ typedef struct TetrigShmReader {
   uint64_t reads;                 /* successful reads */
   uint64_t retries;               /* attempts discarded: slot being written or overwritten */
   uint64_t busy;                  /* reads that gave up (TETRIG_SHM_BUSY) */
+  TetrigShmHeader header_copy;    /* the header as copied and checked at open: the only source of
+                                     the static fields (its live words are the values at open) */
+  uid_t owner_uid;                /* the segment's owner (st_uid; set by tetrig_shm_open, also when
+                                     it returns TETRIG_SHM_E_OWNER or E_MODE) */
+  uint32_t mode;                  /* the segment's permission bits (st_mode & 07777), likewise */
 } TetrigShmReader;
 
 /* Text for a TETRIG_SHM_* return code. */
@@ -262,6 +287,8 @@ static inline const char* tetrig_shm_status_string(int code) {
     case TETRIG_SHM_E_ACCESS: return "permission denied";
     case TETRIG_SHM_E_SYSTEM: return "system error";
     case TETRIG_SHM_E_ARGUMENT: return "invalid argument";
+    case TETRIG_SHM_E_OWNER: return "segment is owned by another user";
+    case TETRIG_SHM_E_MODE: return "segment is writable by group or others";
     default: return "unknown status";
   }
 }
@@ -295,16 +322,32 @@ static inline int tetrig_shm_internal_range_ok(uint64_t offset, uint64_t bytes, 
   return offset >= TETRIG_SHM_HEADER_SIZE && offset <= total && bytes <= total - offset;
 }
 
-/* Validates a mapping of `size` bytes that holds a segment and fills `reader` (no copy: the
- * reader points into the mapping, which must stay mapped until tetrig_shm_close). Used by
- * tetrig_shm_open; also for callers that map the segment themselves. Checks: magic (0 means
- * still being created), major version, header and total size against `size`, counts, every
- * offset, alignment and range, the strings' terminators and every triangle index < vertex count.
- * The mapping must be 64-byte aligned (mmap gives page alignment). */
+/* 1 when the array of `bytes` bytes at `offset` from a slot's start lies inside a slot of `stride`
+ * bytes, past the slot header, 64-byte aligned. */
+static inline int tetrig_shm_internal_slot_range_ok(uint64_t offset, uint64_t bytes, uint64_t stride) {
+  return offset % TETRIG_SHM_ALIGNMENT == 0u && offset >= TETRIG_SHM_SLOT_HEADER_SIZE && offset <= stride &&
+         bytes <= stride - offset;
+}
+
+/* 1 when [a, a + a_bytes) and [b, b + b_bytes) do not overlap (both inside one slot: no overflow). */
+static inline int tetrig_shm_internal_disjoint(uint64_t a, uint64_t a_bytes, uint64_t b, uint64_t b_bytes) {
+  return a + a_bytes <= b || b + b_bytes <= a;
+}
+
+/* Validates a mapping of `size` bytes that holds a segment and fills `reader` (no copy of the
+ * data: the reader points into the mapping, which must stay mapped until tetrig_shm_close). Used
+ * by tetrig_shm_open; also for callers that map the segment themselves. Loads the magic (acquire;
+ * 0 means still being created), copies the whole header into reader->header_copy and checks the
+ * copy: major version, header and total size against `size`, counts, every offset, alignment and
+ * range, the slot arrays inside a slot and disjoint, the strings' terminators and every triangle
+ * index < vertex count. Afterwards the reader uses only the copy's static fields (see
+ * TetrigShmReader). The mapping must be 64-byte aligned (mmap gives page alignment). */
 static inline int tetrig_shm_attach(TetrigShmReader* reader, const void* base, uint64_t size) {
+  TetrigShmHeader hc; /* the copy: checked here, the only source of static fields afterwards */
   const TetrigShmHeader* h;
-  uint64_t magic, v, slot_end, label_bytes;
+  uint64_t magic, v, slot_end, label_bytes, position_bytes;
   uint32_t labels_found;
+  int with_normals, with_markers;
   const unsigned char* bytes = TETRIG_SHM_PTR(const unsigned char*, base);
   if (reader == NULL || base == NULL) return TETRIG_SHM_E_ARGUMENT;
   memset(reader, 0, sizeof *reader);
@@ -313,75 +356,82 @@ static inline int tetrig_shm_attach(TetrigShmReader* reader, const void* base, u
   magic = __atomic_load_n(&h->magic, __ATOMIC_ACQUIRE); /* pairs with the producer's release */
   if (magic == 0u) return TETRIG_SHM_E_NOT_READY;
   if (magic != TETRIG_SHM_MAGIC) return TETRIG_SHM_E_MAGIC;
-  if (h->version_major != TETRIG_SHM_VERSION_MAJOR) return TETRIG_SHM_E_VERSION;
-  if (h->header_size < TETRIG_SHM_HEADER_SIZE || h->header_size % TETRIG_SHM_ALIGNMENT != 0u ||
-      h->total_size != size || h->total_size < h->header_size) {
+  tetrig_shm_load_words(&hc, h, sizeof hc);
+  if (hc.magic != TETRIG_SHM_MAGIC) return TETRIG_SHM_E_MAGIC; /* rewritten meanwhile */
+  if (hc.version_major != TETRIG_SHM_VERSION_MAJOR) return TETRIG_SHM_E_VERSION;
+  if (hc.header_size < TETRIG_SHM_HEADER_SIZE || hc.header_size % TETRIG_SHM_ALIGNMENT != 0u || hc.total_size != size ||
+      hc.total_size < hc.header_size) {
     return TETRIG_SHM_E_SIZE;
   }
-  if (h->vertex_count == 0u || h->slot_count < TETRIG_SHM_MIN_SLOTS || h->slot_count > TETRIG_SHM_MAX_SLOTS) {
+  if (hc.vertex_count == 0u || hc.slot_count < TETRIG_SHM_MIN_SLOTS || hc.slot_count > TETRIG_SHM_MAX_SLOTS) {
     return TETRIG_SHM_E_SIZE;
   }
-  v = h->vertex_count;
-  if (!tetrig_shm_internal_range_ok(h->triangles_offset, TETRIG_SHM_CONV(uint64_t, h->triangle_count) * 12u, size, 1) ||
-      !tetrig_shm_internal_range_ok(h->rest_positions_offset, v * 12u, size, 1) ||
-      !tetrig_shm_internal_range_ok(h->rig_name_offset, TETRIG_SHM_CONV(uint64_t, h->rig_name_length) + 1u, size, 1) ||
-      !tetrig_shm_internal_range_ok(h->marker_labels_offset, h->marker_labels_size, size, 1)) {
+  v = hc.vertex_count;
+  position_bytes = v * 12u;
+  if (!tetrig_shm_internal_range_ok(hc.triangles_offset, TETRIG_SHM_CONV(uint64_t, hc.triangle_count) * 12u, size, 1) ||
+      !tetrig_shm_internal_range_ok(hc.rest_positions_offset, position_bytes, size, 1) ||
+      !tetrig_shm_internal_range_ok(hc.rig_name_offset, TETRIG_SHM_CONV(uint64_t, hc.rig_name_length) + 1u, size, 1) ||
+      !tetrig_shm_internal_range_ok(hc.marker_labels_offset, hc.marker_labels_size, size, 1)) {
     return TETRIG_SHM_E_SIZE;
   }
-  if (bytes[h->rig_name_offset + h->rig_name_length] != 0u) return TETRIG_SHM_E_SIZE;
+  if (bytes[hc.rig_name_offset + hc.rig_name_length] != 0u) return TETRIG_SHM_E_SIZE;
   /* labels: exactly marker_count NUL-terminated strings */
   labels_found = 0u;
-  for (label_bytes = 0; label_bytes < h->marker_labels_size; ++label_bytes) {
-    if (bytes[h->marker_labels_offset + label_bytes] == 0u) ++labels_found;
+  for (label_bytes = 0; label_bytes < hc.marker_labels_size; ++label_bytes) {
+    if (bytes[hc.marker_labels_offset + label_bytes] == 0u) ++labels_found;
   }
-  if (labels_found != h->marker_count ||
-      (h->marker_labels_size > 0u && bytes[h->marker_labels_offset + h->marker_labels_size - 1u] != 0u)) {
+  if (labels_found != hc.marker_count ||
+      (hc.marker_labels_size > 0u && bytes[hc.marker_labels_offset + hc.marker_labels_size - 1u] != 0u)) {
     return TETRIG_SHM_E_SIZE;
   }
-  /* slots */
-  if (h->slot_stride % TETRIG_SHM_ALIGNMENT != 0u || h->slot_positions_offset % TETRIG_SHM_ALIGNMENT != 0u ||
-      h->slot_positions_offset < TETRIG_SHM_SLOT_HEADER_SIZE || h->slot_positions_offset > h->slot_stride ||
-      v * 12u > h->slot_stride - h->slot_positions_offset) {
+  /* slots: every array inside a slot, past its header, aligned, and no two arrays overlapping */
+  if (hc.slot_stride % TETRIG_SHM_ALIGNMENT != 0u ||
+      !tetrig_shm_internal_slot_range_ok(hc.slot_positions_offset, position_bytes, hc.slot_stride)) {
     return TETRIG_SHM_E_SIZE;
   }
-  if ((h->flags & TETRIG_SHM_HAS_NORMALS) != 0u) {
-    if (h->slot_normals_offset % TETRIG_SHM_ALIGNMENT != 0u || h->slot_normals_offset < TETRIG_SHM_SLOT_HEADER_SIZE ||
-        h->slot_normals_offset > h->slot_stride || v * 12u > h->slot_stride - h->slot_normals_offset) {
+  with_normals = (hc.flags & TETRIG_SHM_HAS_NORMALS) != 0u;
+  if (with_normals) {
+    if (!tetrig_shm_internal_slot_range_ok(hc.slot_normals_offset, position_bytes, hc.slot_stride) ||
+        !tetrig_shm_internal_disjoint(hc.slot_positions_offset, position_bytes, hc.slot_normals_offset, position_bytes)) {
       return TETRIG_SHM_E_SIZE;
     }
-  } else if (h->slot_normals_offset != 0u) {
+  } else if (hc.slot_normals_offset != 0u) {
     return TETRIG_SHM_E_SIZE;
   }
   /* 1.1 marker block: checked only when the segment says it has one (a 1.0 segment never does) */
-  if (h->version_minor >= 1u && (h->flags & TETRIG_SHM_HAS_MARKER_POSITIONS) != 0u) {
-    const uint64_t m = h->marker_count;
-    if (m == 0u || h->slot_marker_positions_offset % TETRIG_SHM_ALIGNMENT != 0u ||
-        h->slot_marker_states_offset % TETRIG_SHM_ALIGNMENT != 0u ||
-        h->slot_marker_positions_offset < TETRIG_SHM_SLOT_HEADER_SIZE ||
-        h->slot_marker_states_offset < TETRIG_SHM_SLOT_HEADER_SIZE ||
-        h->slot_marker_positions_offset > h->slot_stride || h->slot_marker_states_offset > h->slot_stride ||
-        m * 12u > h->slot_stride - h->slot_marker_positions_offset ||
-        (m + 3u) / 4u * 4u > h->slot_stride - h->slot_marker_states_offset) {
+  with_markers = hc.version_minor >= 1u && (hc.flags & TETRIG_SHM_HAS_MARKER_POSITIONS) != 0u;
+  if (with_markers) {
+    const uint64_t m = hc.marker_count;
+    const uint64_t mp = hc.slot_marker_positions_offset, ms = hc.slot_marker_states_offset;
+    const uint64_t state_bytes = (m + 3u) / 4u * 4u;
+    if (m == 0u || !tetrig_shm_internal_slot_range_ok(mp, m * 12u, hc.slot_stride) ||
+        !tetrig_shm_internal_slot_range_ok(ms, state_bytes, hc.slot_stride) ||
+        !tetrig_shm_internal_disjoint(mp, m * 12u, ms, state_bytes) ||
+        !tetrig_shm_internal_disjoint(mp, m * 12u, hc.slot_positions_offset, position_bytes) ||
+        !tetrig_shm_internal_disjoint(ms, state_bytes, hc.slot_positions_offset, position_bytes) ||
+        (with_normals && (!tetrig_shm_internal_disjoint(mp, m * 12u, hc.slot_normals_offset, position_bytes) ||
+                          !tetrig_shm_internal_disjoint(ms, state_bytes, hc.slot_normals_offset, position_bytes)))) {
       return TETRIG_SHM_E_SIZE;
     }
   }
-  if (h->slot_stride == 0u || h->slot_stride > size / h->slot_count) return TETRIG_SHM_E_SIZE;
-  slot_end = h->slot_stride * h->slot_count;
-  if (!tetrig_shm_internal_range_ok(h->slots_offset, slot_end, size, 1)) return TETRIG_SHM_E_SIZE;
+  if (hc.slot_stride == 0u || hc.slot_stride > size / hc.slot_count) return TETRIG_SHM_E_SIZE;
+  slot_end = hc.slot_stride * hc.slot_count;
+  if (!tetrig_shm_internal_range_ok(hc.slots_offset, slot_end, size, 1)) return TETRIG_SHM_E_SIZE;
   /* triangle indices */
   {
-    const uint32_t* tri = TETRIG_SHM_PTR(const uint32_t*, bytes + h->triangles_offset);
-    const uint64_t n = TETRIG_SHM_CONV(uint64_t, h->triangle_count) * 3u;
+    const uint32_t* tri = TETRIG_SHM_PTR(const uint32_t*, bytes + hc.triangles_offset);
+    const uint64_t n = TETRIG_SHM_CONV(uint64_t, hc.triangle_count) * 3u;
     uint64_t i;
     for (i = 0; i < n; ++i) {
-      if (tri[i] >= h->vertex_count) return TETRIG_SHM_E_SIZE;
+      if (tri[i] >= hc.vertex_count) return TETRIG_SHM_E_SIZE;
     }
   }
   reader->base = bytes;
   reader->size = size;
   reader->header = h;
-  reader->instance_id = h->instance_id;
-  reader->producer_pid = h->producer_pid;
+  reader->header_copy = hc;
+  reader->instance_id = hc.instance_id;
+  reader->producer_pid = hc.producer_pid;
   reader->max_attempts = 64;
   reader->last_frame_id = 0u;
   reader->reads = 0u;
@@ -390,10 +440,13 @@ static inline int tetrig_shm_attach(TetrigShmReader* reader, const void* base, u
   return TETRIG_SHM_OK;
 }
 
-/* Opens the segment `name` ("/name", at most 255 bytes) read-only: shm_open + fstat + mmap, then
- * tetrig_shm_attach. On failure nothing stays open and the reader is zeroed (safe to close).
- * TETRIG_SHM_E_NOT_FOUND / E_NOT_READY are normal while the producer starts: retry. */
-static inline int tetrig_shm_open(TetrigShmReader* reader, const char* name) {
+/* Opens the segment `name` ("/name", at most 255 bytes) read-only, requiring that it belongs to
+ * the user `owner`: shm_open + fstat; another owner -> TETRIG_SHM_E_OWNER, write permission for
+ * group or others -> TETRIG_SHM_E_MODE (in both cases reader->owner_uid and reader->mode say what
+ * was found); then mmap and tetrig_shm_attach. On failure nothing stays open and the reader is
+ * zeroed (safe to close) but for `error`, `owner_uid` and `mode`. TETRIG_SHM_E_NOT_FOUND /
+ * E_NOT_READY are normal while the producer starts: retry. */
+static inline int tetrig_shm_open_as(TetrigShmReader* reader, const char* name, uid_t owner) {
   int fd, rc;
   struct stat st;
   void* map;
@@ -414,6 +467,16 @@ static inline int tetrig_shm_open(TetrigShmReader* reader, const char* name) {
     close(fd);
     return TETRIG_SHM_E_SYSTEM;
   }
+  reader->owner_uid = st.st_uid;
+  reader->mode = TETRIG_SHM_CONV(uint32_t, st.st_mode & 07777);
+  if (st.st_uid != owner) { /* someone else's object under the name (a squatter, or another user's producer) */
+    close(fd);
+    return TETRIG_SHM_E_OWNER;
+  }
+  if ((st.st_mode & (S_IWGRP | S_IWOTH)) != 0) { /* others could rewrite or truncate it under us */
+    close(fd);
+    return TETRIG_SHM_E_MODE;
+  }
   if (st.st_size < TETRIG_SHM_CONV(off_t, TETRIG_SHM_HEADER_SIZE)) {
     close(fd);
     return TETRIG_SHM_E_NOT_READY; /* created, not yet sized */
@@ -429,14 +492,24 @@ static inline int tetrig_shm_open(TetrigShmReader* reader, const char* name) {
   if (rc != TETRIG_SHM_OK) {
     munmap(map, len);
     memset(reader, 0, sizeof *reader);
+    reader->owner_uid = st.st_uid;
+    reader->mode = TETRIG_SHM_CONV(uint32_t, st.st_mode & 07777);
     return rc;
   }
   reader->owns_mapping = 1;
   reader->mapping = map;
   reader->file_device = TETRIG_SHM_CONV(uint64_t, st.st_dev);
   reader->file_inode = TETRIG_SHM_CONV(uint64_t, st.st_ino);
+  reader->owner_uid = st.st_uid;
+  reader->mode = TETRIG_SHM_CONV(uint32_t, st.st_mode & 07777);
   memcpy(reader->name, name, strlen(name) + 1u);
   return TETRIG_SHM_OK;
+}
+
+/* tetrig_shm_open_as with the reader's own effective uid as the required owner: a segment made by
+ * another user (or a squatter holding the name) is refused with TETRIG_SHM_E_OWNER. */
+static inline int tetrig_shm_open(TetrigShmReader* reader, const char* name) {
+  return tetrig_shm_open_as(reader, name, geteuid());
 }
 
 /* Unmaps (when opened by name) and zeroes the reader. Safe on a zeroed or failed reader. */
@@ -446,39 +519,109 @@ static inline void tetrig_shm_close(TetrigShmReader* reader) {
   memset(reader, 0, sizeof *reader);
 }
 
-/* ---- static data (valid while open; never changes) ---- */
-static inline uint32_t tetrig_shm_vertex_count(const TetrigShmReader* r) { return r->header->vertex_count; }
-static inline uint32_t tetrig_shm_triangle_count(const TetrigShmReader* r) { return r->header->triangle_count; }
-static inline uint32_t tetrig_shm_slot_count(const TetrigShmReader* r) { return r->header->slot_count; }
+/* ---- static data (from the header copied and checked at open) ----
+ * Counts and flags come from reader->header_copy. The pointer accessors (triangles, rest
+ * positions, rig name, labels) point into the segment, whose owner could rewrite those bytes after
+ * the checks at open: before indexing an array with triangle indices, copy them with
+ * tetrig_shm_copy_triangles (which checks the copy); for text, tetrig_shm_copy_rig_name and
+ * tetrig_shm_copy_marker_label give a copy that is always terminated. */
+static inline uint32_t tetrig_shm_vertex_count(const TetrigShmReader* r) { return r->header_copy.vertex_count; }
+static inline uint32_t tetrig_shm_triangle_count(const TetrigShmReader* r) { return r->header_copy.triangle_count; }
+static inline uint32_t tetrig_shm_slot_count(const TetrigShmReader* r) { return r->header_copy.slot_count; }
 static inline int tetrig_shm_has_normals(const TetrigShmReader* r) {
-  return (r->header->flags & TETRIG_SHM_HAS_NORMALS) != 0u;
+  return (r->header_copy.flags & TETRIG_SHM_HAS_NORMALS) != 0u;
 }
-/* triangle_count x 3 vertex indices (counter-clockwise seen from outside). */
+/* triangle_count x 3 vertex indices (counter-clockwise seen from outside), in the segment. */
 static inline const uint32_t* tetrig_shm_triangles(const TetrigShmReader* r) {
-  return TETRIG_SHM_PTR(const uint32_t*, r->base + r->header->triangles_offset);
+  return TETRIG_SHM_PTR(const uint32_t*, r->base + r->header_copy.triangles_offset);
+}
+/* Copies the triangle_count x 3 indices into `out` (`out_len` entries) and checks the copy: every
+ * index < vertex_count. TETRIG_SHM_OK, TETRIG_SHM_E_ARGUMENT (NULL reader or buffer too small:
+ * nothing written) or TETRIG_SHM_E_SIZE (an index out of range: the segment was rewritten after
+ * open; `out` holds the bad copy). */
+static inline int tetrig_shm_copy_triangles(const TetrigShmReader* r, uint32_t* out, size_t out_len) {
+  const uint64_t n = r == NULL ? 0u : TETRIG_SHM_CONV(uint64_t, r->header_copy.triangle_count) * 3u;
+  uint64_t i;
+  if (r == NULL || r->header == NULL || (n > 0u && out == NULL) || out_len < n) return TETRIG_SHM_E_ARGUMENT;
+  if (n > 0u) memcpy(out, r->base + r->header_copy.triangles_offset, TETRIG_SHM_CONV(size_t, n) * 4u);
+  for (i = 0; i < n; ++i) {
+    if (out[i] >= r->header_copy.vertex_count) return TETRIG_SHM_E_SIZE;
+  }
+  return TETRIG_SHM_OK;
 }
 /* vertex_count x 3 floats: the rest pose, rig units. */
 static inline const float* tetrig_shm_rest_positions(const TetrigShmReader* r) {
-  return TETRIG_SHM_PTR(const float*, r->base + r->header->rest_positions_offset);
+  return TETRIG_SHM_PTR(const float*, r->base + r->header_copy.rest_positions_offset);
 }
+/* The rig name in the segment (terminated when checked at open; see tetrig_shm_copy_rig_name). */
 static inline const char* tetrig_shm_rig_name(const TetrigShmReader* r) {
-  return TETRIG_SHM_PTR(const char*, r->base + r->header->rig_name_offset);
+  return TETRIG_SHM_PTR(const char*, r->base + r->header_copy.rig_name_offset);
 }
-static inline uint32_t tetrig_shm_marker_count(const TetrigShmReader* r) { return r->header->marker_count; }
+/* Copies bytes [0, len) of the block at `offset` into `out` (`cap` > 0 bytes) up to the first NUL,
+ * at most cap - 1 bytes, and terminates the copy. */
+static inline void tetrig_shm_internal_copy_text(const TetrigShmReader* r, uint64_t offset, uint64_t len, char* out,
+                                                 size_t cap) {
+  const unsigned char* p = r->base + offset;
+  size_t i = 0;
+  while (i + 1u < cap && i < len && p[i] != 0u) {
+    out[i] = TETRIG_SHM_CONV(char, p[i]);
+    ++i;
+  }
+  out[i] = '\0';
+}
+/* Copies the rig name into `out` (`cap` > 0 bytes): at most cap - 1 bytes, always terminated,
+ * never reading outside the name's block. TETRIG_SHM_OK or TETRIG_SHM_E_ARGUMENT. */
+static inline int tetrig_shm_copy_rig_name(const TetrigShmReader* r, char* out, size_t cap) {
+  if (r == NULL || r->header == NULL || out == NULL || cap == 0u) return TETRIG_SHM_E_ARGUMENT;
+  tetrig_shm_internal_copy_text(r, r->header_copy.rig_name_offset, r->header_copy.rig_name_length, out, cap);
+  return TETRIG_SHM_OK;
+}
+static inline uint32_t tetrig_shm_marker_count(const TetrigShmReader* r) { return r->header_copy.marker_count; }
 /* 1 when every slot carries the markers' positions and states (layout 1.1 with the block; see
  * tetrig_shm_read_latest_markers), 0 for a 1.0 segment, a rig without markers, or a producer that
  * left them out. */
 static inline int tetrig_shm_has_marker_positions(const TetrigShmReader* r) {
-  return r->header->version_minor >= 1u && (r->header->flags & TETRIG_SHM_HAS_MARKER_POSITIONS) != 0u &&
-         r->header->marker_count > 0u;
+  return r->header_copy.version_minor >= 1u && (r->header_copy.flags & TETRIG_SHM_HAS_MARKER_POSITIONS) != 0u &&
+         r->header_copy.marker_count > 0u;
 }
-/* Label of marker `index` (< marker_count), or NULL. Walks the label block: O(label bytes). */
+/* Offset of label `index` in the segment and the bytes left in the label block from there, or 0
+ * when index >= marker_count or the block no longer holds that many terminated labels. */
+static inline uint64_t tetrig_shm_internal_label_offset(const TetrigShmReader* r, uint32_t index, uint64_t* left) {
+  const uint64_t begin = r->header_copy.marker_labels_offset;
+  const uint64_t end = begin + r->header_copy.marker_labels_size; /* checked inside the segment at open */
+  uint64_t at = begin;
+  uint32_t i = 0;
+  if (index >= r->header_copy.marker_count) return 0u;
+  while (i < index) {
+    const void* nul;
+    if (at >= end) return 0u;
+    nul = memchr(r->base + at, 0, TETRIG_SHM_CONV(size_t, end - at));
+    if (nul == NULL) return 0u;
+    at = TETRIG_SHM_CONV(uint64_t, TETRIG_SHM_PTR(const unsigned char*, nul) - r->base) + 1u;
+    ++i;
+  }
+  if (at >= end || memchr(r->base + at, 0, TETRIG_SHM_CONV(size_t, end - at)) == NULL) return 0u;
+  *left = end - at;
+  return at;
+}
+/* Label of marker `index` (< marker_count) in the segment, or NULL (also when the label block no
+ * longer holds that many terminated labels). Walks the block, never past it: O(label bytes). */
 static inline const char* tetrig_shm_marker_label(const TetrigShmReader* r, uint32_t index) {
-  const char* p = TETRIG_SHM_PTR(const char*, r->base + r->header->marker_labels_offset);
-  uint32_t i;
-  if (index >= r->header->marker_count) return NULL;
-  for (i = 0; i < index; ++i) p += strlen(p) + 1u;
-  return p;
+  uint64_t left = 0u;
+  const uint64_t at = tetrig_shm_internal_label_offset(r, index, &left);
+  return at == 0u ? NULL : TETRIG_SHM_PTR(const char*, r->base + at);
+}
+/* Copies label `index` into `out` (`cap` > 0 bytes): at most cap - 1 bytes, always terminated,
+ * never reading outside the label block. TETRIG_SHM_OK, TETRIG_SHM_E_ARGUMENT, or TETRIG_SHM_E_SIZE
+ * when index >= marker_count or the block no longer holds the label (`out` is then ""). */
+static inline int tetrig_shm_copy_marker_label(const TetrigShmReader* r, uint32_t index, char* out, size_t cap) {
+  uint64_t left = 0u, at;
+  if (r == NULL || r->header == NULL || out == NULL || cap == 0u) return TETRIG_SHM_E_ARGUMENT;
+  out[0] = '\0';
+  at = tetrig_shm_internal_label_offset(r, index, &left);
+  if (at == 0u) return TETRIG_SHM_E_SIZE;
+  tetrig_shm_internal_copy_text(r, at, left, out, cap);
+  return TETRIG_SHM_OK;
 }
 
 /* ---- live words ---- */
@@ -520,11 +663,13 @@ static inline void tetrig_shm_load_bytes(void* dst, const void* src, uint64_t by
 static inline int tetrig_shm_internal_read(TetrigShmReader* r, float* positions, size_t positions_len, float* normals,
                                            size_t normals_len, float* marker_positions, size_t marker_positions_len,
                                            uint8_t* marker_states, size_t marker_states_len, TetrigShmFrameInfo* info) {
-  const TetrigShmHeader* h;
+  const TetrigShmHeader* h; /* the copy checked at open: counts, offsets, stride */
+  const uint64_t* latest_word;
   uint64_t float_bytes, need, markers;
   int attempt, with_normals;
-  if (r == NULL || r->header == NULL) return TETRIG_SHM_E_ARGUMENT;
-  h = r->header;
+  if (r == NULL || r->header == NULL || r->header_copy.slot_count == 0u) return TETRIG_SHM_E_ARGUMENT;
+  h = &r->header_copy;
+  latest_word = &r->header->latest_frame_id; /* live, untrusted: only reduced modulo the slot count */
   need = TETRIG_SHM_CONV(uint64_t, h->vertex_count) * 3u;
   float_bytes = need * 4u;
   markers = h->marker_count;
@@ -539,7 +684,7 @@ static inline int tetrig_shm_internal_read(TetrigShmReader* r, float* positions,
     uint64_t seq1, seq2, slot_index;
     const unsigned char* slot;
     const uint64_t* seq;
-    const uint64_t latest = __atomic_load_n(&h->latest_frame_id, __ATOMIC_ACQUIRE);
+    const uint64_t latest = __atomic_load_n(latest_word, __ATOMIC_ACQUIRE);
     if (latest == 0u) return TETRIG_SHM_NO_FRAME;
     slot_index = (latest - 1u) % h->slot_count;
     slot = r->base + h->slots_offset + slot_index * h->slot_stride;
@@ -639,9 +784,14 @@ static inline int tetrig_shm_pid_alive(int32_t pid) {
   return 1;
 }
 
-/* Age of the producer's heartbeat at `now_ns` (CLOCK_MONOTONIC), nanoseconds. */
+/* Age of the producer's heartbeat at `now_ns` (CLOCK_MONOTONIC), nanoseconds: INT64_MAX when
+ * there is none (<= 0), 0 when it lies after `now_ns` (the word is the producer's to write: any
+ * value is handled without overflow). */
 static inline int64_t tetrig_shm_heartbeat_age_ns(const TetrigShmReader* r, int64_t now_ns) {
-  return now_ns - tetrig_shm_heartbeat_ns(r);
+  const int64_t beat = tetrig_shm_heartbeat_ns(r);
+  if (beat <= 0) return INT64_MAX;
+  if (beat >= now_ns) return 0;
+  return now_ns - beat; /* 0 < beat < now_ns: no overflow */
 }
 
 /* Tells a dead producer from a slow one: TETRIG_SHM_PRODUCER_STOPPED when the state says a clean

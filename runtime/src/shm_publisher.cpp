@@ -197,6 +197,10 @@ ShmPublisher::ShmPublisher(const ShmPublisherOptions& options, std::int32_t vert
   if ((options.permissions & ~0666u) != 0 || (options.permissions & 0600u) != 0600u) {
     throw ShmError(where + ": permissions must include owner read/write and have no bits beyond 0666");
   }
+  if ((options.permissions & 0022u) != 0) {  // readers refuse such a segment (tetrig_shm.h: TETRIG_SHM_E_MODE)
+    throw ShmError(where + ": permissions must not let group or others write (any such user could rewrite or truncate the "
+                           "segment under its readers); use 0600, 0640 or 0644");
+  }
   const auto v = static_cast<std::uint64_t>(vertex_count);
   if (data.rest_positions.size() != v * 3) {
     throw ShmError(where + ": rest positions hold " + std::to_string(data.rest_positions.size()) + " floats, expected " +
@@ -341,7 +345,7 @@ void ShmPublisher::writeStatic(const ShmStaticData& data) {
   for (std::size_t i = 0; i < data.triangles.size(); ++i) triangles[i] = static_cast<std::uint32_t>(data.triangles[i]);
   std::memcpy(base_ + header_->rest_positions_offset, data.rest_positions.data(), data.rest_positions.size_bytes());
   char* name = reinterpret_cast<char*>(base_ + header_->rig_name_offset);
-  std::memcpy(name, data.rig_name.data(), data.rig_name.size());
+  if (!data.rig_name.empty()) std::memcpy(name, data.rig_name.data(), data.rig_name.size());  // an empty view may hold nullptr
   name[data.rig_name.size()] = '\0';
   char* label = reinterpret_cast<char*>(base_ + header_->marker_labels_offset);
   for (const std::string& l : data.marker_labels) {

@@ -26,12 +26,14 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <cstddef>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <functional>
 #include <iostream>
+#include <limits>
 #include <memory>
 #include <set>
 #include <sstream>
@@ -679,6 +681,12 @@ TEST(Shm, ReaderRefusesBadMagicVersionAndSizes) {
   const std::uint64_t normals_offset = h.slot_normals_offset;
   expectOpen("normals offset", [&] { h.slot_normals_offset = stride; }, [&] { h.slot_normals_offset = normals_offset; },
              TETRIG_SHM_E_SIZE);
+  // two slot arrays over the same bytes (each inside the slot on its own)
+  const std::uint64_t positions_offset = h.slot_positions_offset;
+  expectOpen("positions over the normals", [&] { h.slot_positions_offset = normals_offset; },
+             [&] { h.slot_positions_offset = positions_offset; }, TETRIG_SHM_E_SIZE);
+  expectOpen("normals over the positions", [&] { h.slot_normals_offset = positions_offset; },
+             [&] { h.slot_normals_offset = normals_offset; }, TETRIG_SHM_E_SIZE);
   // file larger than the header says
   const int fd = shm_open(name.c_str(), O_RDWR, 0);
   ASSERT_GE(fd, 0);
@@ -701,6 +709,10 @@ TEST(Shm, ReaderRefusesBadMagicVersionAndSizes) {
              [&] { h.slot_marker_states_offset = ms; }, TETRIG_SHM_E_SIZE);
   expectOpen("marker states past the slot", [&] { h.slot_marker_states_offset = stride; },
              [&] { h.slot_marker_states_offset = ms; }, TETRIG_SHM_E_SIZE);
+  expectOpen("marker states over the marker positions", [&] { h.slot_marker_states_offset = mp; },
+             [&] { h.slot_marker_states_offset = ms; }, TETRIG_SHM_E_SIZE);
+  expectOpen("marker positions over the normals", [&] { h.slot_marker_positions_offset = normals_offset; },
+             [&] { h.slot_marker_positions_offset = mp; }, TETRIG_SHM_E_SIZE);
 
   EXPECT_EQ(tetrig_shm_open(&r, uniqueName("absent").c_str()), TETRIG_SHM_E_NOT_FOUND);
   EXPECT_EQ(tetrig_shm_open(&r, "no_slash"), TETRIG_SHM_E_ARGUMENT);
@@ -942,6 +954,487 @@ TEST(Shm, CommitAndHeartbeatDoNotAllocate) {
   }
   EXPECT_EQ(tetrig::test::allocationCount(), before_read);
   EXPECT_EQ(info.frame_id, 1001u);
+}
+
+// ---------------------------------------------------------------------------------------------
+// An untrusted segment: whoever can write it may rewrite any byte at any time
+
+// One field of the segment header, rewritten by the tamper tests through their own mapping.
+struct HeaderField {
+  const char* name;
+  std::size_t offset;
+  std::size_t size;
+  bool live;  // a live word the producer keeps rewriting (state, heartbeat, newest frame id)
+};
+#define TETRIG_HEADER_FIELD(f, live) \
+  HeaderField { #f, offsetof(TetrigShmHeader, f), sizeof(TetrigShmHeader::f), live }
+
+std::vector<HeaderField> everyHeaderField() {
+  return {TETRIG_HEADER_FIELD(magic, false),
+          TETRIG_HEADER_FIELD(version_major, false),
+          TETRIG_HEADER_FIELD(version_minor, false),
+          TETRIG_HEADER_FIELD(header_size, false),
+          TETRIG_HEADER_FIELD(total_size, false),
+          TETRIG_HEADER_FIELD(instance_id, false),
+          TETRIG_HEADER_FIELD(start_unix_ns, false),
+          TETRIG_HEADER_FIELD(start_monotonic_ns, false),
+          TETRIG_HEADER_FIELD(producer_pid, false),
+          TETRIG_HEADER_FIELD(flags, false),
+          TETRIG_HEADER_FIELD(state, true),
+          TETRIG_HEADER_FIELD(heartbeat_ns, true),
+          TETRIG_HEADER_FIELD(latest_frame_id, true),
+          TETRIG_HEADER_FIELD(vertex_count, false),
+          TETRIG_HEADER_FIELD(triangle_count, false),
+          TETRIG_HEADER_FIELD(slot_count, false),
+          TETRIG_HEADER_FIELD(marker_count, false),
+          TETRIG_HEADER_FIELD(rig_name_length, false),
+          TETRIG_HEADER_FIELD(triangles_offset, false),
+          TETRIG_HEADER_FIELD(rest_positions_offset, false),
+          TETRIG_HEADER_FIELD(rig_name_offset, false),
+          TETRIG_HEADER_FIELD(marker_labels_offset, false),
+          TETRIG_HEADER_FIELD(marker_labels_size, false),
+          TETRIG_HEADER_FIELD(slots_offset, false),
+          TETRIG_HEADER_FIELD(slot_stride, false),
+          TETRIG_HEADER_FIELD(slot_positions_offset, false),
+          TETRIG_HEADER_FIELD(slot_normals_offset, false),
+          TETRIG_HEADER_FIELD(slot_marker_positions_offset, false),
+          TETRIG_HEADER_FIELD(slot_marker_states_offset, false)};
+}
+#undef TETRIG_HEADER_FIELD
+
+std::uint64_t loadField(const unsigned char* header, const HeaderField& f) {
+  switch (f.size) {
+    case 2: return __atomic_load_n(reinterpret_cast<const std::uint16_t*>(header + f.offset), __ATOMIC_RELAXED);
+    case 4: return __atomic_load_n(reinterpret_cast<const std::uint32_t*>(header + f.offset), __ATOMIC_RELAXED);
+    default: return __atomic_load_n(reinterpret_cast<const std::uint64_t*>(header + f.offset), __ATOMIC_RELAXED);
+  }
+}
+
+// An atomic store (the readers load these words concurrently), truncated to the field's width.
+void storeField(unsigned char* header, const HeaderField& f, std::uint64_t value) {
+  switch (f.size) {
+    case 2:
+      __atomic_store_n(reinterpret_cast<std::uint16_t*>(header + f.offset), static_cast<std::uint16_t>(value), __ATOMIC_RELAXED);
+      break;
+    case 4:
+      __atomic_store_n(reinterpret_cast<std::uint32_t*>(header + f.offset), static_cast<std::uint32_t>(value), __ATOMIC_RELAXED);
+      break;
+    default: __atomic_store_n(reinterpret_cast<std::uint64_t*>(header + f.offset), value, __ATOMIC_RELAXED); break;
+  }
+}
+
+// Hostile values for a field whose current value is `current` in a segment of `size` bytes: zero,
+// one, small counts, the segment's size and beyond, the sign bits, all ones, and near misses of
+// the true value (one alignment step either way, double, half).
+std::vector<std::uint64_t> hostileValues(std::uint64_t current, std::uint64_t size) {
+  return {0u,
+          1u,
+          2u,
+          3u,
+          65u,
+          size - 64u,
+          size,
+          size + 4096u,
+          std::uint64_t{1} << 31,
+          0xFFFFFFFFu,
+          std::uint64_t{1} << 63,
+          ~std::uint64_t{0},
+          current + 1u,
+          current + 64u,
+          current - 64u,
+          current * 2u,
+          current / 2u};
+}
+
+// Under ThreadSanitizer the tamper test's readers all open the segment by name: a layout opened
+// while an offset was rewritten may point the reader's plain reads of static data (rig name,
+// labels, triangles) at slot words the writer is storing, which TSan would report on the
+// writer's own mapping; the ASan build runs the attached readers.
+#if defined(__SANITIZE_THREAD__)
+constexpr bool kThreadSanitizer = true;
+#elif defined(__has_feature)
+#if __has_feature(thread_sanitizer)
+constexpr bool kThreadSanitizer = true;
+#else
+constexpr bool kThreadSanitizer = false;
+#endif
+#else
+constexpr bool kThreadSanitizer = false;
+#endif
+
+// Readers in four threads (two on the producer's own mapping, two opening the segment by name,
+// each re-opening every few reads) read while a writer publishes and the test rewrites every
+// header field in turn through its own mapping, to every hostile value: slot_count 0 and huge,
+// slots_offset and every other offset past the segment, slot_stride, vertex_count, the newest
+// frame id huge, ... A reader must never crash (a SIGFPE or SIGSEGV kills this test), and each
+// call must either return a frame that is exactly the one its info names, or an error code.
+TEST(ShmTamper, ReadersSurviveEveryHeaderFieldRewrittenWhileTheyRead) {
+  const std::string name = uniqueName("tamper");
+  NameGuard guard{name};
+  const int v = 64;
+  const Mesh mesh(v);
+  ShmPublisher pub(optionsFor(name, 4, true), v, mesh.data());
+  publishPattern(pub);
+  RawMapping raw(name);
+  ASSERT_TRUE(raw.ok());
+  const std::uint64_t size = pub.segmentSize();
+  constexpr int kReaders = 4;
+  struct Counts {
+    std::atomic<std::uint64_t> loops{0};
+    std::uint64_t ok = 0, wrong = 0, busy = 0, no_frame = 0, no_markers = 0, argument = 0, opened = 0, refused = 0;
+    std::uint64_t unexpected = 0;
+    int last_unexpected = 0;
+  };
+  std::vector<Counts> counts(kReaders);
+  std::atomic<bool> done{false};
+  std::atomic<bool> writing{true};
+  std::thread writer([&] {
+    while (writing.load(std::memory_order_relaxed)) {
+      publishPattern(pub);
+      std::this_thread::sleep_for(std::chrono::microseconds(100));
+    }
+  });
+  std::vector<std::thread> readers;
+  for (int t = 0; t < kReaders; ++t) {
+    readers.emplace_back([&, t] {
+      Counts& c = counts[static_cast<std::size_t>(t)];
+      const std::size_t n = static_cast<std::size_t>(v) * 3;
+      std::vector<float> pos(n), nrm(n), markers(mesh.labels.size() * 3);
+      std::vector<std::uint8_t> states(mesh.labels.size());
+      std::vector<std::uint32_t> triangles;
+      TetrigShmReader r{};
+      bool open = false;
+      char text[64];
+      for (std::uint64_t loop = 0; !done.load(std::memory_order_relaxed); ++loop) {
+        if (!open || loop % 4 == 0) {  // (re)open: the checks at open run against a header being rewritten
+          if (open) tetrig_shm_close(&r);
+          const int rc = t % 2 == 0 && !kThreadSanitizer ? tetrig_shm_attach(&r, pub.segmentData(), pub.segmentSize())
+                                                         : tetrig_shm_open(&r, name.c_str());
+          open = rc == TETRIG_SHM_OK;
+          if (open) {
+            ++c.opened;
+          } else if (rc == TETRIG_SHM_E_NOT_READY || rc == TETRIG_SHM_E_MAGIC || rc == TETRIG_SHM_E_VERSION ||
+                     rc == TETRIG_SHM_E_SIZE) {
+            ++c.refused;
+          } else {
+            ++c.unexpected;
+            c.last_unexpected = rc;
+          }
+        }
+        if (open) {
+          TetrigShmFrameInfo info{};
+          const int rc = loop % 2 == 0 ? tetrig_shm_read_latest_markers(&r, pos.data(), n, nrm.data(), n, markers.data(),
+                                                                         markers.size(), states.data(), states.size(), &info)
+                                       : tetrig_shm_read_latest(&r, pos.data(), n, nrm.data(), n, &info);
+          switch (rc) {
+            case TETRIG_SHM_OK:
+              ++c.ok;
+              if (!consistent(pos, &nrm, info) || (loop % 2 == 0 && !markersConsistent(info.frame_id, markers, states))) ++c.wrong;
+              break;
+            case TETRIG_SHM_BUSY: ++c.busy; break;
+            case TETRIG_SHM_NO_FRAME: ++c.no_frame; break;
+            case TETRIG_SHM_NO_MARKERS: ++c.no_markers; break;
+            case TETRIG_SHM_E_ARGUMENT: ++c.argument; break;  // the header now claims more vertices than the buffers hold
+            default:
+              ++c.unexpected;
+              c.last_unexpected = rc;
+          }
+          // every other accessor a consumer calls
+          (void)tetrig_shm_state(&r);
+          (void)tetrig_shm_latest_frame_id(&r);
+          (void)tetrig_shm_producer_status(&r, 1'000'000'000);
+          (void)tetrig_shm_heartbeat_age_ns(&r, tetrig_shm_now_ns());
+          (void)tetrig_shm_heartbeat_age_ns(&r, std::numeric_limits<std::int64_t>::min());
+          (void)tetrig_shm_copy_rig_name(&r, text, sizeof text);
+          for (std::uint32_t k = 0; k <= tetrig_shm_marker_count(&r); ++k) {
+            const char* label = tetrig_shm_marker_label(&r, k);
+            if (label != nullptr) (void)std::strlen(label);
+            (void)tetrig_shm_copy_marker_label(&r, k, text, sizeof text);
+          }
+          triangles.resize(std::size_t{tetrig_shm_triangle_count(&r)} * 3);
+          if (tetrig_shm_copy_triangles(&r, triangles.data(), triangles.size()) == TETRIG_SHM_OK) {
+            for (const std::uint32_t i : triangles) {
+              if (i >= tetrig_shm_vertex_count(&r)) ++c.wrong;
+            }
+          }
+          // the last rest coordinate (an atomic load: a layout opened mid-rewrite may place it in a slot)
+          const auto* rest = reinterpret_cast<const std::uint32_t*>(tetrig_shm_rest_positions(&r));
+          (void)__atomic_load_n(rest + std::size_t{tetrig_shm_vertex_count(&r)} * 3 - 1, __ATOMIC_RELAXED);
+        }
+        c.loops.fetch_add(1, std::memory_order_release);
+      }
+      if (open) tetrig_shm_close(&r);
+    });
+  }
+  // Holds each value until every reader has gone round its loop a few times (or 100 ms).
+  auto hold = [&](const HeaderField& f, std::uint64_t value) {
+    std::uint64_t start[kReaders];
+    for (int t = 0; t < kReaders; ++t) start[t] = counts[static_cast<std::size_t>(t)].loops.load(std::memory_order_acquire);
+    const auto give_up = std::chrono::steady_clock::now() + std::chrono::milliseconds(100);
+    for (;;) {
+      storeField(raw.bytes(), f, value);  // again and again: the producer rewrites its live words
+      bool all = true;
+      for (int t = 0; t < kReaders; ++t) {
+        all = all && counts[static_cast<std::size_t>(t)].loops.load(std::memory_order_acquire) >= start[t] + 6;
+      }
+      if (all || std::chrono::steady_clock::now() > give_up) return;
+      std::this_thread::sleep_for(std::chrono::microseconds(50));
+    }
+  };
+  std::size_t rewrites = 0;
+  for (const HeaderField& f : everyHeaderField()) {
+    const std::uint64_t original = loadField(raw.bytes(), f);
+    for (const std::uint64_t value : hostileValues(original, size)) {
+      hold(f, value);
+      ++rewrites;
+      if (!f.live) storeField(raw.bytes(), f, original);
+    }
+    if (f.offset == offsetof(TetrigShmHeader, state)) storeField(raw.bytes(), f, TETRIG_SHM_STATE_RUNNING);
+  }
+  done.store(true);
+  for (auto& th : readers) th.join();
+  writing.store(false);
+  writer.join();
+
+  std::uint64_t ok = 0;
+  for (int t = 0; t < kReaders; ++t) {
+    const Counts& c = counts[static_cast<std::size_t>(t)];
+    EXPECT_EQ(c.wrong, 0u) << "reader " << t << " got frames that are not the frame their info names";
+    EXPECT_EQ(c.unexpected, 0u) << "reader " << t << " got an unexpected code, last " << c.last_unexpected << " ("
+                                << tetrig_shm_status_string(c.last_unexpected) << ")";
+    EXPECT_GT(c.opened, 0u) << "reader " << t;
+    EXPECT_GT(c.refused, 0u) << "reader " << t << " never saw a header it had to refuse";
+    ok += c.ok;
+    std::cout << "[ tamper   ] reader " << t << (t % 2 == 0 && !kThreadSanitizer ? " (attached)" : " (by name) ") << ": " << c.loops.load()
+              << " loops, " << c.opened << " opens, " << c.refused << " refused, " << c.ok << " frames, " << c.busy << " busy, "
+              << c.no_frame << " no frame, " << c.no_markers << " no markers, " << c.argument << " buffer too small\n";
+  }
+  std::cout << "[ tamper   ] " << rewrites << " header rewrites over " << everyHeaderField().size() << " fields, "
+            << pub.framesPublished() << " frames published\n";
+  EXPECT_GT(ok, 0u) << "no frame was read at all";
+  // restored: a new reader reads the newest frame exactly
+  publishPattern(pub);
+  TetrigShmReader r;
+  ASSERT_EQ(tetrig_shm_open(&r, name.c_str()), TETRIG_SHM_OK);
+  std::vector<float> pos(static_cast<std::size_t>(v) * 3), nrm(pos.size());
+  TetrigShmFrameInfo info{};
+  ASSERT_EQ(tetrig_shm_read_latest(&r, pos.data(), pos.size(), nrm.data(), nrm.size(), &info), TETRIG_SHM_OK);
+  EXPECT_EQ(info.frame_id, pub.framesPublished());
+  EXPECT_TRUE(consistent(pos, &nrm, info));
+  tetrig_shm_close(&r);
+}
+
+// A reader that opened the segment uses its own copies of the header's static fields: rewriting
+// them afterwards changes nothing it reads (counts, layout, frames), and a heartbeat of any value
+// gives an age without overflow.
+TEST(ShmTamper, AnOpenReaderKeepsTheHeaderItChecked) {
+  const std::string name = uniqueName("copies");
+  NameGuard guard{name};
+  const Mesh mesh(5);
+  ShmPublisher pub(optionsFor(name, 3, true), 5, mesh.data());
+  TetrigShmReader r;
+  ASSERT_EQ(tetrig_shm_open(&r, name.c_str()), TETRIG_SHM_OK);
+  RawMapping raw(name);
+  ASSERT_TRUE(raw.ok());
+  TetrigShmHeader& h = raw.header();
+  h.slot_count = 0;
+  h.vertex_count = 0xFFFFFFFFu;
+  h.slots_offset = h.total_size + 4096;
+  h.slot_stride = 1;
+  h.slot_positions_offset = ~std::uint64_t{0};
+  h.flags = 0;
+  h.marker_count = 1000;
+  h.triangle_count = 0xFFFFFFFFu;
+  h.version_minor = 0;
+  EXPECT_EQ(tetrig_shm_slot_count(&r), 3u);
+  EXPECT_EQ(tetrig_shm_vertex_count(&r), 5u);
+  EXPECT_EQ(tetrig_shm_triangle_count(&r), 3u);
+  EXPECT_EQ(tetrig_shm_marker_count(&r), 3u);
+  EXPECT_TRUE(tetrig_shm_has_normals(&r));
+  EXPECT_EQ(tetrig_shm_has_marker_positions(&r), 1);
+  for (std::uint64_t k = 1; k <= 5; ++k) {
+    ASSERT_EQ(publishPattern(pub), k);
+    std::vector<float> pos(15), nrm(15), markers(9);
+    std::vector<std::uint8_t> states(3);
+    TetrigShmFrameInfo info{};
+    ASSERT_EQ(tetrig_shm_read_latest_markers(&r, pos.data(), 15, nrm.data(), 15, markers.data(), 9, states.data(), 3, &info),
+              TETRIG_SHM_OK);
+    EXPECT_EQ(info.frame_id, k);
+    EXPECT_TRUE(consistent(pos, &nrm, info));
+    EXPECT_TRUE(markersConsistent(k, markers, states));
+  }
+  // a newest frame id far beyond what was published: no slot holds it, so no frame comes back
+  h.latest_frame_id = ~std::uint64_t{0};
+  r.max_attempts = 3;
+  std::vector<float> pos(15);
+  EXPECT_EQ(tetrig_shm_read_latest(&r, pos.data(), 15, nullptr, 0, nullptr), TETRIG_SHM_BUSY);
+  h.latest_frame_id = 0;
+  EXPECT_EQ(tetrig_shm_read_latest(&r, pos.data(), 15, nullptr, 0, nullptr), TETRIG_SHM_NO_FRAME);
+  // heartbeat ages: never beat -> INT64_MAX (stale); in the future -> 0; extreme values do not overflow
+  const std::int64_t now = tetrig_shm_now_ns();
+  h.heartbeat_ns = 0;
+  EXPECT_EQ(tetrig_shm_heartbeat_age_ns(&r, now), std::numeric_limits<std::int64_t>::max());
+  EXPECT_EQ(tetrig_shm_producer_status(&r, 1'000'000'000), TETRIG_SHM_PRODUCER_STALE);
+  h.heartbeat_ns = std::numeric_limits<std::int64_t>::min();
+  EXPECT_EQ(tetrig_shm_heartbeat_age_ns(&r, now), std::numeric_limits<std::int64_t>::max());
+  h.heartbeat_ns = std::numeric_limits<std::int64_t>::max();
+  EXPECT_EQ(tetrig_shm_heartbeat_age_ns(&r, now), 0);
+  EXPECT_EQ(tetrig_shm_heartbeat_age_ns(&r, std::numeric_limits<std::int64_t>::min()), 0);
+  h.heartbeat_ns = now - 5;
+  EXPECT_EQ(tetrig_shm_heartbeat_age_ns(&r, now), 5);
+  tetrig_shm_close(&r);
+}
+
+// The static data behind the header (triangles, rig name, labels) is checked at open; when it is
+// rewritten later, the copying accessors still never read outside its block, always terminate
+// text, and report triangle indices out of range in their copy.
+TEST(ShmTamper, StaticDataRewrittenAfterOpenIsCopiedSafely) {
+  const std::string name = uniqueName("static_rewrite");
+  NameGuard guard{name};
+  const Mesh mesh(5);
+  ShmPublisher pub(optionsFor(name), 5, mesh.data());
+  TetrigShmReader r;
+  ASSERT_EQ(tetrig_shm_open(&r, name.c_str()), TETRIG_SHM_OK);
+  std::vector<std::uint32_t> tris(9, 0xEEu);
+  EXPECT_EQ(tetrig_shm_copy_triangles(&r, tris.data(), 8), TETRIG_SHM_E_ARGUMENT);
+  EXPECT_EQ(tris, std::vector<std::uint32_t>(9, 0xEEu));
+  ASSERT_EQ(tetrig_shm_copy_triangles(&r, tris.data(), 9), TETRIG_SHM_OK);
+  for (std::size_t i = 0; i < 9; ++i) EXPECT_EQ(tris[i], static_cast<std::uint32_t>(mesh.triangles[i]));
+  char text[64];
+  ASSERT_EQ(tetrig_shm_copy_rig_name(&r, text, sizeof text), TETRIG_SHM_OK);
+  EXPECT_STREQ(text, "test rig");
+  ASSERT_EQ(tetrig_shm_copy_rig_name(&r, text, 5), TETRIG_SHM_OK);  // truncated, terminated
+  EXPECT_STREQ(text, "test");
+  ASSERT_EQ(tetrig_shm_copy_marker_label(&r, 1, text, sizeof text), TETRIG_SHM_OK);
+  EXPECT_STREQ(text, "RFHD");
+  EXPECT_EQ(tetrig_shm_copy_marker_label(&r, 3, text, sizeof text), TETRIG_SHM_E_SIZE);
+  EXPECT_STREQ(text, "");
+
+  RawMapping raw(name);
+  ASSERT_TRUE(raw.ok());
+  const TetrigShmHeader& h = raw.header();
+  reinterpret_cast<std::uint32_t*>(raw.bytes() + h.triangles_offset)[4] = 0xFFFFFFFFu;
+  EXPECT_EQ(tetrig_shm_copy_triangles(&r, tris.data(), 9), TETRIG_SHM_E_SIZE);
+  // the rig name's block and the label block without any NUL
+  std::memset(raw.bytes() + h.rig_name_offset, 'x', h.rig_name_length + 1);
+  ASSERT_EQ(tetrig_shm_copy_rig_name(&r, text, sizeof text), TETRIG_SHM_OK);
+  EXPECT_EQ(std::string(text), std::string(h.rig_name_length, 'x'));  // the name's bytes only, terminated
+  std::memset(raw.bytes() + h.marker_labels_offset, 'y', h.marker_labels_size);
+  for (std::uint32_t k = 0; k < 3; ++k) {
+    EXPECT_EQ(tetrig_shm_marker_label(&r, k), nullptr) << k;
+    EXPECT_EQ(tetrig_shm_copy_marker_label(&r, k, text, sizeof text), TETRIG_SHM_E_SIZE) << k;
+    EXPECT_STREQ(text, "") << k;
+  }
+  tetrig_shm_close(&r);
+}
+
+// Changes the owner of segment `name` (needs root or CAP_CHOWN); false when not permitted.
+bool chownSegment(const std::string& name, uid_t uid) {
+  const int fd = shm_open(name.c_str(), O_RDWR, 0);
+  if (fd < 0) return false;
+  const bool ok = fchown(fd, uid, static_cast<gid_t>(-1)) == 0;
+  close(fd);
+  return ok;
+}
+
+bool chmodSegment(const std::string& name, mode_t mode) {
+  const int fd = shm_open(name.c_str(), O_RDWR, 0);
+  if (fd < 0) return false;
+  const bool ok = fchmod(fd, mode) == 0;
+  close(fd);
+  return ok;
+}
+
+// A segment of another user (a squatter on the name, or another user's producer) is refused by
+// default, naming its owner; tetrig_shm_open_as accepts exactly the user it is told.
+TEST(ShmOwner, ASegmentOfAnotherUserIsRefusedUnlessThatOwnerIsAccepted) {
+  const std::string name = uniqueName("owner");
+  NameGuard guard{name};
+  const Mesh mesh(4);
+  ShmPublisher pub(optionsFor(name), 4, mesh.data());
+  publishPattern(pub);
+  TetrigShmReader r;
+  ASSERT_EQ(tetrig_shm_open(&r, name.c_str()), TETRIG_SHM_OK);
+  EXPECT_EQ(r.owner_uid, geteuid());
+  EXPECT_EQ(r.mode, 0600u);
+  tetrig_shm_close(&r);
+  constexpr uid_t kOther = 12345;
+  if (geteuid() == kOther) GTEST_SKIP() << "running as uid " << kOther;
+  if (!chownSegment(name, kOther)) GTEST_SKIP() << "fchown of the segment not permitted (needs root or CAP_CHOWN)";
+
+  EXPECT_EQ(tetrig_shm_open(&r, name.c_str()), TETRIG_SHM_E_OWNER);
+  EXPECT_EQ(r.owner_uid, kOther);
+  EXPECT_EQ(r.header, nullptr);  // nothing mapped
+  EXPECT_STREQ(tetrig_shm_status_string(TETRIG_SHM_E_OWNER), "segment is owned by another user");
+  tetrig_shm_close(&r);
+  EXPECT_EQ(tetrig_shm_open_as(&r, name.c_str(), geteuid()), TETRIG_SHM_E_OWNER);
+  EXPECT_EQ(tetrig_shm_open_as(&r, name.c_str(), kOther + 1), TETRIG_SHM_E_OWNER);
+  ASSERT_EQ(tetrig_shm_open_as(&r, name.c_str(), kOther), TETRIG_SHM_OK);
+  EXPECT_EQ(r.owner_uid, kOther);
+  std::vector<float> pos(12);
+  TetrigShmFrameInfo info{};
+  ASSERT_EQ(tetrig_shm_read_latest(&r, pos.data(), pos.size(), nullptr, 0, &info), TETRIG_SHM_OK);
+  EXPECT_TRUE(consistent(pos, nullptr, info));
+  EXPECT_EQ(tetrig_shm_name_status(&r), TETRIG_SHM_NAME_SAME);
+  tetrig_shm_close(&r);
+  // a squatter's empty object is refused at once (not "still being created" forever)
+  const std::string squat = uniqueName("squat");
+  NameGuard squat_guard{squat};
+  ASSERT_TRUE(makeRawSegment(squat, 0, [](unsigned char*) {}));
+  ASSERT_TRUE(chownSegment(squat, kOther));
+  EXPECT_EQ(tetrig_shm_open(&r, squat.c_str()), TETRIG_SHM_E_OWNER);
+}
+
+// A segment that group or others may write (anyone of them could rewrite or truncate it under its
+// readers) is refused; read bits for them are fine. The publisher refuses to make one.
+TEST(ShmOwner, ASegmentWritableByGroupOrOthersIsRefused) {
+  const std::string name = uniqueName("mode");
+  NameGuard guard{name};
+  const Mesh mesh(4);
+  ShmPublisher pub(optionsFor(name), 4, mesh.data());
+  publishPattern(pub);
+  TetrigShmReader r;
+  for (const mode_t mode : {0620u, 0602u, 0660u, 0666u, 0622u}) {
+    ASSERT_TRUE(chmodSegment(name, mode));
+    EXPECT_EQ(tetrig_shm_open(&r, name.c_str()), TETRIG_SHM_E_MODE) << std::oct << mode;
+    EXPECT_EQ(r.mode, mode) << std::oct << mode;
+    EXPECT_EQ(r.header, nullptr);
+    EXPECT_EQ(tetrig_shm_open_as(&r, name.c_str(), geteuid()), TETRIG_SHM_E_MODE) << std::oct << mode;
+  }
+  EXPECT_STRNE(tetrig_shm_status_string(TETRIG_SHM_E_MODE), "unknown status");
+  for (const mode_t mode : {0600u, 0640u, 0644u}) {
+    ASSERT_TRUE(chmodSegment(name, mode));
+    ASSERT_EQ(tetrig_shm_open(&r, name.c_str()), TETRIG_SHM_OK) << std::oct << mode;
+    tetrig_shm_close(&r);
+  }
+  for (const unsigned mode : {0620u, 0602u, 0660u, 0666u}) {
+    const std::string wide = uniqueName("mode_wide");
+    NameGuard wide_guard{wide};
+    ShmPublisherOptions o = optionsFor(wide);
+    o.permissions = mode;
+    try {
+      ShmPublisher refused(o, 4, mesh.data());
+      ADD_FAILURE() << "permissions " << std::oct << mode << " accepted";
+    } catch (const ShmError& e) {
+      EXPECT_NE(std::string(e.what()).find("must not let group or others write"), std::string::npos) << e.what();
+    }
+    EXPECT_EQ(tetrig_shm_open(&r, wide.c_str()), TETRIG_SHM_E_NOT_FOUND) << "left behind";
+  }
+}
+
+// An empty rig name (a string_view that may hold nullptr) is published as "" (UBSan: no null
+// pointer reaches memcpy).
+TEST(Shm, AnEmptyRigNameIsPublished) {
+  const std::string name = uniqueName("noname");
+  NameGuard guard{name};
+  const Mesh mesh(4);
+  ShmStaticData data = mesh.data();
+  data.rig_name = std::string_view();
+  ShmPublisher pub(optionsFor(name), 4, data);
+  TetrigShmReader r;
+  ASSERT_EQ(tetrig_shm_open(&r, name.c_str()), TETRIG_SHM_OK);
+  EXPECT_STREQ(tetrig_shm_rig_name(&r), "");
+  tetrig_shm_close(&r);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1543,6 +2036,119 @@ TEST(ShmCat, FollowsARestartedProducerAndSaysSo) {
   for (std::size_t k = 0; k < dump.size(); ++k) {
     EXPECT_EQ(dump[k].instance, k < from_old ? old_instance : fresh.instanceId()) << k;
     EXPECT_TRUE(exactPattern(dump[k])) << k;
+  }
+}
+
+// What an unprivileged user could do to a segment made with --shm-mode 666 (slot_count 0 gave
+// tetrig-shm-cat a SIGFPE, slots_offset past the end a SIGSEGV): every header field rewritten to
+// every hostile value, twice over, while the consumer reads (all but `state`, whose "stopped"
+// would end it early). It keeps printing exact frames, then exits 0 when the producer stops.
+TEST(ShmCat, SurvivesItsSegmentsHeaderRewrittenWhileItReads) {
+  const std::string name = uniqueName("cat_tamper");
+  NameGuard guard{name};
+  const int v = 50;
+  const Mesh mesh(v);
+  auto pub = std::make_unique<ShmPublisher>(optionsFor(name, 4, true), v, mesh.data());
+  const std::uint64_t instance = pub->instanceId();
+  std::atomic<bool> writing{true};
+  std::thread writer([&] {
+    while (writing.load(std::memory_order_relaxed)) {
+      publishPattern(*pub);
+      std::this_thread::sleep_for(std::chrono::microseconds(300));
+    }
+  });
+  CatRun cat;
+  ASSERT_TRUE(spawnCat(cat, {name, "--timeout-ms", "20000", "--dump", "@dump", "--markers", "--poll-us", "50"}));
+  ASSERT_TRUE(waitUntil([&] { return cat.frameLines() >= 1 || cat.exited(); }, std::chrono::seconds(20)));  // opened
+  RawMapping raw(name);
+  ASSERT_TRUE(raw.ok());
+  const std::uint64_t size = pub->segmentSize();
+  std::size_t rewrites = 0;
+  for (int cycle = 0; cycle < 2 && !cat.exited(); ++cycle) {
+    for (const HeaderField& f : everyHeaderField()) {
+      if (f.offset == offsetof(TetrigShmHeader, state)) continue;
+      const std::uint64_t original = loadField(raw.bytes(), f);
+      for (const std::uint64_t value : hostileValues(original, size)) {
+        storeField(raw.bytes(), f, value);
+        std::this_thread::sleep_for(std::chrono::microseconds(500));
+        ++rewrites;
+      }
+      if (!f.live) storeField(raw.bytes(), f, original);
+    }
+  }
+  const int frames_during = cat.frameLines();
+  EXPECT_FALSE(cat.exited()) << "exit " << cat.exit_code << " while the header was rewritten: " << cat.read("err.txt");
+  writing.store(false);
+  writer.join();
+  pub.reset();  // clean stop: the consumer exits 0
+  ASSERT_TRUE(waitUntil([&] { return cat.exited(); }, std::chrono::seconds(20)));
+  EXPECT_EQ(cat.exit_code, 0) << cat.read("err.txt");  // 136 = killed by SIGFPE, 139 = SIGSEGV
+  EXPECT_NE(cat.read("err.txt").find("stopped cleanly"), std::string::npos) << cat.read("err.txt");
+  bool ok = false;
+  const std::vector<DumpRecord> dump = parseDump(cat.read("dump.bin"), ok);
+  ASSERT_TRUE(ok) << "malformed dump";
+  EXPECT_GE(dump.size(), 100u);
+  for (std::size_t k = 0; k < dump.size(); ++k) {
+    EXPECT_EQ(dump[k].instance, instance);
+    EXPECT_EQ(dump[k].positions.size(), static_cast<std::size_t>(v) * 3);
+    EXPECT_TRUE(exactPattern(dump[k])) << "frame " << dump[k].frame_id;
+    if (k > 0) {
+      EXPECT_GT(dump[k].frame_id, dump[k - 1].frame_id);
+    }
+  }
+  EXPECT_EQ(static_cast<std::size_t>(cat.frameLines()), dump.size());
+  std::cout << "[ cat      ] " << rewrites << " header rewrites while the consumer read " << frames_during << " frames ("
+            << dump.size() << " in all)\n";
+}
+
+// A segment of another user is refused with its owner named, unless --owner accepts that user;
+// a segment that group or others may write is refused either way.
+TEST(ShmCat, RefusesAnotherUsersSegmentUnlessToldItsOwner) {
+  const std::string name = uniqueName("cat_owner");
+  NameGuard guard{name};
+  const Mesh mesh(8);
+  ShmPublisher pub(optionsFor(name), 8, mesh.data());
+  publishPattern(pub);
+  constexpr uid_t kOther = 12345;
+  if (geteuid() == kOther) GTEST_SKIP() << "running as uid " << kOther;
+  if (!chownSegment(name, kOther)) GTEST_SKIP() << "fchown of the segment not permitted (needs root or CAP_CHOWN)";
+  {
+    CatRun cat;
+    ASSERT_TRUE(spawnCat(cat, {name, "--timeout-ms", "10000"}));
+    ASSERT_TRUE(waitUntil([&] { return cat.exited(); }, std::chrono::seconds(20)));
+    EXPECT_EQ(cat.exit_code, 4) << cat.read("err.txt");
+    const std::string err = cat.read("err.txt");
+    EXPECT_NE(err.find("belongs to uid 12345, not " + std::to_string(geteuid())), std::string::npos) << err;
+    EXPECT_NE(err.find("--owner 12345"), std::string::npos) << err;
+    EXPECT_EQ(cat.frameLines(), 0);
+  }
+  {
+    CatRun cat;
+    ASSERT_TRUE(spawnCat(cat, {name, "--owner", "12345", "--frames", "5", "--timeout-ms", "10000", "--poll-us", "50"}));
+    publishUntilExit(pub, cat, std::chrono::microseconds(1000));
+    ASSERT_TRUE(cat.exited());
+    EXPECT_EQ(cat.exit_code, 0) << cat.read("err.txt");
+    EXPECT_EQ(cat.frameLines(), 5);
+  }
+  {
+    CatRun cat;  // the segment's own user, but not ours
+    ASSERT_TRUE(spawnCat(cat, {name, "--owner", "12346", "--timeout-ms", "10000"}));
+    ASSERT_TRUE(waitUntil([&] { return cat.exited(); }, std::chrono::seconds(20)));
+    EXPECT_EQ(cat.exit_code, 4) << cat.read("err.txt");
+  }
+  ASSERT_TRUE(chmodSegment(name, 0620));
+  {
+    CatRun cat;
+    ASSERT_TRUE(spawnCat(cat, {name, "--owner", "12345", "--timeout-ms", "10000"}));
+    ASSERT_TRUE(waitUntil([&] { return cat.exited(); }, std::chrono::seconds(20)));
+    EXPECT_EQ(cat.exit_code, 4) << cat.read("err.txt");
+    EXPECT_NE(cat.read("err.txt").find("mode 0620 lets group or others write"), std::string::npos) << cat.read("err.txt");
+  }
+  for (const char* bad : {"abc", "-1", "4294967295", ""}) {
+    CatRun cat;
+    ASSERT_TRUE(spawnCat(cat, {name, "--owner", bad, "--timeout-ms", "10000"}));
+    ASSERT_TRUE(waitUntil([&] { return cat.exited(); }, std::chrono::seconds(20)));
+    EXPECT_EQ(cat.exit_code, 1) << bad << ": " << cat.read("err.txt");
   }
 }
 

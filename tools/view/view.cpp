@@ -386,6 +386,11 @@ class Viewer {
     if (rc != TETRIG_SHM_OK) {
       std::string why = tetrig_shm_status_string(rc);
       if (rc == TETRIG_SHM_E_ACCESS || rc == TETRIG_SHM_E_SYSTEM) why += std::string(": ") + std::strerror(reader_.error);
+      if (rc == TETRIG_SHM_E_OWNER) {
+        why += format(" (uid %lu; tetrig view reads only segments of its own user, uid %lu)", static_cast<unsigned long>(reader_.owner_uid),
+                      static_cast<unsigned long>(geteuid()));
+      }
+      if (rc == TETRIG_SHM_E_MODE) why += format(" (mode %04lo)", static_cast<unsigned long>(reader_.mode));
       throw std::runtime_error("cannot use segment " + name_ + ": " + why);
     }
     if (instances_ > 0 && reader_.instance_id == instance_id_) {  // the same dead or stopped segment: no new producer yet
@@ -395,8 +400,11 @@ class Viewer {
     open_ = true;
     const std::uint32_t vertices = tetrig_shm_vertex_count(&reader_);
     const std::uint32_t triangle_count = tetrig_shm_triangle_count(&reader_);
-    const std::uint32_t* tris = tetrig_shm_triangles(&reader_);
-    triangles_.assign(tris, tris + std::size_t{triangle_count} * 3);
+    triangles_.assign(std::size_t{triangle_count} * 3, 0u);
+    if (tetrig_shm_copy_triangles(&reader_, triangles_.data(), triangles_.size()) != TETRIG_SHM_OK) {  // the copy is checked
+      closeReader();
+      throw std::runtime_error("cannot use segment " + name_ + ": its triangles were rewritten after it was opened");
+    }
     positions_.assign(std::size_t{vertices} * 3, 0.0f);
     const float* rest = tetrig_shm_rest_positions(&reader_);
     const bool same_rig = drawer_ && drawer_->vertexCount() == static_cast<std::int32_t>(vertices) && triangles_ == drawn_triangles_;
@@ -411,7 +419,9 @@ class Viewer {
       camera_ = home();
       have_frame_ = false;
     }
-    rig_name_ = printable(tetrig_shm_rig_name(&reader_));
+    char rig_name[256];
+    tetrig_shm_copy_rig_name(&reader_, rig_name, sizeof rig_name);
+    rig_name_ = printable(rig_name);
     if (instances_ > 0) {
       status(format("producer restarted: instance %016" PRIx64 " (pid %ld) -> %016" PRIx64 " (pid %ld)", instance_id_, static_cast<long>(pid_),
                     reader_.instance_id, static_cast<long>(reader_.producer_pid)));

@@ -57,7 +57,9 @@ struct ShmPublisherOptions {
   bool normals = false;          // publish per-vertex normals beside the positions
   bool marker_positions = true;  // layout 1.1: per slot, each labelled marker's target and state
                                  // (12 + 1 bytes per marker; no block when there are no labels)
-  unsigned permissions = 0600;   // mode of the segment (read/write bits only; set exactly, umask ignored)
+  unsigned permissions = 0600;   // mode of the segment (set exactly, umask ignored): owner read/write, plus
+                                 // read for group/others at most (0640, 0644); write bits for them are
+                                 // refused (readers refuse such segments: docs/shm.md)
 };
 
 // Static data, copied into the segment once by the constructor (the spans need not outlive it).
