@@ -4,6 +4,7 @@
 #include "solver_flags.hpp"
 
 #include "tetrig/clock.hpp"
+#include "tetrig/drivers/c3d_reader.hpp"
 #include "tetrig/drivers/source_factory.hpp"
 #include "tetrig/frame_loop.hpp"
 #include "tetrig/live_rig.hpp"
@@ -17,8 +18,10 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <csignal>
 #include <cstdio>
+#include <fstream>
 #include <memory>
 #include <stdexcept>
 #include <string>
@@ -76,6 +79,46 @@ int reapConsumer(pid_t pid, std::chrono::milliseconds timeout) {
 
 }  // namespace
 
+// Waits until process `pid` maps `file` (its /proc/PID/maps names it), the process ends, or
+// `timeout` passes.
+static void waitUntilMapped(pid_t pid, const std::string& file, std::chrono::milliseconds timeout) {
+  if (pid <= 0) return;
+  const auto end = std::chrono::steady_clock::now() + timeout;
+  const std::string maps = "/proc/" + std::to_string(pid) + "/maps";
+  while (std::chrono::steady_clock::now() < end) {
+    std::ifstream in(maps);
+    if (!in) return;  // the process is gone
+    for (std::string line; std::getline(in, line);) {
+      if (line.size() >= file.size() && line.compare(line.size() - file.size(), file.size(), file) == 0) return;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+}
+
+std::size_t stillLeadFrames(const drivers::C3DClip& clip, double threshold_mm) {
+  const std::size_t frames = clip.frameCount();
+  const int points = clip.pointCount();
+  if (frames == 0 || points == 0) return 0;
+  const double k = clip.unitsToMm();
+  std::vector<float> first(static_cast<std::size_t>(points) * 3, 0.0f);
+  std::vector<std::uint8_t> seen(static_cast<std::size_t>(points), 0);
+  for (std::size_t f = 0; f < frames; ++f) {
+    const float* p = clip.positions(f);
+    for (int i = 0; i < points; ++i) {
+      if (clip.pointKind(i) != drivers::C3DPointKind::kMarker || !clip.isValid(f, i)) continue;
+      const auto u = static_cast<std::size_t>(i);
+      if (!seen[u]) {
+        seen[u] = 1;
+        for (int c = 0; c < 3; ++c) first[u * 3 + static_cast<std::size_t>(c)] = p[u * 3 + static_cast<std::size_t>(c)];
+        continue;
+      }
+      const double dx = p[u * 3] - first[u * 3], dy = p[u * 3 + 1] - first[u * 3 + 1], dz = p[u * 3 + 2] - first[u * 3 + 2];
+      if (k * std::sqrt(dx * dx + dy * dy + dz * dz) > threshold_mm) return f;
+    }
+  }
+  return frames;
+}
+
 int runLive(const RunOptions& options, RunOutcome* outcome) {
   if (options.iterations < 1) throw std::invalid_argument("--iterations must be at least 1");
   if (!options.final_obj.empty()) {
@@ -115,6 +158,15 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
     for (const RigMarker& m : rig.markers) open.synthetic_labels.push_back(m.label);
   }
   std::unique_ptr<drivers::MarkerSource> source = devices::openMarkerSource(options.source, open);
+  // Where a clip run is (frame k of n) for the header and the status line.
+  std::optional<ClipPosition> clip_position;
+  if (options.source.rfind("c3d:", 0) == 0) {
+    drivers::C3DReadOptions read;
+    read.keep_zero_points = options.keep_zero_markers;
+    const drivers::C3DClip clip = drivers::C3DClip::load(options.source.substr(4), read);
+    const double rate = options.rate_hz > 0 ? options.rate_hz : clip.frameRate();
+    clip_position = ClipPosition{clip.frameCount(), rate, rate > 0 ? static_cast<double>(stillLeadFrames(clip)) / rate : 0.0};
+  }
   auto mailbox = std::make_unique<FrameMailbox>();
   // Sources that know their labels before they start (playback, synthetic, the Hydra) start only
   // once the solver waits, so that no frame waits for the set-up; a device names its markers
@@ -166,6 +218,12 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
     std::printf("tetrig run: %s\n", printableText(source->describe()).c_str());
     std::printf("  rig: %s: %d tet vertices, %d tets, %d fine vertices, %zu markers; %d bound by label\n", printableText(rig.name, 256).c_str(),
                 rig.tet_mesh.vertexCount(), rig.tet_mesh.tetCount(), live.fineVertexCount(), rig.markers.size(), binding.matched);
+    if (clip_position && clip_position->rate_hz > 0) {
+      std::printf("  clip: %zu frames, %.1f s at %g Hz", clip_position->frames, static_cast<double>(clip_position->frames) / clip_position->rate_hz,
+                  clip_position->rate_hz);
+      if (clip_position->still_s >= 0.5) std::printf("; it starts with %.1f s of a still pose", clip_position->still_s);
+      std::printf("\n");
+    }
     if (live.coarseLevel() != nullptr)
       std::printf("  coarse level: %d tets, %d iterations per frame\n", live.coarseLevel()->deformer().tetCount(),
                   live.coarseLevel()->options().iterations);
@@ -210,6 +268,13 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
   const StopSignalScope signals;
   FrameLoop loop(*mailbox, live, *publisher, loop_options);
   loop.start();
+  // A consumer (tetrig demo's) starts before the frames do, so that it sees the first one: the
+  // source waits (at most 2 s) until the consumer has mapped the segment.
+  pid_t consumer = -1;
+  if (!options.consumer_command.empty()) {
+    consumer = spawnConsumer(options.consumer_command + " " + options.publish);
+    waitUntilMapped(consumer, "/dev/shm" + shm_options.name, std::chrono::seconds(2));
+  }
   if (start_late && !source->start(*mailbox)) {
     loop.requestStop();
     loop.join();
@@ -220,8 +285,6 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
                 options.publish.c_str(), options.normals ? "positions and normals" : "positions", budget_ms, options.iterations,
                 pose_threads, pose_threads > 1 ? "s" : "");
   std::fflush(stdout);
-  pid_t consumer = -1;
-  if (!options.consumer_command.empty()) consumer = spawnConsumer(options.consumer_command + " " + options.publish);
 
   // 5. Wait for the end: source finished and drained, --frames reached, or a signal.
   const bool tty = options.status_line && !options.quiet && isatty(STDERR_FILENO);
@@ -250,10 +313,18 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
     const auto now = std::chrono::steady_clock::now();
     if (tty && now - last_status >= std::chrono::milliseconds(250)) {
       const double dt = std::chrono::duration<double>(now - last_status).count();
+      std::string where;
+      if (clip_position && clip_position->frames > 0 && clip_position->rate_hz > 0) {
+        const std::uint64_t k = source->stats().frames_published % clip_position->frames;
+        char buf[96];
+        std::snprintf(buf, sizeof buf, "clip %llu / %zu (%.1f / %.1f s) | ", static_cast<unsigned long long>(k), clip_position->frames,
+                      static_cast<double>(k) / clip_position->rate_hz, static_cast<double>(clip_position->frames) / clip_position->rate_hz);
+        where = buf;
+      }
       std::fprintf(stderr,
-                   "\r\033[2K%8llu frames | %6.1f Hz | latency p50 %.3f ms p99 %.3f ms | %.2f it | occluded %llu | unknown %llu | "
+                   "\r\033[2K%s%8llu frames | %6.1f Hz | latency p50 %.3f ms p99 %.3f ms | %.2f it | occluded %llu | unknown %llu | "
                    "dropped %llu | misses %llu%s",
-                   static_cast<unsigned long long>(s.counters.frames), static_cast<double>(s.counters.frames - status_frames) / dt,
+                   where.c_str(), static_cast<unsigned long long>(s.counters.frames), static_cast<double>(s.counters.frames - status_frames) / dt,
                    static_cast<double>(s.recent_p50_ns) * 1e-6, static_cast<double>(s.recent_p99_ns) * 1e-6,
                    s.counters.frames ? static_cast<double>(s.counters.iterations) / static_cast<double>(s.counters.frames) : 0.0,
                    static_cast<unsigned long long>(s.counters.occluded_marker_frames),
@@ -296,6 +367,9 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
     if (c.rejected_target_frames != 0 || c.rejected_poses != 0)
       std::printf("  frames with rejected marker targets %llu, rejected solved poses %llu (last pose republished; see docs/live.md)\n",
                   static_cast<unsigned long long>(c.rejected_target_frames), static_cast<unsigned long long>(c.rejected_poses));
+    if (c.rejected_marker_samples != 0)
+      std::printf("  marker samples rejected as implausible %llu (predicted instead; see docs/live.md)\n",
+                  static_cast<unsigned long long>(c.rejected_marker_samples));
     std::printf("  occluded marker-frames %llu, unknown marker-frames %llu; source: %llu frames, %llu lost, %llu decode errors\n",
                 static_cast<unsigned long long>(c.occluded_marker_frames), static_cast<unsigned long long>(c.unknown_marker_frames),
                 static_cast<unsigned long long>(source_stats.frames_published), static_cast<unsigned long long>(source_stats.frames_lost),
@@ -341,6 +415,7 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
                    {"compact_pose_transfer", !options.double_pose_transfer}};
     j["rejected_target_frames"] = c.rejected_target_frames;
     j["rejected_poses"] = c.rejected_poses;
+    j["rejected_marker_samples"] = c.rejected_marker_samples;
     j["stale_periods"] = c.stale_periods;
     j["frames_before_start"] = c.frames_before_start;
     j["deadline_hits"] = c.deadline_hits;

@@ -4,6 +4,7 @@
 // Keys of --stats-json: docs/live.md.
 #pragma once
 
+#include "tetrig/drivers/c3d_reader.hpp"
 #include "tetrig/frame_loop.hpp"
 #include "tetrig/live_rig.hpp"
 #include "tetrig/rig_file.hpp"
@@ -12,6 +13,7 @@
 
 #include <cstddef>
 #include <cstdint>
+
 #include <optional>
 #include <string>
 #include <vector>
@@ -72,6 +74,17 @@ struct RunOutcome {
   std::string rig_name;
   double budget_ms = 0;
 };
+
+// Where a clip run is: its frame count and rate, and how long it starts with a still pose.
+struct ClipPosition {
+  std::size_t frames = 0;
+  double rate_hz = 0;
+  double still_s = 0;
+};
+
+// Frames at the start of a clip in which no physical marker moved more than threshold_mm from
+// where it was first seen (a performer standing in the calibration pose before the take).
+std::size_t stillLeadFrames(const drivers::C3DClip& clip, double threshold_mm = 20.0);
 
 // Runs until the source ends, `frames` frames were solved, or SIGINT/SIGTERM. Prints a summary
 // on stdout. Returns the process exit code; throws (one clear line) on bad input: a rig that does

@@ -51,6 +51,47 @@ std::string joinWords(const std::vector<std::string>& words) {
   return out;
 }
 
+// What build-rig's user does next: whether the rig is ready, the markers worth a look, the next
+// commands.
+std::string buildVerdict(const Rig& rig, const std::string& out, const std::string& clip) {
+  std::string text = "\nverdict: ";
+  if (rig.markers.empty()) {
+    return text + "built, with no markers: handles and regions move it (tetrig pose " + out + " --region NAME=FILE.def --out posed.obj)\n";
+  }
+  const double mm = rig.alignment.rig_units_per_mm > 0 ? 1.0 / rig.alignment.rig_units_per_mm : 1.0;
+  std::vector<std::pair<double, std::string>> far;
+  std::vector<double> distances;
+  for (const RigMarker& m : rig.markers) distances.push_back(m.surface_distance * mm);
+  std::vector<double> sorted = distances;
+  std::sort(sorted.begin(), sorted.end());
+  const double median = sorted[sorted.size() / 2];
+  // A marker well beyond the others' distance from the skin: placed elsewhere on the performer
+  // than on the character, or a body of other proportions there.
+  for (std::size_t i = 0; i < rig.markers.size(); ++i) {
+    if (distances[i] > std::max(30.0, 2.5 * median)) far.emplace_back(distances[i], rig.markers[i].label);
+  }
+  std::sort(far.rbegin(), far.rend());
+  char line[200];
+  std::snprintf(line, sizeof line, "the rig is ready: %zu markers, %.0f mm from the skin (median)", rig.markers.size(), median);
+  text += line;
+  if (far.empty()) {
+    text += ", none far from it.\n";
+  } else {
+    text += "; further (check where they sit on the performer and on the character):";
+    for (std::size_t i = 0; i < far.size() && i < 6; ++i) {
+      std::snprintf(line, sizeof line, " %s %.0f mm", printableText(far[i].second, 40).c_str(), far[i].first);
+      text += line;
+    }
+    text += far.size() > 6 ? " ...\n" : "\n";
+  }
+  const std::string c = clip.empty() ? std::string("CLIP.c3d") : clip;
+  text += "next:    tetrig run --rig " + out + " --clip " + c + "      (live, into the shared memory an engine reads)\n";
+  text += "         tetrig export --rig " + out + " --clip " + c + " --out " +
+          std::filesystem::path(out).replace_extension(".pc2").string() + " --report " +
+          std::filesystem::path(out).replace_extension(".json").string() + "   (offline; the report says how closely the skin follows)\n";
+  return text;
+}
+
 int buildRigCommand(const BuildArgs& a) {
   RigDescription desc;
   if (!a.rig_json.empty()) desc = readRigDescription(a.rig_json);
@@ -102,6 +143,7 @@ int buildRigCommand(const BuildArgs& a) {
   for (const std::string& n : report.notes) progress.note("note: " + printableText(n));  // notes may quote labels from the clip
   if (!a.quiet) {
     std::printf("%s", describeRig(rig, static_cast<std::int64_t>(bytes.size()), a.list_markers).c_str());
+    std::printf("%s", buildVerdict(rig, a.out, a.markers.empty() ? desc.markers.clip.string() : a.markers).c_str());
   }
   return 0;
 }
@@ -223,19 +265,32 @@ int main(int argc, char** argv) {
 
   BuildArgs build;
   CLI::App* build_cmd = app.add_subcommand("build-rig", "Build a rig file from a mesh, a rig description and a marker clip");
-  build_cmd->add_option("--mesh", build.mesh, "Surface mesh (OBJ, PLY, OFF, STL, glTF, ...) or ready tet mesh (.node/.ele, .mesh)")
-      ->required();
-  build_cmd->add_option("--out", build.out, "Rig file to write (atomically replaced)")->required();
-  build_cmd->add_option("--rig", build.rig_json, "Rig description JSON (handles, regions, rigid groups, stiffness, markers; docs/rig-format.md)");
-  build_cmd->add_option("--markers", build.markers, "C3D clip whose rest frame gives the markers to bind (overrides markers.clip)");
+  const char* kEssentials = "Essentials";
+  build_cmd->add_option("--mesh", build.mesh, "The character: a surface mesh (OBJ, PLY, OFF, STL, glTF, ...) or a ready tet mesh (.node/.ele, .mesh)")
+      ->required()
+      ->group(kEssentials);
+  build_cmd->add_option("--clip,--markers", build.markers,
+                        "The performer: a C3D clip whose markers drive the character (its first frame, or --frame, is matched to the mesh's "
+                        "rest pose; --markers is the old spelling)")
+      ->group(kEssentials);
+  build_cmd->add_option("--out", build.out, "Rig file to write (a file tetrig did not write is kept unless --force)")->required()->group(kEssentials);
+  build_cmd->add_option("--description,--rig", build.rig_json,
+                        "Rig description JSON: anything the automatic rig should do otherwise (handles, regions, stiffness, markers; "
+                        "docs/rig-format.md; --rig is the old spelling)")
+      ->group(kEssentials);
   build_cmd->add_flag("--keep-zero-markers", build.keep_zero_markers,
-                      "C3D samples at x = y = z = 0 with residual 0 are valid points (default: gaps)");
-  build_cmd->add_option("--tet-vertices", build.tet_vertices, "Tet-vertex budget: surface vertices the decimation keeps plus TetGen's interior points (default 2500)")
-      ->check(CLI::Range(4, 10000000));
+                      "C3D samples at x = y = z = 0 with residual 0 are valid points (default: gaps)")
+      ->group("Clip");
+  build_cmd->add_option("--tet-vertices", build.tet_vertices,
+                        "How finely the body's volume is modelled: more follows the markers more closely and costs more per frame "
+                        "(default 2500)")
+      ->check(CLI::Range(4, 10000000))
+      ->group("Accuracy and cost");
   build_cmd->add_option("--coarse-tet-vertices", build.coarse_tet_vertices,
                         "Also build a coarse level with this tet-vertex budget (e.g. 150) into the rig: tetrig run solves it first every "
-                        "frame (docs/fidelity.md, \"Coarse level\")")
-      ->check(CLI::Range(4, 10000000));
+                        "frame: the skin lands nearer its final shape in a frame's few iterations (docs/fidelity.md)")
+      ->check(CLI::Range(4, 10000000))
+      ->group("Accuracy and cost");
   build_cmd->add_option("--frame", build.frame,
                         "Rest frame of the clip, 0-based (default 0: the first), or auto: the frame that best fits the mesh's rest pose")
       ->check([](const std::string& v) -> std::string {
@@ -247,28 +302,39 @@ int main(int argc, char** argv) {
         } catch (const std::exception&) {
         }
         return "expected a frame number in [0, 100000000] or auto";
-      });
+      })
+      ->group("Clip");
   build_cmd->add_option("--max-marker-distance", build.max_marker_distance,
                         "Stop when a marker is further than this from the surface after alignment, rig units "
                         "(default: 6 % of the mesh's bounding-box diagonal)")
-      ->check(CLI::Range(1e-6, 1e6));
+      ->check(CLI::Range(1e-6, 1e6))
+      ->group("Alignment checks");
   build_cmd->add_option("--min-fit-scale", build.min_fit_scale, "Refuse an automatic alignment whose fit scale is below this (default 0.85)")
-      ->check(CLI::Range(1e-6, 1e6));
+      ->check(CLI::Range(1e-6, 1e6))
+      ->group("Alignment checks");
   build_cmd->add_option("--max-fit-scale", build.max_fit_scale, "Refuse an automatic alignment whose fit scale is above this (default 1.18)")
-      ->check(CLI::Range(1e-6, 1e6));
+      ->check(CLI::Range(1e-6, 1e6))
+      ->group("Alignment checks");
   build_cmd->add_flag("--accept-pose-mismatch", build.accept_pose_mismatch,
-                      "Build although the markers do not cover the mesh's extent in its rest pose (a partial marker set)");
+                      "Build although the markers do not cover the mesh's extent in its rest pose (a partial marker set)")
+      ->group("Alignment checks");
   build_cmd->add_flag("--accept-implausible-alignment", build.accept_implausible_alignment,
-                      "Build although the automatic alignment fails the scale or pose checks (docs/rig-builder.md)");
-  build_cmd->add_option("--mesh-unit", build.mesh_unit, "Unit of the mesh: m, cm, mm or auto (default m)");
-  build_cmd->add_option("--mesh-up", build.mesh_up, "Up axis of the mesh: x, y, z, -x, -y, -z (default y)");
-  build_cmd->add_option("--device-up", build.device_up, "Up axis of the marker clip (default z, the C3D convention)");
-  build_cmd->add_option("--alignment", build.alignment, "Marker alignment: auto (similarity ICP), units (axes and unit only), matrix")
-      ->check(CLI::IsMember({"auto", "units", "matrix"}));
-  build_cmd->add_flag("--list-markers", build.list_markers, "List every marker in the summary");
-  build_cmd->add_flag("--simple-progress", build.simple, "Plain progress lines even on a terminal");
-  build_cmd->add_flag("--force", build.force, "Replace an existing --out that is not a tetrig rig (an input is never replaced)");
-  build_cmd->add_flag("-q,--quiet", build.quiet, "No progress and no summary");
+                      "Build although the automatic alignment fails the scale or pose checks (docs/rig-builder.md)")
+      ->group("Alignment checks");
+  build_cmd->add_option("--mesh-unit", build.mesh_unit,
+                        "Unit of the mesh: m, cm, mm, or auto (the unit that makes it as tall as the performer's markers) (default m)")
+      ->group("Units and axes");
+  build_cmd->add_option("--mesh-up", build.mesh_up, "Up axis of the mesh: x, y, z, -x, -y, -z (default y)")->group("Units and axes");
+  build_cmd->add_option("--device-up", build.device_up, "Up axis of the marker clip (default z, the C3D convention)")->group("Units and axes");
+  build_cmd->add_option("--alignment", build.alignment,
+                        "How the markers are placed on the mesh: auto (fitted to the surface), units (axes and unit only), matrix "
+                        "(the description's)")
+      ->check(CLI::IsMember({"auto", "units", "matrix"}))
+      ->group("Units and axes");
+  build_cmd->add_flag("--list-markers", build.list_markers, "List every marker in the summary")->group("Output");
+  build_cmd->add_flag("--simple-progress", build.simple, "Plain progress lines even on a terminal")->group("Output");
+  build_cmd->add_flag("--force", build.force, "Replace an existing --out that is not a tetrig rig (an input is never replaced)")->group("Output");
+  build_cmd->add_flag("-q,--quiet", build.quiet, "No progress and no summary")->group("Output");
 
   std::string inspect_path;
   bool inspect_markers = false;
@@ -281,7 +347,7 @@ int main(int argc, char** argv) {
   demo_cmd->add_option("--frames", demo.frames, "Frames to solve (default: one pass of the default character's performance, 1152 frames; the whole clip with --c3d)")
       ->check(CLI::Range(1, 100000000));
   demo_cmd->add_option("--mesh", demo.mesh, "Real data: a surface mesh (with --c3d); the rig is built once and cached");
-  demo_cmd->add_option("--c3d", demo.c3d, "Real data: the C3D clip that drives the mesh (with --mesh)");
+  demo_cmd->add_option("--clip,--c3d", demo.c3d, "Real data: the C3D clip that drives the mesh (with --mesh; --c3d is the old spelling)");
   demo_cmd->add_option("--max-marker-distance", demo.max_marker_distance,
                        "Real data: stop when a marker is further than this from the surface after alignment, rig units "
                        "(default: 6 % of the mesh's bounding-box diagonal)")
@@ -303,138 +369,186 @@ int main(int argc, char** argv) {
 
   tetrig::tools::RunOptions run;
   CLI::App* run_cmd = app.add_subcommand("run", "Run the live path: a marker source -> the rig, frame after frame -> shared memory");
-  run_cmd->add_option("--rig", run.rig_path, "Rig file (tetrig build-rig)")->required();
-  run_cmd->add_flag("--predict", run.predict,
-                    "Temporal prediction of each frame's start (docs/fidelity.md): nearer the converged pose, larger steps at "
-                    "occlusion edges");
-  run_cmd->add_flag("--keep-volume", run.keep_volume,
-                    "Keep the fine mesh's enclosed volume at its rest value (a Lagrange multiplier; docs/fidelity.md): "
-                    "creases lose no volume; its per-frame linearization runs after each publish");
-  run_cmd->add_option("--after-publish-iterations", run.after_publish_iterations,
-                      "Iterations on each frame's targets after its pose is published, within its budget: the next frame "
-                      "starts nearer the converged pose (docs/fidelity.md)")
-      ->capture_default_str()
-      ->check(CLI::Range(0, 100));
-  run_cmd->add_option("--relax", run.relax,
-                      "Over-relaxation omega of each iteration's rotation update (docs/fidelity.md): 1 plain; 1.9 with --predict "
-                      "and a coarse level lands nearest the converged pose; with --keep-volume too, keep 1.8")
-      ->capture_default_str()
-      ->check(CLI::Range(1.0, 1.999));
-  run_cmd->add_option("--inversion-guard", run.inversion_guard,
-                      "Body tets squashed below half their volume take up to 1 + K times their stiffness (docs/deformation.md): "
-                      "fewer inverted tets where the markers bend the body far; at most 1, or 1000 with --inversion-guard-solves")
-      ->capture_default_str()
-      ->check(CLI::Range(0.0, 1000.0));
-  run_cmd->add_option("--inversion-guard-solves", run.inversion_guard_solves,
-                      "The inversion guard implicit: S conjugate-gradient steps per iteration, one more solve each "
-                      "(docs/deformation.md); with --inversion-guard 2, 1 (or 2, at twice the solves) kept every body tet the right way out on HDM05")
-      ->capture_default_str()
-      ->check(CLI::Range(0, 64));
-  run_cmd->add_option("--inversion-guard-threshold", run.inversion_guard_threshold,
-                      "The volume ratio below which the inversion guard holds a body tet (docs/deformation.md); 0.7 with "
-                      "--keep-volume kept every body tet the right way out on HDM05")
-      ->capture_default_str()
-      ->check(CLI::Range(0.01, 1.0));
-  run_cmd->add_flag("--no-coarse", run.no_coarse, "Do not use the rig's own coarse level (built with --coarse-tet-vertices)");
-  run_cmd->add_option("--coarse-rig", run.coarse_rig_path,
-                      "Coarse level: the same mesh and markers built with fewer --tet-vertices (e.g. 300), solved first every "
-                      "frame; lands nearer the converged pose (docs/fidelity.md)");
-  run_cmd->add_option("--source", run.source,
-                      "Marker source: c3d:PATH, replay:PATH, synthetic[:N], synthetic:character, hid:VID:PID, usb:VID:PID (hex ids), hydra[:SERIAL]")
-      ->required();
-  run_cmd->add_option("--publish", run.publish, "Shared-memory segment name (docs/shm.md)")->capture_default_str();
+  std::string run_clip;
+  run_cmd->add_option("--rig", run.rig_path, "Rig file (tetrig build-rig)")->required()->group(kEssentials);
+  CLI::Option* run_source = run_cmd->add_option("--source", run.source,
+                      "Where the markers come from: c3d:PATH, replay:PATH, synthetic[:N], synthetic:character, hid:VID:PID, "
+                      "usb:VID:PID (hex ids), hydra[:SERIAL]")
+      ->group(kEssentials);
+  run_cmd->add_option("--clip", run_clip, "Play this C3D clip (the same as --source c3d:PATH)")->group(kEssentials);
+  run_cmd->add_option("--publish", run.publish, "Shared-memory segment the engine reads (docs/shm.md)")->capture_default_str()->group(kEssentials);
   run_cmd->add_option("--frames", run.frames, "Stop after this many solved frames (default: until the source ends or Ctrl-C)")
-      ->check(CLI::NonNegativeNumber);
-  run_cmd->add_option("--iterations", run.iterations, "Iterations per frame (also bounded by the budget)")
+      ->check(CLI::NonNegativeNumber)
+      ->group(kEssentials);
+  const char* kAccuracy = "Accuracy (how closely the skin follows the markers)";
+  run_cmd->add_option("--iterations", run.iterations, "Solver iterations per frame: more land nearer the final shape, each costs time")
       ->capture_default_str()
-      ->check(CLI::Range(1, 1000));
+      ->check(CLI::Range(1, 1000))
+      ->group(kAccuracy);
+  run_cmd->add_flag("--predict", run.predict,
+                    "Start each frame where the motion is heading: the skin lands nearer its final shape in the frame's iterations")
+      ->group(kAccuracy);
+  run_cmd->add_flag("--keep-volume", run.keep_volume,
+                    "Keep the body's volume constant: bent joints do not lose volume; about a quarter more work per frame, "
+                    "done after each publish")
+      ->group(kAccuracy);
+  run_cmd->add_option("--after-publish-iterations", run.after_publish_iterations,
+                      "Iterations on each frame after it is published, within its budget: the next frame starts nearer its final shape")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 100))
+      ->group(kAccuracy);
+  run_cmd->add_option("--relax", run.relax,
+                      "How far each iteration steps toward the final shape: 1 cautious; the default 1.8 lands nearest in a few "
+                      "iterations (docs/fidelity.md)")
+      ->capture_default_str()
+      ->check(CLI::Range(1.0, 1.999))
+      ->group(kAccuracy);
+  run_cmd->add_option("--inversion-guard", run.inversion_guard,
+                      "Resist the body turning inside out where the markers bend it far: squashed parts get up to 1 + K times "
+                      "stiffer (0 off; 3 with --inversion-guard-solves 1 is the accurate setup)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1000.0))
+      ->group(kAccuracy);
+  run_cmd->add_option("--inversion-guard-solves", run.inversion_guard_solves,
+                      "A stronger inversion guard: 1 (recommended) or more; each adds one solve per iteration")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 64))
+      ->group(kAccuracy);
+  run_cmd->add_option("--inversion-guard-threshold", run.inversion_guard_threshold,
+                      "How squashed a part of the body must be before the guard acts, as a fraction of its volume (0.7 with "
+                      "--keep-volume)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.01, 1.0))
+      ->group(kAccuracy);
+  run_cmd->add_flag("--no-coarse", run.no_coarse, "Do not use the rig's own coarse level (built with --coarse-tet-vertices)")->group(kAccuracy);
+  run_cmd->add_option("--coarse-rig", run.coarse_rig_path,
+                      "A coarse rig of the same mesh and markers (fewer --tet-vertices, e.g. 300) solved first every frame: "
+                      "lands nearer the final shape")
+      ->group(kAccuracy);
+  run_cmd->add_option("--occlusion-blend-ms", run.occlusion_blend_ms, "How long a marker that drops out or returns takes to blend")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 10000.0))
+      ->group(kAccuracy);
+  const char* kLatency = "Latency";
   run_cmd->add_option("--budget-ms", run.budget_ms, "Receive -> published deadline per frame (default: 0.9 of the source's period)")
-      ->check(CLI::Range(0.01, 60000.0));
-  run_cmd->add_option("--stale-ms", run.stale_ms, "No frame for this long: the segment says the source is stale")
-      ->capture_default_str()
-      ->check(CLI::Range(1.0, 600000.0));
-  run_cmd->add_flag("--as-fast-as-possible", run.as_fast_as_possible, "Playback sources: no pacing (offline runs)");
-  run_cmd->add_option("--speed", run.speed, "Playback speed factor (real-time pacing)")->capture_default_str()->check(CLI::Range(0.01, 100.0));
-  run_cmd->add_flag("--loop", run.loop, "Playback sources: start again at the end");
-  run_cmd->add_flag("--keep-zero-markers", run.keep_zero_markers,
-                    "c3d: samples at x = y = z = 0 with residual 0 are valid points (default: gaps)");
-  run_cmd->add_option("--rate", run.rate_hz, "Frame rate in Hz: asked of a device (SET_RATE), or overriding a clip's or the synthetic rate")
-      ->check(CLI::Range(1, 65535));
-  run_cmd->add_flag("--normals", run.normals, "Also publish per-vertex normals");
-  run_cmd->add_option("--pose-threads", run.pose_threads, "Pose transfer threads: 1 (default), or 2 (the solver and one worker; docs/live.md)")
-      ->check(CLI::Range(1, 2));
+      ->check(CLI::Range(0.01, 60000.0))
+      ->group(kLatency);
+  run_cmd->add_option("--pose-threads", run.pose_threads, "Threads that write the mesh: 1 (default), or 2 on a machine with a spare core")
+      ->check(CLI::Range(1, 2))
+      ->group(kLatency);
+  run_cmd->add_option("--cpu", run.cpu, "Pin the solver thread to this CPU")->check(CLI::Range(0, 4095))->group(kLatency);
+  run_cmd->add_flag("--fifo", run.fifo, "Run the solver thread under SCHED_FIFO (needs the privilege; reported when refused)")->group(kLatency);
+  bool no_mlock = false;
+  run_cmd->add_flag("--no-mlock", no_mlock, "Do not lock the process's memory")->group(kLatency);
   run_cmd->add_flag("--double-pose-transfer", run.double_pose_transfer,
-                    "Stream the rig's double-precision B (12 bytes per entry) instead of its compact copy (float "
-                    "weights, 16-bit columns: 6 bytes); for A/B measurements (docs/live.md)");
-  run_cmd->add_option("--occlusion-blend-ms", run.occlusion_blend_ms, "Blend time when a marker drops out or returns")
+                    "Write the mesh from the rig's full-precision weights (twice the bytes per frame; for A/B measurements)")
+      ->group(kLatency);
+  const char* kSources = "Sources";
+  run_cmd->add_flag("--as-fast-as-possible", run.as_fast_as_possible, "Playback: no pacing (offline runs)")->group(kSources);
+  run_cmd->add_option("--speed", run.speed, "Playback speed factor (the budget follows it)")
       ->capture_default_str()
-      ->check(CLI::Range(0.0, 10000.0));
+      ->check(CLI::Range(0.01, 100.0))
+      ->group(kSources);
+  run_cmd->add_flag("--loop", run.loop, "Playback: start again at the end")->group(kSources);
+  run_cmd->add_flag("--keep-zero-markers", run.keep_zero_markers,
+                    "c3d: samples at x = y = z = 0 with residual 0 are valid points (default: gaps)")
+      ->group(kSources);
+  run_cmd->add_option("--rate", run.rate_hz, "Frame rate in Hz: asked of a device (SET_RATE), or overriding a clip's or the synthetic rate")
+      ->check(CLI::Range(1, 65535))
+      ->group(kSources);
   run_cmd->add_option("--label-timeout-ms", run.label_timeout_ms, "How long to wait for a device to name its markers")
       ->capture_default_str()
-      ->check(CLI::Range(1.0, 600000.0));
-  run_cmd->add_option("--stats-json", run.stats_json, "Write the run's statistics (keys: docs/live.md)");
-  run_cmd->add_option("--cpu", run.cpu, "Pin the solver thread to this CPU")->check(CLI::Range(0, 4095));
-  run_cmd->add_flag("--fifo", run.fifo, "Run the solver thread under SCHED_FIFO (needs the privilege; reported when refused)");
-  bool no_mlock = false;
-  run_cmd->add_flag("--no-mlock", no_mlock, "Do not lock the process's memory");
+      ->check(CLI::Range(1.0, 600000.0))
+      ->group(kSources);
+  run_cmd->add_option("--stale-ms", run.stale_ms, "No frame for this long: the segment says the source is stale")
+      ->capture_default_str()
+      ->check(CLI::Range(1.0, 600000.0))
+      ->group(kSources);
+  const char* kOutput = "Output";
+  run_cmd->add_flag("--normals", run.normals, "Also publish per-vertex normals")->group(kOutput);
+  run_cmd->add_option("--stats-json", run.stats_json, "Write the run's statistics (keys: docs/live.md)")->group(kOutput);
   std::string shm_mode;
-  run_cmd->add_option("--shm-mode", shm_mode, "Segment permissions in octal (default 600: owner only; read bits for group/others, e.g. 640 or 644, but no write bits)");
-  run_cmd->add_flag("-q,--quiet", run.quiet, "Only errors");
+  run_cmd->add_option("--shm-mode", shm_mode, "Segment permissions in octal (default 600: owner only; read bits for group/others, e.g. 640 or 644, but no write bits)")
+      ->group(kOutput);
+  run_cmd->add_flag("-q,--quiet", run.quiet, "Only errors")->group(kOutput);
 
   tetrig::tools::ExportOptions exp;
   CLI::App* export_cmd = app.add_subcommand(
       "export", "Run a clip offline through a rig at full quality and write the fine-mesh animation (PC2 + OBJ, OBJ/PLY sequence, glTF)");
-  export_cmd->add_option("--rig", exp.rig_path, "Rig file (tetrig build-rig)")->required();
-  export_cmd->add_option("--c3d", exp.clip_path, "C3D clip that drives the rig (bound by marker label, as tetrig run binds it)")->required();
+  export_cmd->add_option("--rig", exp.rig_path, "Rig file (tetrig build-rig)")->required()->group(kEssentials);
+  export_cmd->add_option("--clip,--c3d", exp.clip_path,
+                         "C3D clip that drives the rig (bound by marker label, as tetrig run binds it; --c3d is the old spelling)")
+      ->required()
+      ->group(kEssentials);
   export_cmd->add_option("--out", exp.out,
                          "Output, format from the extension: FILE.pc2 (+ FILE.rest.obj, the rest mesh), NAME_####.obj or NAME_####.ply "
                          "(one file per frame; the #s become the clip frame number), FILE.gltf or FILE.glb (docs/export.md)")
-      ->required();
-  export_cmd->add_option("--frames", exp.frames, "Clip frames A:B (0-based, B exclusive; A: or :B), default the whole clip");
-  export_cmd->add_option("--iterations", exp.iterations, "Exactly this many solver iterations per frame (default: iterate to convergence)")
-      ->check(CLI::Range(1, 100000));
+      ->required()
+      ->group(kEssentials);
+  export_cmd->add_option("--range,--frames", exp.frames,
+                         "Clip frames A:B (0-based, B exclusive; A: or :B), default the whole clip (--frames is the old spelling)")
+      ->group(kEssentials);
+  export_cmd->add_option("--report", exp.report,
+                         "Also write a JSON report: how closely the skin followed the markers (tracking_mm, docs/fidelity.md) and counts")
+      ->group(kEssentials);
+  export_cmd->add_option("--iterations", exp.iterations,
+                         "Exactly this many solver iterations per frame, as tetrig run does live (default: iterate to convergence)")
+      ->check(CLI::Range(1, 100000))
+      ->group(kAccuracy);
   export_cmd->add_option("--tolerance", exp.tolerance,
                          "Convergence: stop once no fine vertex moved more than this fraction of the mesh's bounding-box diagonal in 4 iterations")
       ->capture_default_str()
-      ->check(CLI::Range(1e-12, 1.0));
+      ->check(CLI::Range(1e-12, 1.0))
+      ->group(kAccuracy);
   export_cmd->add_option("--max-iterations", exp.max_iterations, "Convergence: at most this many iterations per frame")
       ->capture_default_str()
-      ->check(CLI::Range(1, 100000));
+      ->check(CLI::Range(1, 100000))
+      ->group(kAccuracy);
   export_cmd->add_option("--occlusion-blend-ms", exp.occlusion_blend_ms, "Blend time when a marker drops out or returns (as tetrig run)")
       ->capture_default_str()
-      ->check(CLI::Range(0.0, 10000.0));
-  export_cmd->add_flag("--keep-volume", exp.keep_volume, "Keep the fine mesh's enclosed volume at its rest value (as tetrig run)");
+      ->check(CLI::Range(0.0, 10000.0))
+      ->group(kAccuracy);
+  export_cmd->add_flag("--keep-volume", exp.keep_volume, "Keep the fine mesh's enclosed volume at its rest value (as tetrig run)")
+      ->group(kAccuracy);
   export_cmd->add_option("--after-publish-iterations", exp.after_publish_iterations,
                          "With --iterations N: iterations on each frame's targets after it is written (as tetrig run)")
-      ->check(CLI::Range(0, 100));
-  export_cmd->add_flag("--predict", exp.predict, "With --iterations N: temporal prediction of each frame's start (as tetrig run)");
+      ->check(CLI::Range(0, 100))
+      ->group(kAccuracy);
+  export_cmd->add_flag("--predict", exp.predict, "With --iterations N: temporal prediction of each frame's start (as tetrig run)")
+      ->group(kAccuracy);
   export_cmd->add_option("--relax", exp.relax, "Over-relaxation omega of the rotation update (as tetrig run)")
       ->capture_default_str()
-      ->check(CLI::Range(1.0, 1.999));
+      ->check(CLI::Range(1.0, 1.999))
+      ->group(kAccuracy);
   export_cmd->add_option("--inversion-guard", exp.inversion_guard, "Extra stiffness K of squashed body tets (as tetrig run)")
       ->capture_default_str()
-      ->check(CLI::Range(0.0, 1000.0));
+      ->check(CLI::Range(0.0, 1000.0))
+      ->group(kAccuracy);
   export_cmd->add_option("--inversion-guard-solves", exp.inversion_guard_solves,
                          "The inversion guard implicit, S conjugate-gradient steps per iteration (as tetrig run)")
       ->capture_default_str()
-      ->check(CLI::Range(0, 64));
+      ->check(CLI::Range(0, 64))
+      ->group(kAccuracy);
   export_cmd->add_option("--inversion-guard-threshold", exp.inversion_guard_threshold,
                          "The volume ratio below which the guard holds a body tet (as tetrig run)")
       ->capture_default_str()
-      ->check(CLI::Range(0.01, 1.0));
+      ->check(CLI::Range(0.01, 1.0))
+      ->group(kAccuracy);
   export_cmd->add_flag("--keep-zero-markers", exp.keep_zero_markers,
-                       "Samples at x = y = z = 0 with residual 0 are valid points, not gaps (as tetrig run)");
-  export_cmd->add_option("--rate", exp.rate_hz, "Frame rate in Hz instead of the clip's (glTF sample times)")->check(CLI::Range(0.001, 100000.0));
-  export_cmd->add_flag("--simple-progress", exp.simple_progress, "Plain progress lines even on a terminal");
-  export_cmd->add_option("--report", exp.report,
-                         "Also write a JSON report: how closely the skin followed the markers (tracking_mm, docs/fidelity.md) and counts");
-  export_cmd->add_flag("--force", exp.force, "Replace existing output files that tetrig did not write (an input is never replaced)");
-  export_cmd->add_flag("-q,--quiet", exp.quiet, "No progress and no summary");
+                       "Samples at x = y = z = 0 with residual 0 are valid points, not gaps (as tetrig run)")
+      ->group(kSources);
+  export_cmd->add_option("--rate", exp.rate_hz, "Frame rate in Hz instead of the clip's (glTF sample times)")->check(CLI::Range(0.001, 100000.0))
+      ->group(kSources);
+  export_cmd->add_flag("--simple-progress", exp.simple_progress, "Plain progress lines even on a terminal")->group(kOutput);
+  export_cmd->add_flag("--force", exp.force, "Replace existing output files that tetrig did not write (an input is never replaced)")
+      ->group(kOutput);
+  export_cmd->add_flag("-q,--quiet", exp.quiet, "No progress and no summary")->group(kOutput);
 
   tetrig::tools::ViewOptions view;
   CLI::App* view_cmd = app.add_subcommand(
       "view", "A window showing a shared-memory segment live: shaded mesh, orbit/zoom, frame id, rate, latency (docs/view.md)");
-  view_cmd->add_option("NAME", view.name, "Segment name (the --publish name of tetrig run / tetrig demo)")->required();
+  view_cmd->add_option("NAME", view.name, "Segment name (the --publish name of tetrig run / tetrig demo; default: tetrig run's)")
+      ->capture_default_str();
   view_cmd->add_flag("--markers", view.markers, "Draw the markers as dots coloured by state (measured, blended, predicted) with their counts (M toggles)");
   view_cmd->add_flag("--follow", view.follow, "Keep the camera on the figure as it moves (F toggles it)");
   view_cmd->add_option("--screenshot", view.screenshot, "Write the window's picture to this PNG after --after-frames new frames, then exit 0");
@@ -503,6 +617,11 @@ int main(int argc, char** argv) {
     if (cmd == "export") return tetrig::tools::runExport(exp);
     if (cmd == "run") {
       run.lock_memory = !no_mlock;
+      if (!run_clip.empty() && run_source->count() > 0)
+        throw std::invalid_argument("give --clip PATH or --source SOURCE, not both (--clip PATH is --source c3d:PATH)");
+      if (!run_clip.empty()) run.source = "c3d:" + run_clip;
+      if (run_clip.empty() && run_source->count() == 0)
+        throw std::invalid_argument("no marker source: give --clip CLIP.c3d or --source SOURCE (c3d:PATH, synthetic, hid:VID:PID, ...)");
       if (!shm_mode.empty()) {
         // Octal digits only (std::stoul would take spaces and signs, and throw "stoul" on other text).
         if (shm_mode.size() > 4 || shm_mode.find_first_not_of("01234567") != std::string::npos || std::stoul(shm_mode, nullptr, 8) > 0777) {

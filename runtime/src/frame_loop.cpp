@@ -243,6 +243,7 @@ void FrameLoop::run() noexcept {
     if (stats.flags & kLiveTargetsRejected) rejected_target_frames_.fetch_add(1, std::memory_order_relaxed);
     if (stats.flags & kLivePoseRejected) rejected_poses_.fetch_add(1, std::memory_order_relaxed);
     occluded_marker_frames_.fetch_add(stats.occluded_markers, std::memory_order_relaxed);
+    rejected_marker_samples_.fetch_add(stats.rejected_marker_samples, std::memory_order_relaxed);
     unknown_marker_frames_.fetch_add(stats.unknown_markers, std::memory_order_relaxed);
     iterations_.fetch_add(static_cast<std::uint64_t>(std::max(0, stats.step.iterations)), std::memory_order_relaxed);
     const std::uint64_t done = frames_.fetch_add(1, std::memory_order_relaxed) + 1;
@@ -320,6 +321,7 @@ FrameLoopCounters FrameLoop::counters() const noexcept {
   c.rejected_target_frames = rejected_target_frames_.load(std::memory_order_relaxed);
   c.rejected_poses = rejected_poses_.load(std::memory_order_relaxed);
   c.occluded_marker_frames = occluded_marker_frames_.load(std::memory_order_relaxed);
+  c.rejected_marker_samples = rejected_marker_samples_.load(std::memory_order_relaxed);
   c.unknown_marker_frames = unknown_marker_frames_.load(std::memory_order_relaxed);
   c.stale_periods = stale_periods_.load(std::memory_order_relaxed);
   c.iterations = iterations_.load(std::memory_order_relaxed);

@@ -11,6 +11,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <stdexcept>
 #include <string_view>
 
@@ -125,6 +126,11 @@ LiveRig::LiveRig(const Rig& rig, const LiveRigOptions& options, const Rig* coars
   if (!(options.untimed_frame_period_s >= 0.0) || !std::isfinite(options.untimed_frame_period_s)) {
     throw std::invalid_argument("live rig: untimed_frame_period_s must be finite and >= 0");
   }
+  for (const double v : {options.max_marker_speed_mm_s, options.marker_jump_floor_diagonals, options.marker_prediction_bound_diagonals}) {
+    if (!(v >= 0.0) || !std::isfinite(v)) {
+      throw std::invalid_argument("live rig: max_marker_speed_mm_s and the marker bounds must be finite and >= 0");
+    }
+  }
   blend_ns_ = static_cast<std::int64_t>(std::llround(options.occlusion_blend_s * 1e9));
   untimed_ns_ = static_cast<std::int64_t>(std::llround(options.untimed_frame_period_s * 1e9));
   max_abs_coordinate_ = rig.setup.options.max_abs_coordinate;
@@ -142,6 +148,10 @@ LiveRig::LiveRig(const Rig& rig, const LiveRigOptions& options, const Rig* coars
   measurement_.assign(markers, Eigen::Vector3d::Zero());
   measured_.assign(markers, 0);
   skip_prediction_.assign(markers, 0);
+  accepted_position_.assign(markers, Eigen::Vector3d::Zero());
+  accepted_ns_.assign(markers, 0);
+  has_accepted_.assign(markers, 0);
+  rejected_.assign(markers, 0);
   if (options.compact_pose_transfer && fitsCompactPoseTransfer(rig.pose_transfer.cols))
     blocked_b_ = blockPoseTransfer(rig.pose_transfer, std::span<const double>(rig.fine_vertices.data(),
                                                                               static_cast<std::size_t>(rig.fine_vertices.size())));
@@ -170,7 +180,19 @@ LiveRig::LiveRig(const Rig& rig, const LiveRigOptions& options, const Rig* coars
 
   const auto fine = static_cast<std::size_t>(rig.fine_vertices.rows());
   rest_positions_.resize(fine * 3);
-  pose_bound_ = PoseBound(boundingBoxDiagonal(rig.fine_vertices), max_abs_coordinate_);
+  const double rest_diagonal = boundingBoxDiagonal(rig.fine_vertices);
+  pose_bound_ = PoseBound(rest_diagonal, max_abs_coordinate_,
+                          std::max(markers, setup.vertex_handles.size() + setup.point_handles.size() + setup.region_handles.size()));
+  // Plausible samples, in rig units: the alignment is a similarity (s Q), its scale s = |det|^(1/3)
+  // rig units per device millimetre.
+  const double units_per_mm = std::cbrt(std::abs(rig.alignment.linear.determinant()));
+  max_speed_ = std::isfinite(units_per_mm) ? options.max_marker_speed_mm_s * units_per_mm : 0.0;
+  jump_floor_ = options.marker_jump_floor_diagonals * rest_diagonal;
+  prediction_bound_ = options.marker_prediction_bound_diagonals * rest_diagonal;
+  if (max_speed_ > 0.0) {
+    const double window_s = std::max(0.0, prediction_bound_ - jump_floor_) / max_speed_;
+    own_window_ns_ = static_cast<std::int64_t>(std::min(window_s * 1e9, 1e18));
+  }
   for (std::size_t v = 0; v < fine; ++v)
     for (int c = 0; c < 3; ++c) rest_positions_[v * 3 + static_cast<std::size_t>(c)] = static_cast<float>(rig.fine_vertices(static_cast<Eigen::Index>(v), c));
   last_positions_ = rest_positions_;
@@ -321,11 +343,13 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
     dt_ns = source_ns - last_source_ns_;
   }
   if (source_ns != 0) last_source_ns_ = source_ns;
+  sample_ns_ = dt_ns > std::numeric_limits<std::int64_t>::max() - sample_ns_ ? std::numeric_limits<std::int64_t>::max() : sample_ns_ + dt_ns;
 
-  // 2. Measurements: bound ids, valid, finite, sane after alignment.
+  // 2. Measurements: bound ids, valid, finite, sane after alignment, plausible (plausibleSample).
   std::fill(measured_.begin(), measured_.end(), std::uint8_t{0});
+  std::fill(rejected_.begin(), rejected_.end(), std::uint8_t{0});
   const int count = std::min<int>(frame.marker_count, kMaxMarkers);
-  std::uint32_t unknown = 0;
+  std::uint32_t unknown = 0, rejected = 0;
   std::fill(sensor_sample_.begin(), sensor_sample_.end(), nullptr);
   for (int i = 0; i < count; ++i) {
     const Marker& mk = frame.markers[static_cast<std::size_t>(i)];
@@ -342,14 +366,26 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
     const auto ku = static_cast<std::size_t>(k);
     if (!mk.valid || measured_[ku]) continue;
     const Eigen::Vector3d mm(mk.position_mm[0], mk.position_mm[1], mk.position_mm[2]);
-    if (!mm.allFinite()) continue;
     const Eigen::Vector3d x = rig.alignment.linear * mm + rig.alignment.translation;
-    if (!x.allFinite() || x.cwiseAbs().maxCoeff() > max_abs_coordinate_) continue;
+    if (!mm.allFinite() || !x.allFinite() || x.cwiseAbs().maxCoeff() > max_abs_coordinate_ || !plausibleSample(ku, x)) {
+      rejected_[ku] = 1;
+      ++rejected;
+      continue;
+    }
     measurement_[ku] = x;
     measured_[ku] = 1;
   }
   std::uint32_t measured = 0;
-  for (const std::uint8_t m : measured_) measured += m;
+  for (std::size_t k = 0; k < markers; ++k) {
+    if (!measured_[k]) continue;
+    ++measured;
+    rejected_[k] = 0;  // another sample of it was taken
+    accepted_position_[k] = measurement_[k];
+    accepted_ns_[k] = sample_ns_;
+    has_accepted_[k] = 1;
+  }
+  stats.rejected_marker_samples = static_cast<std::uint16_t>(std::min<std::uint32_t>(rejected, 0xFFFF));
+  if (rejected > 0) stats.flags |= kLiveMarkersRejected;
   // Pose sensors move their regions (clutch or absolute; a sample that is not usable changes
   // nothing). A frame that carries a usable sensor sample steps even with every marker occluded.
   for (std::size_t s = 0; s < sensors_.size(); ++s) {
@@ -487,14 +523,25 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
   const std::int64_t t0 = monotonicNowNs();
   const std::size_t n = rest_positions_.size();
   transferPose(positions);
-  // Never publish a non-finite or implausible value: the pose must lie near this frame's targets.
+  // Never publish a non-finite or implausible value: the pose must lie near where most of this
+  // frame's markers are (without markers: its handles' targets).
   pose_bound_.beginTargets();
-  for (const Eigen::Vector3d& p : vertex_targets_) pose_bound_.addTarget(p);
-  for (const Eigen::Vector3d& p : point_targets_) pose_bound_.addTarget(p);
-  for (std::size_t r = 0; r < region_targets_.size(); ++r)
-    pose_bound_.addTarget(region_targets_[r].rotation * region_centroid_[r] + region_targets_[r].translation);
+  if (markers > 0) {
+    for (const Eigen::Vector3d& p : marker_target_) pose_bound_.addTarget(p);
+  } else {
+    for (const Eigen::Vector3d& p : vertex_targets_) pose_bound_.addTarget(p);
+    for (const Eigen::Vector3d& p : point_targets_) pose_bound_.addTarget(p);
+    for (std::size_t r = 0; r < region_targets_.size(); ++r)
+      pose_bound_.addTarget(region_targets_[r].rotation * region_centroid_[r] + region_targets_[r].translation);
+  }
+  pose_bound_.endTargets();
   if (pose_bound_.accepts(positions, n)) {
     std::memcpy(last_positions_.data(), positions, n * sizeof(float));
+    if (measured > 0) {
+      // Predictions from this pose may judge the samples of returning markers (plausibleSample).
+      body_valid_ = true;
+      body_ns_ = sample_ns_;
+    }
     // The constraint linearized at this pose, then the after-publish iterations: prepareNextFrame().
     next_frame_pending_ = volume_constraint_ != nullptr || options_.after_publish_iterations > 0;
     if (options_.normals) {
@@ -508,6 +555,7 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
     deformer_.reset();
     predictor_.reset();
     if (coarse_) coarse_->reset();
+    body_valid_ = false;  // the predictions start again from rest: they judge no sample until a pose is accepted
   }
   stats.pose_transfer_ns = monotonicNowNs() - t0;
   return stats;
@@ -565,6 +613,24 @@ void LiveRig::transferPose(float* positions) const noexcept {
   } else {
     applyPoseTransferPadded(rig_->pose_transfer.view(), deformer_.paddedPositions().data(), positions);
   }
+}
+
+bool LiveRig::plausibleSample(std::size_t k, const Eigen::Vector3d& x) const noexcept {
+  if (!(max_speed_ > 0.0)) return true;
+  // The marker's own last accepted sample, while it is recent: no marker moves faster than v.
+  if (has_accepted_[k]) {
+    const std::int64_t since_ns = sample_ns_ - accepted_ns_[k];
+    if (since_ns <= own_window_ns_) {
+      const double bound = jump_floor_ + max_speed_ * 1e-9 * static_cast<double>(since_ns);
+      return (x - accepted_position_[k]).squaredNorm() <= bound * bound;
+    }
+  }
+  // Else where the body has it (its prediction from the last pose), when a pose solved from
+  // accepted samples exists: a marker on the body is within the rig's size of it, plus what the
+  // body may have moved since that pose. Before any such pose nothing judges a sample.
+  if (!body_valid_) return true;
+  const double bound = prediction_bound_ + max_speed_ * 1e-9 * static_cast<double>(sample_ns_ - body_ns_);
+  return (x - prediction_[k]).squaredNorm() <= bound * bound;
 }
 
 double LiveRig::dropoutWeight(const Track& track) const noexcept {

@@ -5,31 +5,47 @@
 #include <cmath>
 
 namespace tetrig {
+namespace {
 
-PoseBound::PoseBound(double rest_diagonal, double max_abs_coordinate) noexcept
-    : margin_(kPoseBoundMargin * rest_diagonal), max_abs_(max_abs_coordinate) {}
+// Median of v[0, n) (n > 0), reordering it: the middle value, or the mean of the two middle ones.
+double median(double* v, std::size_t n) noexcept {
+  double* mid = v + n / 2;
+  std::nth_element(v, mid, v + n);
+  if (n % 2 == 1) return *mid;
+  return 0.5 * (*std::max_element(v, mid) + *mid);
+}
 
-void PoseBound::beginTargets() noexcept { any_ = false; }
+}  // namespace
+
+PoseBound::PoseBound(double rest_diagonal, double max_abs_coordinate, std::size_t capacity)
+    : reach_(kPoseBoundReach * rest_diagonal), max_abs_(max_abs_coordinate) {
+  for (std::vector<double>& a : axis_) a.assign(capacity, 0.0);
+  beginTargets();
+}
+
+void PoseBound::beginTargets() noexcept {
+  count_ = 0;
+  centre_.setZero();
+  low_ = Eigen::Vector3d::Constant(-max_abs_);
+  high_ = Eigen::Vector3d::Constant(max_abs_);
+}
 
 void PoseBound::addTarget(const Eigen::Vector3d& p) noexcept {
-  if (!p.allFinite()) return;
-  if (!any_) {
-    lo_ = hi_ = p;
-    any_ = true;
+  if (!p.allFinite() || count_ >= axis_[0].size()) return;
+  for (int c = 0; c < 3; ++c) axis_[c][count_] = p[c];
+  ++count_;
+}
+
+void PoseBound::endTargets() noexcept {
+  if (count_ == 0) {
+    beginTargets();
     return;
   }
-  lo_ = lo_.cwiseMin(p);
-  hi_ = hi_.cwiseMax(p);
-}
-
-Eigen::Vector3d PoseBound::low() const noexcept {
-  const Eigen::Vector3d limit = Eigen::Vector3d::Constant(-max_abs_);
-  return any_ ? Eigen::Vector3d((lo_.array() - margin_).max(limit.array())) : limit;
-}
-
-Eigen::Vector3d PoseBound::high() const noexcept {
-  const Eigen::Vector3d limit = Eigen::Vector3d::Constant(max_abs_);
-  return any_ ? Eigen::Vector3d((hi_.array() + margin_).min(limit.array())) : limit;
+  for (int c = 0; c < 3; ++c) {
+    centre_[c] = median(axis_[c].data(), count_);
+    low_[c] = std::max(centre_[c] - reach_, -max_abs_);
+    high_[c] = std::min(centre_[c] + reach_, max_abs_);
+  }
 }
 
 bool PoseBound::accepts(const float* xyz, std::size_t floats) const noexcept {
@@ -37,11 +53,10 @@ bool PoseBound::accepts(const float* xyz, std::size_t floats) const noexcept {
   // SIMD width, so the test runs over contiguous floats (6890 vertices: about 5 us, where a test
   // per vertex and axis took 30). A NaN fails both comparisons; +-inf lies outside any finite box.
   constexpr std::size_t kBlock = 48;
-  const Eigen::Vector3d low3 = low(), high3 = high();
   float lo[kBlock], hi[kBlock];
   for (std::size_t j = 0; j < kBlock; ++j) {
-    lo[j] = static_cast<float>(low3[static_cast<Eigen::Index>(j % 3)]);
-    hi[j] = static_cast<float>(high3[static_cast<Eigen::Index>(j % 3)]);
+    lo[j] = static_cast<float>(low_[static_cast<Eigen::Index>(j % 3)]);
+    hi[j] = static_cast<float>(high_[static_cast<Eigen::Index>(j % 3)]);
   }
   int inside = floats % 3 == 0 ? 1 : 0;
   std::size_t i = 0;

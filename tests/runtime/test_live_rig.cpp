@@ -15,6 +15,7 @@
 #include <cmath>
 #include <cstring>
 #include <functional>
+#include <limits>
 #include <map>
 #include <string>
 #include <vector>
@@ -648,31 +649,216 @@ TEST(LiveRig, AnImplausiblePoseIsNeverPublished) {
 }
 
 // Poses far from rest that the targets do produce are not mistaken for implausible ones: the whole
-// bar carried 500 units away, turned half round, and stretched to three times its length.
+// bar carried 500 units away, turned half round, and stretched to three times its length (1.4 rest
+// diagonals from the markers' median at the ends). First in 10 frames with the sample test off
+// (its markers move 50 units a frame: the pose bound alone), then at a human pace with it on, the
+// bar starting out there (a first frame has nothing to be judged against).
 TEST(LiveRig, FarStretchedAndTurnedPosesAreNotRejected) {
-  BoundBar bar;
-  const Rig& rig = bar.rig;
-  LiveRig& live = bar.live;
-  const std::size_t n = bar.floats();
-  std::vector<float> x(n);
-  const std::vector<bool> all(kMarkers, true);
-  const Eigen::Vector3d shift(500.0, -300.0, 200.0);
-  std::vector<Eigen::Vector3d> targets;
-  for (int f = 0; f < 30; ++f) {
-    const double u = std::min(1.0, f / 10.0);
-    targets.clear();
-    for (const RigMarker& m : rig.markers) {
-      Eigen::Vector3d p = m.rest_position;
-      p.z() *= 1.0 + 2.0 * u;
-      targets.push_back(Eigen::AngleAxisd(M_PI * u, Eigen::Vector3d::UnitX()) * p + u * shift);
+  for (const bool paced : {false, true}) {
+    LiveRigOptions options;
+    if (!paced) options.max_marker_speed_mm_s = 0.0;
+    BoundBar bar(options);
+    const Rig& rig = bar.rig;
+    LiveRig& live = bar.live;
+    const std::size_t n = bar.floats();
+    std::vector<float> x(n);
+    const std::vector<bool> all(kMarkers, true);
+    const Eigen::Vector3d shift(500.0, -300.0, 200.0);
+    const int ramp = paced ? 600 : 10;  // paced: the far end moves up to 0.12 units (metres here) a frame, 14.5 m/s
+    std::vector<Eigen::Vector3d> targets;
+    for (int f = 0; f < ramp + 20; ++f) {
+      const double u = std::min(1.0, static_cast<double>(f) / ramp);
+      targets.clear();
+      for (const RigMarker& m : rig.markers) {
+        Eigen::Vector3d p = m.rest_position;
+        p.z() *= 1.0 + 2.0 * u;
+        targets.push_back(Eigen::AngleAxisd(M_PI * u, Eigen::Vector3d::UnitX()) * p + (paced ? 1.0 : u) * shift);
+      }
+      const LiveFrameStats s = live.processFrame(makeFrame(rig, targets, all, static_cast<std::uint64_t>(f)), StepBudget{3}, x.data(), nullptr);
+      ASSERT_FALSE(s.flags & kLivePoseRejected) << "frame " << f << (paced ? " (paced)" : "");
+      ASSERT_EQ(s.rejected_marker_samples, 0) << "frame " << f << (paced ? " (paced)" : "");
     }
-    const LiveFrameStats s = live.processFrame(makeFrame(rig, targets, all, static_cast<std::uint64_t>(f)), StepBudget{3}, x.data(), nullptr);
-    ASSERT_FALSE(s.flags & kLivePoseRejected) << "frame " << f;
+    Eigen::Vector3d centroid = Eigen::Vector3d::Zero(), target_centroid = Eigen::Vector3d::Zero();
+    for (std::size_t v = 0; v < n; v += 3) centroid += Eigen::Vector3d(x[v], x[v + 1], x[v + 2]) / static_cast<double>(n / 3);
+    for (const auto& p : targets) target_centroid += p / static_cast<double>(targets.size());
+    EXPECT_LT((centroid - target_centroid).norm(), 1.0) << "the published bar is where its markers are" << (paced ? " (paced)" : "");
   }
-  Eigen::Vector3d centroid = Eigen::Vector3d::Zero(), target_centroid = Eigen::Vector3d::Zero();
-  for (std::size_t v = 0; v < n; v += 3) centroid += Eigen::Vector3d(x[v], x[v + 1], x[v + 2]) / static_cast<double>(n / 3);
-  for (const auto& p : targets) target_centroid += p / static_cast<double>(targets.size());
-  EXPECT_LT((centroid - target_centroid).norm(), 1.0) << "the published bar is where its markers are";
+}
+
+// ---------------------------------------------------------------------------------------------
+// Implausible marker samples (LiveRigOptions::max_marker_speed_mm_s, docs/live.md "Implausible
+// marker samples"). The bar here is a forearm: the same rig with device millimetres mapped 10x
+// larger, so one rig unit is 10 cm and the bar 0.8 m long (rest diagonal 8.49 units = 0.85 m): the
+// jump floor is 0.85 units (8.5 cm), the prediction bound 8.49 units (0.85 m), the speed limit
+// (30 m/s) 300 units a second, 2.5 units a 120 Hz frame.
+
+constexpr double kForearmUnitsPerMetre = 10.0;
+
+Rig makeForearmRig() {
+  Rig rig = makeBarRig();
+  rig.alignment.linear *= 10.0;
+  rig.alignment.rig_units_per_mm = 1e-2;
+  return rig;
+}
+
+// A live rig on a rig, bound, with its own position buffer.
+struct Player {
+  explicit Player(const Rig& r, const LiveRigOptions& options = {}) : rig(r), live(r, options) {
+    live.bindLabels(labelTable());
+    x.resize(static_cast<std::size_t>(live.fineVertexCount()) * 3);
+  }
+  LiveFrameStats play(const std::vector<Eigen::Vector3d>& markers, const std::vector<bool>& valid, int f) {
+    return live.processFrame(makeFrame(rig, markers, valid, static_cast<std::uint64_t>(f)), StepBudget{3}, x.data(), nullptr);
+  }
+  const Rig& rig;
+  LiveRig live;
+  std::vector<float> x;
+};
+
+// One marker thrown 100 m for one frame, then three markers' coordinates garbage for one frame: those
+// samples are rejected and counted, their markers are predicted for that frame, the pose stays
+// within a hair of the clean run's, and the next frame's real samples are taken again.
+TEST(LiveRigPlausibility, AMarkerThrownFarForOneFrameIsRejectedAndCounted) {
+  const Rig rig = makeForearmRig();
+  Player clean(rig), glitched(rig);
+  LiveRigOptions off;
+  off.max_marker_speed_mm_s = 0.0;
+  Player unguarded(rig, off);
+  const std::vector<bool> all(kMarkers, true);
+  constexpr int kThrow = 40, kGarbage = 50;
+  double thrown_difference = 0.0, garbage_difference = 0.0, unguarded_difference = 0.0;
+  for (int f = 0; f < 70; ++f) {
+    // A slow twist and drift (the far end moves about 0.03 units, 3 mm, a frame).
+    const std::vector<Eigen::Vector3d> markers = movedMarkers(rig, 0.004 * f, 0.002 * f, Eigen::Vector3d(0.02 * f, 0.0, 0.0));
+    std::vector<Eigen::Vector3d> bad = markers;
+    if (f == kThrow) bad[5] += Eigen::Vector3d(100.0 * kForearmUnitsPerMetre, 0.0, 0.0);
+    if (f == kGarbage) {
+      bad[1] = Eigen::Vector3d(3.1e4, -2.2e5, 7.0);
+      bad[7] = Eigen::Vector3d(-1234.5, 0.5, 9.0e3);
+      bad[10] = Eigen::Vector3d(17.0, 230.0, -41.0);
+    }
+    const LiveFrameStats c = clean.play(markers, all, f);
+    const LiveFrameStats g = glitched.play(bad, all, f);
+    const LiveFrameStats u = unguarded.play(bad, all, f);
+    if (f == kThrow) {
+      // Without the sample test the throw reaches the solve, and the pose bound (2 rest diagonals
+      // around the markers' median) refuses what it makes of the bar: the last pose is held.
+      EXPECT_EQ(u.rejected_marker_samples, 0);
+      EXPECT_TRUE(u.flags & kLivePoseRejected);
+    }
+    ASSERT_EQ(c.rejected_marker_samples, 0) << "frame " << f;
+    ASSERT_FALSE(g.flags & kLivePoseRejected) << "frame " << f;
+    if (f == kThrow) {
+      EXPECT_EQ(g.rejected_marker_samples, 1);
+      EXPECT_TRUE(g.flags & kLiveMarkersRejected);
+      EXPECT_EQ(g.measured_markers, kMarkers - 1);
+      EXPECT_EQ(g.occluded_markers, 1) << "a rejected sample counts as an occluded marker";
+      EXPECT_TRUE(g.flags & kLiveMarkersPredicted);
+      EXPECT_EQ(glitched.live.markerRejected()[5], 1);
+      EXPECT_EQ(glitched.live.markerMeasured()[5], 0);
+      EXPECT_EQ(glitched.live.markerState(5), MarkerTrackState::kPredicted);
+      EXPECT_LT((glitched.live.markerTargets()[5] - markers[5]).norm(), 0.1) << "driven from the body, not from the throw";
+      thrown_difference = maxDistance(glitched.x, clean.x);
+      unguarded_difference = maxDistance(unguarded.x, clean.x);
+    } else if (f == kThrow + 1) {
+      EXPECT_EQ(g.rejected_marker_samples, 0) << "the next real sample is taken";
+      EXPECT_EQ(glitched.live.markerMeasured()[5], 1);
+      EXPECT_EQ(glitched.live.markerState(5), MarkerTrackState::kReturning) << "blending back from the prediction";
+    } else if (f == kGarbage) {
+      EXPECT_EQ(g.rejected_marker_samples, 3);
+      EXPECT_EQ(g.occluded_markers, 3);
+      for (const int k : {1, 7, 10}) EXPECT_EQ(glitched.live.markerRejected()[static_cast<std::size_t>(k)], 1) << k;
+      garbage_difference = maxDistance(glitched.x, clean.x);
+    } else {
+      EXPECT_EQ(g.rejected_marker_samples, 0) << "frame " << f;
+      EXPECT_FALSE(g.flags & kLiveMarkersRejected) << "frame " << f;
+    }
+  }
+  std::printf("[ measured ] forearm bar: largest vertex difference from the clean run in the thrown frame %.4f units (%.2f mm; "
+              "without the sample test, the pose held: %.2f mm), in the garbage frame %.4f units (%.2f mm)\n",
+              thrown_difference, 100.0 * thrown_difference, 100.0 * unguarded_difference, garbage_difference, 100.0 * garbage_difference);
+  EXPECT_LT(thrown_difference, 0.05);   // 5 mm
+  EXPECT_LT(garbage_difference, 0.05);
+}
+
+// A hand-fast motion (peak 8 m/s, reversing 4 times a second) is never rejected; the same path
+// eight times as fast (64 m/s, beyond any human marker) is.
+TEST(LiveRigPlausibility, FastHumanMotionIsNotRejected) {
+  const Rig rig = makeForearmRig();
+  const std::vector<bool> all(kMarkers, true);
+  for (const double peak_m_s : {8.0, 64.0}) {
+    Player run(rig);
+    const double omega = 2.0 * M_PI * 2.0 * peak_m_s / 8.0;                  // rad/s
+    const double amplitude = peak_m_s * kForearmUnitsPerMetre / omega;        // units: peak speed = amplitude * omega
+    std::uint32_t rejected = 0;
+    double fastest = 0.0;
+    std::vector<Eigen::Vector3d> last;
+    for (int f = 0; f < 240; ++f) {
+      const double t = f * 1e-9 * static_cast<double>(kPeriodNs);
+      const std::vector<Eigen::Vector3d> markers =
+          movedMarkers(rig, 0.3 * std::sin(omega * t), 0.0, Eigen::Vector3d(amplitude * std::sin(omega * t), 0.0, 0.0));
+      rejected += run.play(markers, all, f).rejected_marker_samples;
+      for (std::size_t k = 0; k < last.size(); ++k) fastest = std::max(fastest, (markers[k] - last[k]).norm() / (1e-9 * static_cast<double>(kPeriodNs)));
+      last = markers;
+    }
+    std::printf("[ measured ] forearm bar waved at a peak of %.0f m/s (fastest marker %.1f m/s): %u samples rejected\n", peak_m_s,
+                fastest / kForearmUnitsPerMetre, rejected);
+    if (peak_m_s < 10.0) {
+      EXPECT_GE(fastest / kForearmUnitsPerMetre, 8.0);
+      EXPECT_EQ(rejected, 0u);
+    } else {
+      EXPECT_GT(rejected, 0u) << "beyond the limit: rejected";
+    }
+  }
+}
+
+// A marker back after 1 s of occlusion, 2 m from where it left (the body carried it), lies within
+// the rig's size of its prediction: taken at once. Its last sample is too old to judge it (judged
+// by that, with the time capped, it would be rejected). A returning sample 1.5 rest diagonals from
+// where the body has it is rejected. After a 1 s total loss every marker is taken back at once.
+TEST(LiveRigPlausibility, AMarkerReturningFarFromWhereItLeftIsJudgedByItsPrediction) {
+  const Rig rig = makeForearmRig();
+  const double diagonal = boundingBoxDiagonal(rig.fine_vertices);
+  constexpr int kDrop = 60, kBack = 180, kFrames = 240;
+  for (const bool wrong : {false, true}) {
+    Player run(rig);
+    Eigen::Vector3d left = Eigen::Vector3d::Zero();
+    for (int f = 0; f < kFrames; ++f) {
+      // 2 m/s along x: 0.167 units a frame.
+      std::vector<Eigen::Vector3d> markers = movedMarkers(rig, 0.0, 0.0, Eigen::Vector3d(20.0 * f * 1e-9 * static_cast<double>(kPeriodNs), 0.0, 0.0));
+      std::vector<bool> valid(kMarkers, true);
+      valid[5] = f < kDrop || f >= kBack;
+      if (f == kDrop - 1) left = markers[5];
+      if (wrong && f == kBack) markers[5] += Eigen::Vector3d(0.0, 1.5 * diagonal, 0.0);
+      const LiveFrameStats s = run.play(markers, valid, f);
+      if (f == kBack) {
+        EXPECT_GT((markers[5] - left).norm(), diagonal) << "farther from where it left than the prediction bound";
+        if (!wrong) {
+          EXPECT_EQ(s.rejected_marker_samples, 0);
+          EXPECT_EQ(run.live.markerMeasured()[5], 1);
+          EXPECT_EQ(run.live.markerState(5), MarkerTrackState::kReturning);
+        } else {
+          EXPECT_EQ(s.rejected_marker_samples, 1);
+          EXPECT_EQ(run.live.markerState(5), MarkerTrackState::kPredicted);
+        }
+      } else {
+        EXPECT_EQ(s.rejected_marker_samples, 0) << "frame " << f << (wrong ? " (wrong return)" : "");
+      }
+    }
+  }
+  // Every marker lost for 1 s while the body goes on 2 m: the pose is held, and every marker is
+  // taken back on its return (nothing measured the body meanwhile: a held pose judges generously).
+  Player run(rig);
+  for (int f = 0; f < kFrames; ++f) {
+    const std::vector<Eigen::Vector3d> markers = movedMarkers(rig, 0.0, 0.0, Eigen::Vector3d(20.0 * f * 1e-9 * static_cast<double>(kPeriodNs), 0.0, 0.0));
+    const std::vector<bool> valid(kMarkers, f < kDrop || f >= kBack);
+    const LiveFrameStats s = run.play(markers, valid, f);
+    ASSERT_EQ(s.rejected_marker_samples, 0) << "frame " << f;
+    if (f == kBack) {
+      EXPECT_EQ(s.measured_markers, kMarkers);
+      EXPECT_FALSE(s.flags & kLivePoseHeld);
+    }
+  }
 }
 
 TEST(LiveRig, SameFramesGiveBitIdenticalOutputs) {
@@ -860,13 +1046,15 @@ TEST_P(LiveRigAllocations, NonePerFrameAfterWarmUp) {
   live.bindLabels(labels);
   const std::size_t n = static_cast<std::size_t>(live.fineVertexCount()) * 3;
   std::vector<float> x(n), nrm(n);
-  // Frames made up front: dropouts, returns, a held stretch, unknown ids.
+  // Frames made up front: dropouts, returns, a held stretch, unknown ids, a rejected sample.
   std::vector<MarkerFrame> frames;
   for (int f = 0; f < 120; ++f) {
     std::vector<bool> valid(kMarkers, true);
     valid[2] = f < 20 || f > 50;
     if (f >= 70 && f < 80) valid.assign(kMarkers, false);
-    frames.push_back(makeFrame(rig, movedMarkers(rig, 0.01 * f, 0.005 * f, Eigen::Vector3d::Zero()), valid, static_cast<std::uint64_t>(f)));
+    std::vector<Eigen::Vector3d> markers = movedMarkers(rig, 0.01 * f, 0.005 * f, Eigen::Vector3d::Zero());
+    if (f == 60) markers[4].x() += 100.0;  // an implausible sample (rejected)
+    frames.push_back(makeFrame(rig, markers, valid, static_cast<std::uint64_t>(f)));
     Marker& unknown = frames.back().markers[frames.back().marker_count++];
     unknown.id = 4000;
     unknown.valid = 1;
@@ -888,6 +1076,7 @@ TEST_P(LiveRigAllocations, NonePerFrameAfterWarmUp) {
   EXPECT_TRUE(flags & kLivePoseHeld);
   EXPECT_TRUE(flags & kLiveMarkersPredicted);
   EXPECT_TRUE(flags & kLiveMarkersBlending);
+  EXPECT_TRUE(flags & kLiveMarkersRejected);
 }
 INSTANTIATE_TEST_SUITE_P(CoarseLevel, LiveRigAllocations, ::testing::Bool(),
                          [](const ::testing::TestParamInfo<bool>& i) { return i.param ? "WithCoarseLevel" : "Plain"; });
@@ -1081,6 +1270,17 @@ TEST(LiveRig, RejectsInvalidRigsAndOptions) {
   LiveRigOptions bad;
   bad.occlusion_blend_s = -1.0;
   EXPECT_THROW(LiveRig(rig, bad), std::invalid_argument);
+  for (const double v : {-1.0, std::numeric_limits<double>::infinity(), std::numeric_limits<double>::quiet_NaN()}) {
+    LiveRigOptions speed;
+    speed.max_marker_speed_mm_s = v;
+    EXPECT_THROW(LiveRig(rig, speed), std::invalid_argument);
+    LiveRigOptions floor;
+    floor.marker_jump_floor_diagonals = v;
+    EXPECT_THROW(LiveRig(rig, floor), std::invalid_argument);
+    LiveRigOptions prediction;
+    prediction.marker_prediction_bound_diagonals = v;
+    EXPECT_THROW(LiveRig(rig, prediction), std::invalid_argument);
+  }
   rig.markers[0].vertex_handle = 5;  // not the handle of its vertex
   EXPECT_THROW(LiveRig{rig}, std::invalid_argument);
 }

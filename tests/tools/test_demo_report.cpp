@@ -103,7 +103,7 @@ TEST(DemoReport, AShortDemoWritesTheSummaryTheSheetAndThePlot) {
   // summary.json: the run's --stats-json keys (docs/live.md), values consistent with the run.
   const nlohmann::json s = nlohmann::json::parse(readText(report / "summary.json"));
   for (const char* key : {"frames", "budget_misses", "deadline_hits", "dropped_frames", "occluded_marker_frames", "unknown_marker_frames",
-                          "held_frames", "rejected_target_frames", "rejected_poses", "stale_periods", "frames_before_start", "iterations_per_frame", "seconds", "budget_ms", "end",
+                          "held_frames", "rejected_target_frames", "rejected_poses", "rejected_marker_samples", "stale_periods", "frames_before_start", "iterations_per_frame", "seconds", "budget_ms", "end",
                           "source", "rig", "solver_thread", "latency_us"})
     EXPECT_TRUE(s.contains(key)) << key;
   EXPECT_EQ(s["frames"].get<int>(), 240);

@@ -124,8 +124,14 @@ TEST_P(FrameLoopBitExact, EveryPublishedFrameEqualsAnOfflineRunBitForBit) {
   auto frame = std::make_unique<MarkerFrame>();
   int predicted_frames = 0, held_frames = 0;
   int state_counts[4] = {0, 0, 0, 0};
+  constexpr std::uint64_t kThrow = 100;  // one valid marker thrown 100 m in this frame: rejected and counted
   for (std::uint64_t k = 0; k < 240; ++k) {
     source->fillFrame(k, *frame);
+    if (k == kThrow) {
+      Marker* m = std::find_if(frame->markers.begin(), frame->markers.begin() + frame->marker_count, [](const Marker& x) { return x.valid != 0; });
+      ASSERT_NE(m, frame->markers.begin() + frame->marker_count);
+      m->position_mm[0] += 1e5f;
+    }
     ASSERT_TRUE(h.publishAndWait(*frame)) << "frame " << k << " was not published within 10 s";
     TetrigShmFrameInfo info{};
     ASSERT_EQ(tetrig_shm_read_latest_markers(&h.reader, got.data(), n, got_normals.data(), n, marker_positions.data(),
@@ -141,6 +147,7 @@ TEST_P(FrameLoopBitExact, EveryPublishedFrameEqualsAnOfflineRunBitForBit) {
     if (info.flags & TETRIG_SHM_FRAME_MARKERS_PREDICTED) ++predicted_frames;
     const LiveFrameStats s = offline.processFrame(*frame, StepBudget{info.iterations}, want.data(), want_normals.data());
     EXPECT_EQ(s.occluded_markers, info.occluded_markers);
+    EXPECT_EQ(s.rejected_marker_samples, k == kThrow ? 1 : 0) << "frame " << k;
     if (s.flags & kLivePoseHeld) ++held_frames;
     ASSERT_EQ(std::memcmp(got.data(), want.data(), n * sizeof(float)), 0) << "positions differ at frame " << k;
     ASSERT_EQ(std::memcmp(got_normals.data(), want_normals.data(), n * sizeof(float)), 0) << "normals differ at frame " << k;
@@ -171,6 +178,7 @@ TEST_P(FrameLoopBitExact, EveryPublishedFrameEqualsAnOfflineRunBitForBit) {
   const FrameLoopCounters c = h.loop->counters();
   EXPECT_EQ(c.frames, 240u);
   EXPECT_EQ(c.iterations, 720u);
+  EXPECT_EQ(c.rejected_marker_samples, 1u) << "the thrown sample";
   EXPECT_EQ(c.mailbox_dropped, 0u);
   EXPECT_EQ(c.budget_misses, 0u);
   EXPECT_EQ(h.loop->latency().receive_to_published.count(), 240u);

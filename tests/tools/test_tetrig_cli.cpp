@@ -82,6 +82,39 @@ TEST(TetrigCli, CommandLineMistakesSayWhatToDo) {
   EXPECT_EQ(run("--version", dir).status, 0);
 }
 
+// tetrig run on a clip says where it is: the clip's length, and that it starts with a still pose
+// (a performer standing before the take); --clip is --source c3d:.
+TEST(TetrigCli, RunSaysHowLongTheClipIsAndThatItStartsStill) {
+  const TempDir dir;
+  const std::string rig = dir.writeBytes("small.rig", serializeRig(test::buildSmallRig(dir))).string();
+  test::TestC3DSpec spec;
+  spec.floating = true;
+  spec.scale = 1.0f;
+  spec.rate = 100.0f;
+  spec.frames = 200;
+  spec.labels = {"TOP", "LEFT", "RIGHT", "FRONT", "BACK"};
+  for (std::size_t f = 0; f < spec.frames; ++f) {
+    // Still for 1.2 s (120 frames), then the block moves 1 mm a frame along x.
+    const float dx = f < 120 ? 0.0f : static_cast<float>(f - 119);
+    for (auto p : test::smallMarkerPositionsMm()) {
+      p[0] += dx;
+      spec.xyz.push_back(p);
+      spec.valid.push_back(true);
+    }
+  }
+  const std::string clip = dir.writeBytes("still.c3d", test::writeTestC3D(spec)).string();
+  const std::string name = "tetrig-cli-still-" + std::to_string(getpid());
+  const CliRun r = run("run --rig '" + rig + "' --clip '" + clip + "' --as-fast-as-possible --publish " + name, dir);
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_CONTAINS(r.out, "clip: 200 frames, 2.0 s at 100 Hz; it starts with 1.4 s of a still pose");
+  const CliRun both = run("run --rig '" + rig + "' --clip '" + clip + "' --source synthetic", dir);
+  EXPECT_EQ(both.status, 1);
+  EXPECT_CONTAINS(both.err, "give --clip PATH or --source SOURCE, not both");
+  const CliRun none = run("run --rig '" + rig + "'", dir);
+  EXPECT_EQ(none.status, 1);
+  EXPECT_CONTAINS(none.err, "no marker source: give --clip CLIP.c3d or --source SOURCE");
+}
+
 // A folder where a file belongs is named as such (not std::bad_alloc or a stream error).
 TEST(TetrigCli, AFolderWhereAFileBelongsIsSaidSo) {
   const TempDir dir;
@@ -152,6 +185,22 @@ TEST(TetrigCli, BuildThenInspect) {
   ASSERT_EQ(b.status, 0) << b.err;
   EXPECT_CONTAINS(b.err, "binding markers by invisible tets");  // plain progress lines on stderr
   ASSERT_TRUE(std::filesystem::exists(out));
+  // The verdict a person acts on: ready or not, markers worth a look, the next commands.
+  EXPECT_CONTAINS(b.out, "verdict: the rig is ready: 5 markers, ");
+  EXPECT_CONTAINS(b.out, "next:    tetrig run --rig " + out + " --clip " + clip.string());
+  EXPECT_CONTAINS(b.out, "tetrig export --rig " + out + " --clip " + clip.string() + " --out " + (dir.path() / "small.pc2").string());
+  // Built again onto its own rig: replaced (tetrig wrote it); onto the clip: refused before any work.
+  EXPECT_EQ(run("build-rig --mesh '" + node.string() + "' --description '" + json.string() + "' --clip '" + clip.string() + "' --out '" + out +
+                    "' -q",
+                dir)
+                .status,
+            0);
+  const CliRun onto_clip = run("build-rig --mesh '" + node.string() + "' --rig '" + json.string() + "' --markers '" + clip.string() +
+                                   "' --out '" + clip.string() + "' --force -q",
+                               dir);
+  EXPECT_EQ(onto_clip.status, 1);
+  EXPECT_CONTAINS(onto_clip.err, "is also an input of this command: writing it would lose the input");
+  EXPECT_EQ(onto_clip.err.find("binding markers"), std::string::npos) << "refused before any work";
   const CliRun i = run("inspect '" + out + "' --markers", dir);
   EXPECT_EQ(i.status, 0) << i.err;
   EXPECT_CONTAINS(i.out, "tet mesh:      41 vertices (36 body + 5 marker)");
@@ -191,7 +240,8 @@ TEST(TetrigCli, RunPlaysAClipAndRefusesBadInput) {
   EXPECT_GE(j["frames"].get<int>(), 1);
   EXPECT_LE(j["frames"].get<int>(), 2);
   EXPECT_EQ(j["frames"].get<int>() + j["dropped_frames"].get<int>(), 2) << "the clip has 2 frames";
-  for (const char* key : {"budget_misses", "dropped_frames", "occluded_marker_frames", "unknown_marker_frames"}) EXPECT_TRUE(j.contains(key)) << key;
+  for (const char* key : {"budget_misses", "dropped_frames", "occluded_marker_frames", "unknown_marker_frames",
+                          "rejected_marker_samples"}) EXPECT_TRUE(j.contains(key)) << key;
   for (const char* phase : {"receive_to_taken", "step", "pose_transfer", "receive_to_published", "overhead"}) {
     const auto& p = j["latency_us"][phase];
     EXPECT_LE(p["p50"].get<double>(), p["p99"].get<double>()) << phase;

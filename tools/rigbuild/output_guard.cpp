@@ -56,7 +56,9 @@ bool generatorIsTetrig(std::string_view json) {
 bool sameFile(const std::filesystem::path& a, const std::filesystem::path& b) {
   struct stat sa {}, sb {};
   if (::stat(a.c_str(), &sa) != 0 || ::stat(b.c_str(), &sb) != 0) {
-    return std::filesystem::weakly_canonical(a) == std::filesystem::weakly_canonical(b);
+    std::error_code ea, eb;
+    const auto ca = std::filesystem::weakly_canonical(a, ea), cb = std::filesystem::weakly_canonical(b, eb);
+    return !ea && !eb && ca == cb;
   }
   return sa.st_dev == sb.st_dev && sa.st_ino == sb.st_ino;
 }

@@ -17,7 +17,7 @@
 namespace tetrig::tools {
 
 struct ViewOptions {
-  std::string name;              // segment, e.g. tetrig or /tetrig (the leading '/' is added)
+  std::string name = "tetrig";   // segment, e.g. tetrig or /tetrig (the leading '/' is added); tetrig run's default
   bool markers = false;          // marker dots coloured by state (layout 1.1) and the overlay's markers line
   bool follow = false;           // keep the camera on the newest frame's centre (F toggles it)
   std::string screenshot;        // PNG to write after `after_frames` new frames, then exit; "" = interactive

@@ -109,6 +109,8 @@ struct FrameLoopCounters {
   std::uint64_t rejected_poses = 0;         // frames whose solved pose was non-finite or implausible (last pose
                                             // republished, deformer reset; should never happen)
   std::uint64_t occluded_marker_frames = 0; // sum over frames of the rig markers driven by prediction
+  std::uint64_t rejected_marker_samples = 0; // sum over frames of the marker samples rejected as non-finite, absurd or
+                                             // implausible (LiveFrameStats::rejected_marker_samples; predicted instead)
   std::uint64_t unknown_marker_frames = 0;  // sum over frames of markers whose id the rig does not know
   std::uint64_t stale_periods = 0;          // times the source went stale
   std::uint64_t iterations = 0;             // sum of iterations run
@@ -169,7 +171,8 @@ class FrameLoop {
   std::string hygiene_;  // written by the solver thread before hygiene_ready_
   // Live counters (solver thread writes, others read relaxed).
   std::atomic<std::uint64_t> frames_{0}, budget_misses_{0}, deadline_hits_{0}, held_frames_{0},
-      rejected_target_frames_{0}, rejected_poses_{0}, occluded_marker_frames_{0}, unknown_marker_frames_{0}, stale_periods_{0}, iterations_{0}, frames_before_start_{0};
+      rejected_target_frames_{0}, rejected_poses_{0}, occluded_marker_frames_{0}, rejected_marker_samples_{0}, unknown_marker_frames_{0},
+      stale_periods_{0}, iterations_{0}, frames_before_start_{0};
   std::atomic<std::int64_t> last_latency_ns_{0}, recent_p50_ns_{0}, recent_p99_ns_{0};
   std::uint64_t mailbox_dropped_at_start_ = 0;
   std::int64_t start_ns_ = 0;  // when the solver thread was ready (written before hygiene_ready_)

@@ -5,8 +5,8 @@
 //   std::vector<float> x(live.fineVertexCount() * 3);
 //   LiveFrameStats s = live.processFrame(frame, budget, x.data(), nullptr);   // per frame
 //
-// Per frame: every bound, valid, finite marker (device mm) -> rig units through rig.alignment ->
-// its vertex handle's target; every other rig marker (occluded, invalid, or named by no source)
+// Per frame: every bound, valid, finite, plausible marker (device mm) -> rig units through rig.alignment ->
+// its vertex handle's target; every other rig marker (occluded, invalid, rejected, or named by no source)
 // is driven by its prediction (tetrig/marker_prediction.hpp: its rest offset carried by the
 // current rigid motion of the body it is bound to), blended in and out over
 // LiveRigOptions::occlusion_blend_s so nothing pops (docs/live.md, "Occlusion"); then
@@ -33,6 +33,14 @@
 // Measured markers of the first frame that steps are taken as they are (there is no earlier pose
 // to blend from). A frame with no measured rig marker holds the last pose (no step, kLivePoseHeld),
 // unless the rig has no markers or a region target was set for the frame (setRegionTarget).
+// Plausible samples (docs/live.md, "Implausible marker samples"): a valid sample that is not finite,
+// lies beyond the rig's max_abs_coordinate, or lies farther from its marker's expected position than
+// a human marker can move (LiveRigOptions::max_marker_speed_mm_s: the last accepted sample of that
+// marker while it is recent, else its prediction, with floors from the rig's rest diagonal) is
+// rejected: counted, and the marker is treated as occluded for that frame. Its next plausible sample
+// is taken again (blending back from the prediction).
+// Published poses: outside tetrig/pose_bound.hpp's box (kPoseBoundReach rest diagonals around the
+// per-axis median of the markers' targets) the last pose is written again and flagged.
 // Refresh (refresh_predictions, on by default): when some markers are predicted or blending and
 // some are fully measured, the step runs one iteration, the predictions are recomputed from the
 // pose that iteration gave, and the remaining iterations run with the new targets (predictions
@@ -116,6 +124,17 @@ struct LiveRigOptions {
   int coarse_iterations = 5;   // with a coarse rig: its iterations per frame (CoarseLevelOptions::iterations)
   bool use_coarse_level = true;  // use the rig's own coarse level (Rig::coarse, built with build-rig
                                  // --coarse-tet-vertices) when it has one and no coarse rig is given
+  // Plausible samples only (docs/live.md, "Implausible marker samples"): a measured sample farther
+  // from its marker's expected position than a human marker can move is treated as occluded for that
+  // frame and counted (LiveFrameStats::rejected_marker_samples). D = the fine mesh's rest diagonal,
+  // v = max_marker_speed_mm_s in rig units (through rig.alignment's scale), tau = time on the frames'
+  // own clock, F_jump = marker_jump_floor_diagonals * D, F_pred = marker_prediction_bound_diagonals * D.
+  // Expected position and bound: the marker's last accepted sample, within F_jump + v * tau, while
+  // tau <= (F_pred - F_jump) / v; else, once some pose has been solved from accepted samples, its
+  // prediction, within F_pred + v * (time since that pose); else none (accepted).
+  double max_marker_speed_mm_s = 30000.0;       // 30 m/s (real clips: at most 12.4 m/s); 0: no sample is rejected
+  double marker_jump_floor_diagonals = 0.1;     // slack on a marker's own last sample (SMPL: 0.26 m)
+  double marker_prediction_bound_diagonals = 1.0;  // slack on its prediction (SMPL: 2.6 m)
 };
 
 enum LiveFrameFlags : std::uint32_t {
@@ -127,6 +146,8 @@ enum LiveFrameFlags : std::uint32_t {
   kLivePoseRejected = 1u << 5,      // the step produced a non-finite or implausible pose (outside
                                     // tetrig/pose_bound.hpp's box): the last pose was written and the
                                     // deformer was reset to rest (should never happen)
+  kLiveMarkersRejected = 1u << 6,   // some valid marker samples were rejected (rejected_marker_samples): those
+                                    // markers were driven by their prediction, as occluded ones
 };
 
 struct LiveFrameStats {
@@ -139,6 +160,9 @@ struct LiveFrameStats {
   std::uint16_t occluded_markers = 0;   // rig markers driven by their prediction (unbound ones included)
   std::uint16_t blending_markers = 0;   // rig markers in a dropout fade or a return blend
   std::uint16_t unknown_markers = 0;    // frame markers whose id names no rig marker (ignored)
+  std::uint16_t rejected_marker_samples = 0;  // valid samples of rig markers rejected: non-finite, beyond the rig's
+                                              // max_abs_coordinate, or implausible (max_marker_speed_mm_s); their
+                                              // markers count in occluded_markers (unless another sample was taken)
   std::uint32_t flags = 0;              // LiveFrameFlags
 };
 
@@ -231,6 +255,8 @@ class LiveRig {
   std::span<const Eigen::Vector3d> markerTargets() const noexcept { return marker_target_; }      // the target it was driven with, rig units
   std::span<const Eigen::Vector3d> markerPredictions() const noexcept { return prediction_; }    // its prediction, rig units
   std::span<const std::uint8_t> markerMeasured() const noexcept { return measured_; }            // 1: measured in that frame
+  std::span<const std::uint8_t> markerRejected() const noexcept { return rejected_; }            // 1: its sample was rejected
+                                                                                                  // (so it was predicted)
   std::span<const Eigen::Quaterniond> markerAnchorRotations() const noexcept { return rotation_; }  // R of its prediction
   MarkerTrackState markerState(std::int32_t marker) const noexcept { return tracks_[static_cast<std::size_t>(marker)].state; }
   // The rig marker bound to source id `id`, or -1.
@@ -254,6 +280,7 @@ class LiveRig {
   void linearizeVolumeConstraint(const float* fine) noexcept; // the constraint at the deformer's pose (fine = B x_tet)
   HandleTargets frameTargets() const noexcept;                // the last frame's vertex, region and point targets
   std::uint32_t updateTargets() noexcept;                     // targets from the states; returns the blending count
+  bool plausibleSample(std::size_t marker, const Eigen::Vector3d& x) const noexcept;  // LiveRigOptions::max_marker_speed_mm_s
 
   const Rig* rig_ = nullptr;
   LiveRigOptions options_;
@@ -297,6 +324,17 @@ class LiveRig {
   std::vector<Eigen::Quaterniond> rotation_;  // the anchor rotation R of each prediction
   std::vector<std::uint8_t> measured_;
   std::vector<std::uint8_t> skip_prediction_;  // per marker: measured and settled, no prediction needed
+  // Plausible samples (plausibleSample): each marker's last accepted sample and when (sample clock).
+  std::vector<Eigen::Vector3d> accepted_position_;
+  std::vector<std::int64_t> accepted_ns_;
+  std::vector<std::uint8_t> has_accepted_, rejected_;
+  double max_speed_ = 0.0;          // rig units per second (0: no test)
+  double jump_floor_ = 0.0;         // rig units
+  double prediction_bound_ = 0.0;   // rig units
+  std::int64_t own_window_ns_ = 0;  // a marker's own last sample is its reference while this recent
+  std::int64_t sample_ns_ = 0;      // the frames' own clock, advanced on every frame (held ones too)
+  std::int64_t body_ns_ = 0;        // when the last pose solved from accepted samples was published
+  bool body_valid_ = false;         // such a pose exists since the start or the last reset
 
   // Clock (internal, ns) and whether any frame has stepped yet.
   bool have_time_ = false;
