@@ -305,22 +305,22 @@ FrameRange parseFrameRange(const std::string& text, std::size_t clip_frames) {
   if (text.empty()) return r;
   const std::size_t colon = text.find(':');
   if (colon == std::string::npos || text.find(':', colon + 1) != std::string::npos)
-    throw std::invalid_argument("--frames " + text + ": expected A:B (first frame A, end B exclusive, 0-based; A: or :B allowed)");
+    throw std::invalid_argument("--range " + text + ": expected A:B (first frame A, end B exclusive, 0-based; A: or :B allowed)");
   auto number = [&](const std::string& part, std::size_t fallback) -> std::size_t {
     if (part.empty()) return fallback;
     std::size_t value = 0;
     for (const char c : part) {
       if (c < '0' || c > '9' || value > 1'000'000'000'000ull)
-        throw std::invalid_argument("--frames " + text + ": '" + part + "' is not a frame number (A:B, 0-based)");
+        throw std::invalid_argument("--range " + text + ": '" + part + "' is not a frame number (A:B, 0-based)");
       value = value * 10 + static_cast<std::size_t>(c - '0');
     }
     return value;
   };
   r.first = number(text.substr(0, colon), 0);
   r.end = number(text.substr(colon + 1), clip_frames);
-  if (r.first >= clip_frames) throw std::invalid_argument("--frames " + text + ": first frame " + std::to_string(r.first) + " is past the end; " + clip);
-  if (r.end > clip_frames) throw std::invalid_argument("--frames " + text + ": end " + std::to_string(r.end) + " is past the end; " + clip);
-  if (r.end <= r.first) throw std::invalid_argument("--frames " + text + ": the range is empty (B is exclusive: A:B needs B > A)");
+  if (r.first >= clip_frames) throw std::invalid_argument("--range " + text + ": first frame " + std::to_string(r.first) + " is past the end; " + clip);
+  if (r.end > clip_frames) throw std::invalid_argument("--range " + text + ": end " + std::to_string(r.end) + " is past the end; " + clip);
+  if (r.end <= r.first) throw std::invalid_argument("--range " + text + ": the range is empty (B is exclusive: A:B needs B > A)");
   return r;
 }
 

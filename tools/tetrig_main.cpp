@@ -378,7 +378,10 @@ int main(int argc, char** argv) {
   run_cmd->add_option("--clip", run_clip, "Play this C3D clip (the same as --source c3d:PATH)")->group(kEssentials);
   run_cmd->add_option("--publish", run.publish, "Shared-memory segment the engine reads (docs/shm.md)")->capture_default_str()->group(kEssentials);
   run_cmd->add_option("--frames", run.frames, "Stop after this many solved frames (default: until the source ends or Ctrl-C)")
-      ->check(CLI::NonNegativeNumber)
+      ->check([](const std::string& v) -> std::string {
+        if (!v.empty() && v.size() <= 19 && v.find_first_not_of("0123456789") == std::string::npos) return {};
+        return "'" + v + "' is not a number of frames (a whole number, 0 = until the source ends; a range A:B is tetrig export's --range)";
+      })
       ->group(kEssentials);
   const char* kAccuracy = "Accuracy (how closely the skin follows the markers)";
   run_cmd->add_option("--iterations", run.iterations, "Solver iterations per frame: more land nearer the final shape, each costs time")

@@ -307,6 +307,36 @@ TEST(ImportSurface, KeepsTheFileVertexOrder) {
   EXPECT_FALSE(readFileVertexList(dir.write("mesh.stl", "solid x\nendsolid x\n")).has_value());  // no shared list
 }
 
+// Issue 37: an ascii list length is read as a number, and "nan" passed the old range test (NaN
+// fails both n < 0 and n > 1e6); converting it to an integer is undefined (UBSan aborts; x86
+// gives INT64_MIN, so the face's data was skipped and the next lines read as vertices). A list
+// length that is not a whole number in [0, 1e6] makes the list unreadable, before or in the
+// vertex element.
+TEST(ImportSurface, VertexListRefusesListLengthsThatAreNotWholeNumbers) {
+  const std::string vertices = "element vertex 3\nproperty float x\nproperty float y\nproperty float z\n";
+  const std::string faces = "element face 1\nproperty list uchar int vertex_indices\n";
+  for (const char* length : {"nan", "-nan", "inf", "2.5", "1e300"}) {
+    SCOPED_TRACE(length);
+    // Faces before the vertices: the face's list is skipped, then the vertices are read.
+    EXPECT_FALSE(readFileVertexList("ply\nformat ascii 1.0\n" + faces + vertices + "end_header\n" + length +
+                                        "\n0 0 0\n1 0 0\n0 1 0\n",
+                                    ".ply")
+                     .has_value());
+    // A list property inside the vertex element.
+    EXPECT_FALSE(readFileVertexList("ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n"
+                                    "property float z\nproperty list uchar float extra\nend_header\n1 2 3 " +
+                                        std::string(length) + "\n",
+                                    ".ply")
+                     .has_value());
+  }
+  // The same files with a whole length read as before.
+  const std::optional<Vertices> good = readFileVertexList(
+      "ply\nformat ascii 1.0\n" + faces + vertices + "end_header\n3 0 1 2\n0 0 0\n1 0 0\n0 1 0\n", ".ply");
+  ASSERT_TRUE(good.has_value());
+  EXPECT_EQ(good->rows(), 3);
+  EXPECT_EQ((*good)(1, 0), 1.0);
+}
+
 TEST(ImportSurface, DuplicateAndUnusedFileVertices) {
   // File vertices: 0..1 = cube corners kPerm[0..1], 2 = an unused point, 3..8 = corners kPerm[2..7],
   // 9 = an exact copy of vertex 0 that half of the faces use instead of vertex 0.

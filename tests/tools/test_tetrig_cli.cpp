@@ -142,6 +142,18 @@ TEST(TetrigCli, AFolderWhereAFileBelongsIsSaidSo) {
     EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
   }
   EXPECT_FALSE(std::filesystem::exists(out));
+  // Surface files the importer cannot use: our own line, not assimp's text.
+  const std::string empty = dir.write("empty.obj", "").string();
+  const std::string points = dir.write("points.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n").string();
+  const CliRun e = run("build-rig --mesh '" + empty + "' --clip '" + clip + "' --out '" + out + "' -q", dir);
+  EXPECT_EQ(e.err, "tetrig build-rig: error: " + empty + ": the file is empty (0 bytes): give the character's surface mesh (OBJ, PLY, OFF, STL, glTF/GLB, FBX)\n");
+  const CliRun p = run("build-rig --mesh '" + points + "' --clip '" + clip + "' --out '" + out + "' -q", dir);
+  EXPECT_EQ(p.err, "tetrig build-rig: error: " + points + ": the OBJ has no faces (no 'f' lines): it is a point cloud or a curve; give a surface mesh\n");
+  // run's --frames is a count; a range is export's --range.
+  const CliRun range = run("run --rig '" + rig + "' --clip '" + clip + "' --frames 500:100", dir);
+  EXPECT_EQ(range.status, 2);
+  EXPECT_CONTAINS(range.err, "'500:100' is not a number of frames");
+  EXPECT_CONTAINS(range.err, "a range A:B is tetrig export's --range");
 }
 
 TEST(TetrigCli, BadInputIsOneLineNonZeroAndNoFile) {

@@ -10,6 +10,7 @@
 #include <array>
 #include <bit>
 #include <charconv>
+#include <cmath>
 #include <cstdint>
 #include <fstream>
 #include <sstream>
@@ -130,6 +131,10 @@ struct PlyElement {
   std::vector<PlyProperty> properties;
 };
 
+// A list length read as a double (an ascii token may say "nan", "inf" or "2.5"): a whole number
+// in [0, 1e6], so that it converts to an integer (converting NaN is undefined behaviour).
+bool isListLength(double n) { return n >= 0.0 && n <= 1e6 && n == std::floor(n); }
+
 // One binary scalar as a double; false at the end of the file.
 bool readBinary(std::istream& in, int size, bool is_float, bool is_signed, bool big, double& out) {
   std::array<unsigned char, 8> b{};
@@ -209,7 +214,7 @@ std::optional<Vertices> readPly(std::istream& in, std::uintmax_t file_bytes) {
       for (long long i = 0; i < e.count; ++i) {
         for (const PlyProperty& p : e.properties) {
           double n = 1;
-          if (p.list && (!nextValue(p, true, n) || n < 0 || n > 1e6)) return std::nullopt;
+          if (p.list && (!nextValue(p, true, n) || !isListLength(n))) return std::nullopt;
           for (long long k = 0; k < static_cast<long long>(n); ++k) {
             double ignored = 0;
             if (!nextValue(p, false, ignored)) return std::nullopt;
@@ -239,7 +244,7 @@ std::optional<Vertices> readPly(std::istream& in, std::uintmax_t file_bytes) {
       for (std::size_t k = 0; k < e.properties.size(); ++k) {
         const PlyProperty& p = e.properties[k];
         double n = 1;
-        if (p.list && (!nextValue(p, true, n) || n < 0 || n > 1e6)) return std::nullopt;
+        if (p.list && (!nextValue(p, true, n) || !isListLength(n))) return std::nullopt;
         for (long long j = 0; j < static_cast<long long>(n); ++j) {
           double value = 0;
           if (!nextValue(p, false, value)) return std::nullopt;

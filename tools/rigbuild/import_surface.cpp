@@ -207,6 +207,19 @@ std::string readWholeFile(const std::filesystem::path& path) {
 
 }  // namespace
 
+// Whether an OBJ's text has a face line ("f" followed by a blank, at the start of a line).
+static bool objHasFaces(const std::string& text) {
+  for (std::size_t at = 0; at < text.size();) {
+    std::size_t i = at;
+    while (i < text.size() && (text[i] == ' ' || text[i] == '\t')) ++i;
+    if (i + 1 < text.size() && text[i] == 'f' && (text[i + 1] == ' ' || text[i + 1] == '\t')) return true;
+    const std::size_t nl = text.find('\n', at);
+    if (nl == std::string::npos) break;
+    at = nl + 1;
+  }
+  return false;
+}
+
 SurfaceMesh importSurface(const std::filesystem::path& path, const ImportOptions& options, ImportStats* stats) {
   std::error_code ec;
   if (std::filesystem::is_directory(path, ec)) {
@@ -224,9 +237,15 @@ SurfaceMesh importSurface(const std::filesystem::path& path, const ImportOptions
                         ": give the file the extension of its format (OBJ, PLY, OFF, STL, glTF/GLB, FBX or another that assimp reads)");
   }
   std::optional<std::string> bytes;
+  if (std::filesystem::file_size(path, ec) == 0 && !ec) {
+    throw RigBuildError(path.string() + ": the file is empty (0 bytes): give the character's surface mesh (OBJ, PLY, OFF, STL, glTF/GLB, FBX)");
+  }
   if (checked) {
     bytes = readWholeFile(path);
     (void)checkSurfaceBytes(*bytes, ext, path.string(), options.file_limits);
+    if (ext == ".obj" && !objHasFaces(*bytes)) {
+      throw RigBuildError(path.string() + ": the OBJ has no faces (no 'f' lines): it is a point cloud or a curve; give a surface mesh");
+    }
   }
   const std::string hint = ext.substr(1);
   AssimpMesh raw;
