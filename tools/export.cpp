@@ -27,6 +27,7 @@
 #include "tetrig/drivers/c3d_reader.hpp"
 #include "tetrig/drivers/playback_sources.hpp"
 #include "tetrig/live_rig.hpp"
+#include "tetrig/printable_text.hpp"
 #include "tetrig/rig_file.hpp"
 #include "tetrig/rigbuild/progress.hpp"
 #include "tetrig/rigbuild/output_guard.hpp"
@@ -239,6 +240,40 @@ nlohmann::json reportJson(const ExportReport& r, const ExportOptions& o, const R
           {"tracking_mm", std::move(tracking)}};
 }
 
+// A file of the rig's asset (relative to the asset's folder at build time, or absolute) as seen
+// from `out_dir`: a relative path when the file is there now, else as the asset named it (and
+// listed in `missing`).
+std::string assetReference(const RigSurfaceAttributes& s, const std::string& file, const std::filesystem::path& out_dir,
+                           std::vector<std::string>& missing) {
+  if (file.empty()) return {};
+  std::filesystem::path p(file);
+  if (p.is_relative() && !s.asset.empty()) p = std::filesystem::path(s.asset).parent_path() / p;
+  std::error_code ec;
+  if (p.is_absolute() && std::filesystem::is_regular_file(p, ec)) {
+    const std::filesystem::path base = std::filesystem::absolute(out_dir, ec);
+    const std::filesystem::path relative = ec ? std::filesystem::path() : std::filesystem::relative(p, base, ec);
+    return !ec && !relative.empty() ? relative.generic_string() : p.lexically_normal().generic_string();
+  }
+  missing.push_back(file);
+  return file;
+}
+
+// The rig's texture coordinates and materials for files written into `out_dir` (the arrays are the rig's).
+SurfaceLayout surfaceLayout(const Rig& rig, const std::filesystem::path& out_dir, std::vector<std::string>& missing) {
+  const RigSurfaceAttributes& s = rig.surface;
+  SurfaceLayout layout;
+  if (s.empty()) return layout;
+  for (const std::string& library : s.material_libraries) layout.material_libraries.push_back(assetReference(s, library, out_dir, missing));
+  for (const RigMaterial& m : s.materials) {
+    layout.materials.push_back(
+        {m.name, assetReference(s, m.diffuse_texture, out_dir, missing), {m.diffuse_color.x(), m.diffuse_color.y(), m.diffuse_color.z()}});
+  }
+  layout.uvs = std::span<const double>(s.uvs.data(), static_cast<std::size_t>(s.uvs.size()));
+  if (s.uvs.rows() > 0) layout.corner_uvs = std::span<const std::int32_t>(s.corner_uvs.data(), static_cast<std::size_t>(s.corner_uvs.size()));
+  if (!s.materials.empty()) layout.triangle_materials = s.triangle_materials;
+  return layout;
+}
+
 }  // namespace
 
 ExportTarget parseExportTarget(const std::filesystem::path& out) {
@@ -359,7 +394,7 @@ ExportReport exportClip(const ExportOptions& o) {
   if (gltf && report.frame_count > kMaxGltfFrames)
     throw std::invalid_argument("glTF holds one morph target per frame and frames x frames animated weights: " +
                                 std::to_string(report.frame_count) + " frames is more than " + std::to_string(kMaxGltfFrames) +
-                                "; export a range with --frames A:B, or use FILE.pc2 or an OBJ/PLY sequence");
+                                "; export a range with --range A:B, or use FILE.pc2 or an OBJ/PLY sequence");
   {
     // Every file this export would write, checked before any work: no input and no file tetrig
     // did not write is replaced (without --force).
@@ -403,6 +438,7 @@ ExportReport exportClip(const ExportOptions& o) {
   live_options.volume_constraint = o.keep_volume;
   live_options.after_publish_iterations = o.after_publish_iterations;
   if (o.predict) live_options.rotation_extrapolation = 1.0;
+  live_options.normals = gltf;  // glTF carries the live rig's vertex normals (base NORMAL and morph-target deltas)
   LiveRig live(rig, live_options);
   std::vector<std::string> labels;
   {
@@ -442,11 +478,26 @@ ExportReport exportClip(const ExportOptions& o) {
           " rate_hz=" + rateText(report.rate_hz) + " unit=" + commentText(rig.unit) + " up=" + commentText(rig.alignment.rig_up) +
           " vertices=" + std::to_string(report.vertices)};
 
+  // The asset's texture coordinates and materials (Rig::surface), files referenced from the output's folder.
+  std::vector<std::string> missing_files;
+  const SurfaceLayout surface = surfaceLayout(rig, directoryOf(target.path), missing_files);
+  const SurfaceLayout* surface_ptr = rig.surface.empty() ? nullptr : &surface;
+  for (const std::string& m : missing_files)
+    progress.note("note: the asset's file " + printableText(m, 200) + " is not beside the asset the rig was built from (" +
+                  printableText(rig.surface.asset, 200) + "): referenced as the asset names it");
+  std::optional<std::vector<float>> ply_uvs;
+  if (target.format == ExportFormat::kPlySequence && !surface.corner_uvs.empty()) {
+    ply_uvs = perVertexUvs(static_cast<std::size_t>(live.fineVertexCount()), triangles, surface);
+    if (!ply_uvs)
+      progress.note("note: the asset's texture coordinates have seams (vertices with several uvs), which a PLY vertex cannot hold: "
+                    "the PLY frames carry none (OBJ and glTF do)");
+  }
+
   // 3. Outputs staged before solving (a directory that refuses files fails now, not after minutes).
   std::optional<AtomicFile> pc2, rest_obj;
   std::uint64_t pc2_bytes = 0, rest_obj_bytes = 0;
   std::optional<StagedDirectory> sequence;
-  std::vector<float> gltf_frames;
+  std::vector<float> gltf_frames, gltf_normals;
   if (target.format == ExportFormat::kPc2) {
     pc2.emplace(target.path);
     rest_obj.emplace(target.rest_obj);
@@ -455,13 +506,14 @@ ExportReport exportClip(const ExportOptions& o) {
     pc2_bytes += header.size();
     std::vector<std::string> obj_comment = comment;
     obj_comment.insert(obj_comment.begin() + 1, "rest fine mesh; the animation is the point cache " + target.path.filename().string());
-    const std::string text = objText(rest, triangles, obj_comment);
+    const std::string text = objText(rest, triangles, obj_comment, surface_ptr);
     rest_obj->write(text.data(), text.size());
     rest_obj_bytes = text.size();
   } else if (!gltf) {
     sequence.emplace(target);
   } else {
     gltf_frames.reserve(report.frame_count * values);
+    gltf_normals.reserve(report.frame_count * values);
   }
 
   // 4. Solve frame by frame, write as we go.
@@ -470,7 +522,8 @@ ExportReport exportClip(const ExportOptions& o) {
   const auto solve_start = std::chrono::steady_clock::now();
   double write_seconds = 0;
   const double tolerance = o.tolerance * restDiagonal(rest);
-  std::vector<float> x(rest.begin(), rest.end()), previous(values);
+  std::vector<float> x(rest.begin(), rest.end()), previous(values), normals(gltf ? values : 0);
+  float* const normals_out = gltf ? normals.data() : nullptr;
   std::vector<std::uint8_t> sample;
   MarkerFrame frame{};
   std::size_t measured_frames = 0;
@@ -479,7 +532,7 @@ ExportReport exportClip(const ExportOptions& o) {
     playback.fillFrame(f, f, frame);
     std::int32_t frame_iterations = 0;
     const int first_budget = o.iterations > 0 ? o.iterations : std::min(kConvergeChunkIterations, o.max_iterations);
-    LiveFrameStats s = live.processFrame(frame, StepBudget{first_budget}, x.data(), nullptr);
+    LiveFrameStats s = live.processFrame(frame, StepBudget{first_budget}, x.data(), normals_out);
     frame_iterations += s.step.iterations;
     if (s.flags & kLivePoseHeld) ++report.held_frames;
     else ++measured_frames;
@@ -489,7 +542,7 @@ ExportReport exportClip(const ExportOptions& o) {
       while (frame_iterations < o.max_iterations) {
         previous.swap(x);
         const LiveFrameStats more =
-            live.processFrame(frame, StepBudget{std::min(kConvergeChunkIterations, o.max_iterations - frame_iterations)}, x.data(), nullptr);
+            live.processFrame(frame, StepBudget{std::min(kConvergeChunkIterations, o.max_iterations - frame_iterations)}, x.data(), normals_out);
         s.flags |= more.flags;
         frame_iterations += more.step.iterations;
         change = maxChange(x, previous);
@@ -517,16 +570,18 @@ ExportReport exportClip(const ExportOptions& o) {
         pc2_bytes += sample.size();
         break;
       case ExportFormat::kObjSequence: {
-        const std::string text = objText(x, triangles, comment);
+        const std::string text = objText(x, triangles, comment, surface_ptr);
         sequence->write(sequenceFramePath(target, f), std::span<const std::uint8_t>(reinterpret_cast<const std::uint8_t*>(text.data()), text.size()));
         break;
       }
       case ExportFormat::kPlySequence:
-        sequence->write(sequenceFramePath(target, f), plyBytes(x, triangles, comment));
+        sequence->write(sequenceFramePath(target, f),
+                        plyBytes(x, triangles, comment, ply_uvs ? std::span<const float>(*ply_uvs) : std::span<const float>()));
         break;
       case ExportFormat::kGltf:
       case ExportFormat::kGlb:
         gltf_frames.insert(gltf_frames.end(), x.begin(), x.end());
+        gltf_normals.insert(gltf_normals.end(), normals.begin(), normals.end());
         break;
     }
     write_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - write_start).count();
@@ -562,14 +617,19 @@ ExportReport exportClip(const ExportOptions& o) {
     case ExportFormat::kGltf:
     case ExportFormat::kGlb: {
       // glTF is +Y up: a rig with another up axis is turned (positions exact: axis permutations).
-      std::vector<float> rest_y(rest.begin(), rest.end());
+      std::vector<float> rest_y(rest.begin(), rest.end()), rest_normals_y(live.restNormals().begin(), live.restNormals().end());
       rotateUpToY(rig.alignment.rig_up, rest_y);
       rotateUpToY(rig.alignment.rig_up, gltf_frames);
+      rotateUpToY(rig.alignment.rig_up, rest_normals_y);
+      rotateUpToY(rig.alignment.rig_up, gltf_normals);
       GltfAnimation anim;
       anim.name = rig.name;
       anim.rest = rest_y;
       anim.triangles = triangles;
       anim.frames = gltf_frames;
+      anim.rest_normals = rest_normals_y;
+      anim.frame_normals = gltf_normals;
+      anim.surface = surface_ptr;
       anim.frame_count = report.frame_count;
       anim.rate_hz = report.rate_hz;
       anim.first_frame = static_cast<std::int64_t>(range.first);

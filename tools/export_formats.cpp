@@ -11,7 +11,9 @@
 
 #include <algorithm>
 #include <bit>
+#include <cctype>
 #include <charconv>
+#include <map>
 #include <cstring>
 #include <limits>
 #include <sstream>
@@ -47,6 +49,13 @@ void appendFloats(std::vector<std::uint8_t>& out, std::span<const float> values)
 // Shortest decimal that reads back to the same float (std::to_chars).
 void appendFloatText(std::string& out, float value) {
   char buf[32];
+  const auto r = std::to_chars(buf, buf + sizeof buf, value);
+  out.append(buf, r.ptr);
+}
+
+// Shortest decimal that reads back to the same double.
+void appendDoubleText(std::string& out, double value) {
+  char buf[40];
   const auto r = std::to_chars(buf, buf + sizeof buf, value);
   out.append(buf, r.ptr);
 }
@@ -97,7 +106,115 @@ int addVec3(tinygltf::Model& model, std::span<const float> xyz) {
   return addAccessor(model, view, TINYGLTF_COMPONENT_TYPE_FLOAT, xyz.size() / 3, TINYGLTF_TYPE_VEC3, std::move(lo), std::move(hi));
 }
 
+void checkSurface(const SurfaceLayout& s, std::size_t triangle_values) {
+  if (s.uvs.size() % 2 != 0) throw std::invalid_argument("export: uvs are not a multiple of 2 values");
+  if (!s.corner_uvs.empty() && s.corner_uvs.size() != triangle_values)
+    throw std::invalid_argument("export: corner uvs do not match the triangles");
+  if (!s.triangle_materials.empty() && s.triangle_materials.size() * 3 != triangle_values)
+    throw std::invalid_argument("export: triangle materials do not match the triangles");
+  const auto uvs = static_cast<std::int64_t>(s.uvs.size() / 2), materials = static_cast<std::int64_t>(s.materials.size());
+  for (const std::int32_t u : s.corner_uvs)
+    if (u < -1 || u >= uvs) throw std::invalid_argument("export: corner uv " + std::to_string(u) + " out of range");
+  for (const std::int32_t m : s.triangle_materials)
+    if (m < -1 || m >= materials) throw std::invalid_argument("export: material " + std::to_string(m) + " out of range");
+}
+
+// A relative file reference as a URI reference (RFC 3986): bytes outside the unreserved and
+// path characters percent-encoded.
+std::string uriReference(const std::string& path) {
+  static const char* kHex = "0123456789ABCDEF";
+  std::string out;
+  for (const char ch : path) {
+    const auto c = static_cast<unsigned char>(ch);
+    if (std::isalnum(c) || std::strchr("-._~/!$&'()*+,;=:@", c) != nullptr) {
+      out += ch;
+    } else {
+      out += '%';
+      out += kHex[c >> 4];
+      out += kHex[c & 15];
+    }
+  }
+  return out;
+}
+
+// A name on one OBJ line: a control character (a line break would end the line) becomes '?'.
+std::string oneLine(const std::string& text) {
+  std::string out = text;
+  for (char& c : out) {
+    if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f) c = '?';
+  }
+  return out;
+}
+
+// tinygltf writes images itself unless its writer says it did not: keep the URI as given.
+bool keepImageUri(const std::string*, const std::string*, const tinygltf::Image*, bool, std::string*, void*) { return false; }
+
 }  // namespace
+
+std::optional<std::vector<float>> perVertexUvs(std::size_t vertex_count, std::span<const std::int32_t> triangles,
+                                               const SurfaceLayout& surface) {
+  checkSurface(surface, triangles.size());
+  if (surface.corner_uvs.empty()) return std::nullopt;
+  std::vector<std::int32_t> first(vertex_count, -1);
+  std::vector<float> out(vertex_count * 2, 0.0f);
+  for (std::size_t c = 0; c < triangles.size(); ++c) {
+    const std::int32_t u = surface.corner_uvs[c];
+    if (u < 0) return std::nullopt;
+    const auto v = static_cast<std::size_t>(triangles[c]);
+    if (v >= vertex_count) throw std::invalid_argument("export: triangle index out of range");
+    if (first[v] < 0) {
+      first[v] = u;
+    } else if (first[v] != u && (surface.uvs[2 * static_cast<std::size_t>(u)] != surface.uvs[2 * static_cast<std::size_t>(first[v])] ||
+                                 surface.uvs[2 * static_cast<std::size_t>(u) + 1] != surface.uvs[2 * static_cast<std::size_t>(first[v]) + 1])) {
+      return std::nullopt;
+    }
+  }
+  for (std::size_t v = 0; v < vertex_count; ++v) {
+    if (first[v] < 0) continue;  // no triangle uses it: (0, 0)
+    out[2 * v] = static_cast<float>(surface.uvs[2 * static_cast<std::size_t>(first[v])]);
+    out[2 * v + 1] = static_cast<float>(surface.uvs[2 * static_cast<std::size_t>(first[v]) + 1]);
+  }
+  return out;
+}
+
+SeamSplit splitAtSeams(std::size_t vertex_count, std::span<const std::int32_t> triangles, const SurfaceLayout& surface) {
+  checkSurface(surface, triangles.size());
+  SeamSplit out;
+  out.source.resize(vertex_count);
+  for (std::size_t v = 0; v < vertex_count; ++v) out.source[v] = static_cast<std::int32_t>(v);
+  out.uvs.assign(vertex_count * 2, 0.0f);
+  out.triangles.resize(triangles.size());
+  // Per vertex: the (u, v) of each split vertex made for it so far (a few at a seam).
+  struct Copy {
+    double u, v;
+    std::int32_t index;
+  };
+  std::vector<std::vector<Copy>> copies(vertex_count);
+  for (std::size_t c = 0; c < triangles.size(); ++c) {
+    const auto v = static_cast<std::size_t>(triangles[c]);
+    if (v >= vertex_count) throw std::invalid_argument("export: triangle index out of range");
+    const std::int32_t k = surface.corner_uvs.empty() ? -1 : surface.corner_uvs[c];
+    // No uv: (0, 0), as glTF has no "none".
+    const double u = k < 0 ? 0.0 : surface.uvs[2 * static_cast<std::size_t>(k)], w = k < 0 ? 0.0 : surface.uvs[2 * static_cast<std::size_t>(k) + 1];
+    std::int32_t index = -1;
+    for (const Copy& copy : copies[v]) {
+      if (copy.u == u && copy.v == w) index = copy.index;
+    }
+    if (index < 0) {
+      index = copies[v].empty() ? static_cast<std::int32_t>(v) : static_cast<std::int32_t>(out.source.size());
+      if (index != static_cast<std::int32_t>(v)) {
+        out.source.push_back(static_cast<std::int32_t>(v));
+        out.uvs.push_back(0.0f);
+        out.uvs.push_back(0.0f);
+      }
+      out.uvs[2 * static_cast<std::size_t>(index)] = static_cast<float>(u);
+      out.uvs[2 * static_cast<std::size_t>(index) + 1] = static_cast<float>(w);
+      copies[v].push_back({u, w, index});
+    }
+    out.triangles[c] = index;
+  }
+  return out;
+}
 
 std::vector<std::uint8_t> pc2Header(std::int32_t points, float start_frame, float sample_rate, std::int32_t samples) {
   if (points <= 0 || samples <= 0) throw std::invalid_argument("PC2: the cache needs at least one point and one sample");
@@ -115,11 +232,18 @@ std::vector<std::uint8_t> pc2Header(std::int32_t points, float start_frame, floa
 
 void appendPc2Sample(std::span<const float> positions, std::vector<std::uint8_t>& out) { appendFloats(out, positions); }
 
-std::string objText(std::span<const float> positions, std::span<const std::int32_t> triangles, std::span<const std::string> comment) {
+std::string objText(std::span<const float> positions, std::span<const std::int32_t> triangles, std::span<const std::string> comment,
+                    const SurfaceLayout* surface) {
   checkMesh(positions, triangles);
+  if (surface) checkSurface(*surface, triangles.size());
+  const bool uvs = surface && !surface->corner_uvs.empty();
+  const bool materials = surface && !surface->triangle_materials.empty();
   std::string out;
-  out.reserve(positions.size() * 12 + triangles.size() * 8 + 256);
+  out.reserve(positions.size() * 12 + triangles.size() * (uvs ? 16 : 8) + (surface ? surface->uvs.size() * 12 : 0) + 256);
   for (const std::string& line : comment) out += "# " + line + "\n";
+  if (materials) {
+    for (const std::string& library : surface->material_libraries) out += "mtllib " + oneLine(library) + "\n";
+  }
   for (std::size_t i = 0; i < positions.size(); i += 3) {
     out += "v ";
     appendFloatText(out, positions[i]);
@@ -129,30 +253,57 @@ std::string objText(std::span<const float> positions, std::span<const std::int32
     appendFloatText(out, positions[i + 2]);
     out += '\n';
   }
+  if (uvs) {
+    for (std::size_t i = 0; i < surface->uvs.size(); i += 2) {
+      out += "vt ";
+      appendDoubleText(out, surface->uvs[i]);
+      out += ' ';
+      appendDoubleText(out, surface->uvs[i + 1]);
+      out += '\n';
+    }
+  }
+  std::int32_t material = -1;
   for (std::size_t i = 0; i < triangles.size(); i += 3) {
-    out += "f ";
-    appendIntText(out, std::int64_t{triangles[i]} + 1);
-    out += ' ';
-    appendIntText(out, std::int64_t{triangles[i + 1]} + 1);
-    out += ' ';
-    appendIntText(out, std::int64_t{triangles[i + 2]} + 1);
+    if (materials) {
+      const std::int32_t m = surface->triangle_materials[i / 3];
+      if (m >= 0 && m != material) out += "usemtl " + oneLine(surface->materials[static_cast<std::size_t>(m)].name) + "\n";
+      if (m >= 0) material = m;
+    }
+    const bool textured = uvs && surface->corner_uvs[i] >= 0 && surface->corner_uvs[i + 1] >= 0 && surface->corner_uvs[i + 2] >= 0;
+    out += 'f';
+    for (std::size_t k = 0; k < 3; ++k) {
+      out += ' ';
+      appendIntText(out, std::int64_t{triangles[i + k]} + 1);
+      if (textured) {
+        out += '/';
+        appendIntText(out, std::int64_t{surface->corner_uvs[i + k]} + 1);
+      }
+    }
     out += '\n';
   }
   return out;
 }
 
 std::vector<std::uint8_t> plyBytes(std::span<const float> positions, std::span<const std::int32_t> triangles,
-                                   std::span<const std::string> comment) {
+                                   std::span<const std::string> comment, std::span<const float> vertex_uvs) {
   checkMesh(positions, triangles);
+  const std::size_t vertices = positions.size() / 3;
+  if (!vertex_uvs.empty() && vertex_uvs.size() != vertices * 2) throw std::invalid_argument("PLY: vertex uvs do not match the vertices");
   std::string header = "ply\nformat binary_little_endian 1.0\n";
   for (const std::string& line : comment) header += "comment " + line + "\n";
-  header += "element vertex " + std::to_string(positions.size() / 3) +
-            "\nproperty float x\nproperty float y\nproperty float z\n"
-            "element face " + std::to_string(triangles.size() / 3) +
+  header += "element vertex " + std::to_string(vertices) + "\nproperty float x\nproperty float y\nproperty float z\n" +
+            (vertex_uvs.empty() ? "" : "property float s\nproperty float t\n") + "element face " + std::to_string(triangles.size() / 3) +
             "\nproperty list uchar int vertex_indices\nend_header\n";
   std::vector<std::uint8_t> out(header.begin(), header.end());
-  out.reserve(out.size() + positions.size_bytes() + triangles.size() / 3 * 13);
-  appendFloats(out, positions);
+  out.reserve(out.size() + positions.size_bytes() + vertex_uvs.size_bytes() + triangles.size() / 3 * 13);
+  if (vertex_uvs.empty()) {
+    appendFloats(out, positions);
+  } else {
+    for (std::size_t v = 0; v < vertices; ++v) {
+      appendFloats(out, positions.subspan(3 * v, 3));
+      appendFloats(out, vertex_uvs.subspan(2 * v, 2));
+    }
+  }
   for (std::size_t i = 0; i < triangles.size(); i += 3) {
     out.push_back(3);
     for (int c = 0; c < 3; ++c) appendPod(out, triangles[i + static_cast<std::size_t>(c)]);
@@ -162,10 +313,38 @@ std::vector<std::uint8_t> plyBytes(std::span<const float> positions, std::span<c
 
 std::vector<std::uint8_t> gltfBytes(const GltfAnimation& a, bool binary) {
   checkMesh(a.rest, a.triangles);
-  const std::size_t n = a.frame_count, values = a.rest.size();
+  const std::size_t n = a.frame_count, values = a.rest.size(), vertices = values / 3;
   if (n == 0) throw std::invalid_argument("glTF: no frame to write");
   if (a.frames.size() != n * values) throw std::invalid_argument("glTF: frame data does not match the frame count and vertex count");
+  const bool normals = !a.rest_normals.empty();
+  if (normals && (a.rest_normals.size() != values || a.frame_normals.size() != n * values))
+    throw std::invalid_argument("glTF: normals do not match the vertices and frames");
   if (!(a.rate_hz > 0.0)) throw std::invalid_argument("glTF: the sample times need a frame rate");
+  const SurfaceLayout none;
+  const SurfaceLayout& surface = a.surface ? *a.surface : none;
+  const bool uvs = !surface.corner_uvs.empty();
+  const bool materials = !surface.triangle_materials.empty() && !surface.materials.empty();
+  // The vertices as glTF holds them: split at uv seams (vertex i < #V is vertex i).
+  SeamSplit split;
+  if (uvs) {
+    split = splitAtSeams(vertices, a.triangles, surface);
+  } else {
+    checkSurface(surface, a.triangles.size());
+    split.source.resize(vertices);
+    for (std::size_t v = 0; v < vertices; ++v) split.source[v] = static_cast<std::int32_t>(v);
+    split.triangles.assign(a.triangles.begin(), a.triangles.end());
+  }
+  const std::size_t split_values = split.source.size() * 3;
+  auto expand = [&](const float* xyz, std::vector<float>& out) {
+    out.resize(split_values);
+    for (std::size_t v = 0; v < split.source.size(); ++v) {
+      const auto s3 = static_cast<std::size_t>(split.source[v]) * 3;
+      out[3 * v] = xyz[s3];
+      out[3 * v + 1] = xyz[s3 + 1];
+      out[3 * v + 2] = xyz[s3 + 2];
+    }
+  };
+
   tinygltf::Model model;
   model.asset.version = "2.0";
   model.asset.generator = a.generator;
@@ -173,29 +352,101 @@ std::vector<std::uint8_t> gltfBytes(const GltfAnimation& a, bool binary) {
   info["rate_hz"] = tinygltf::Value(a.rate_hz);
   info["first_frame"] = tinygltf::Value(static_cast<int>(a.first_frame));
   info["frames"] = tinygltf::Value(static_cast<int>(n));
+  info["vertices"] = tinygltf::Value(static_cast<int>(vertices));
+  tinygltf::Value::Array seam_copies;
+  for (std::size_t v = vertices; v < split.source.size(); ++v) seam_copies.emplace_back(static_cast<int>(split.source[v]));
+  info["seam_copies"] = tinygltf::Value(std::move(seam_copies));
   tinygltf::Value::Object extras;
   extras["tetrig_export"] = tinygltf::Value(info);
   model.asset.extras = tinygltf::Value(extras);
   model.buffers.resize(1);
-  std::size_t bytes = values * 4 * (n + 1) + a.triangles.size() * 4 + n * 4 + n * n * 4 + 64;
+  const std::size_t per_vertex = normals ? 2 : 1;
+  std::size_t bytes = split_values * 4 * per_vertex * (n + 1) + split.source.size() * 8 + a.triangles.size() * 4 + n * 4 + n * n * 4 + 64;
   model.buffers[0].data.reserve(bytes);
 
-  tinygltf::Primitive prim;
-  prim.mode = TINYGLTF_MODE_TRIANGLES;
-  prim.attributes["POSITION"] = addVec3(model, a.rest);
-  if (!a.triangles.empty()) {
-    const int view = addView(model, a.triangles.data(), a.triangles.size_bytes(), TINYGLTF_TARGET_ELEMENT_ARRAY_BUFFER);
-    prim.indices = addAccessor(model, view, TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT, a.triangles.size(), TINYGLTF_TYPE_SCALAR);
+  // Materials: one per asset material; textures by URI (not embedded), one image per file.
+  if (materials) {
+    std::vector<std::string> image_uris;
+    for (const ExportMaterial& em : surface.materials) {
+      tinygltf::Material m;
+      m.name = em.name;
+      m.pbrMetallicRoughness.metallicFactor = 0.0;  // OBJ materials are diffuse (glTF's default is metal)
+      m.pbrMetallicRoughness.roughnessFactor = 1.0;
+      if (!em.texture_uri.empty()) {
+        const auto found = std::find(image_uris.begin(), image_uris.end(), em.texture_uri);
+        if (found == image_uris.end()) {
+          tinygltf::Image image;
+          image.uri = uriReference(em.texture_uri);
+          model.images.push_back(image);
+          tinygltf::Texture texture;
+          texture.source = static_cast<int>(model.images.size() - 1);
+          model.textures.push_back(texture);
+          image_uris.push_back(em.texture_uri);
+        }
+        const auto image = std::find(image_uris.begin(), image_uris.end(), em.texture_uri) - image_uris.begin();
+        m.pbrMetallicRoughness.baseColorTexture.index = static_cast<int>(image);  // texture k shows image k
+        m.pbrMetallicRoughness.baseColorTexture.texCoord = 0;
+      } else {
+        m.pbrMetallicRoughness.baseColorFactor = {em.color[0], em.color[1], em.color[2], 1.0};
+      }
+      model.materials.push_back(std::move(m));
+    }
   }
+
+  std::map<std::string, int> attributes;
+  std::vector<float> scratch;
+  expand(a.rest.data(), scratch);
+  attributes["POSITION"] = addVec3(model, scratch);
+  if (normals) {
+    expand(a.rest_normals.data(), scratch);
+    attributes["NORMAL"] = addVec3(model, scratch);
+  }
+  if (uvs) {
+    std::vector<float> texcoord(split.uvs);
+    for (std::size_t i = 1; i < texcoord.size(); i += 2) texcoord[i] = 1.0f - texcoord[i];  // glTF: v down from the top
+    const int view = addView(model, texcoord.data(), texcoord.size() * 4, TINYGLTF_TARGET_ARRAY_BUFFER);
+    attributes["TEXCOORD_0"] = addAccessor(model, view, TINYGLTF_COMPONENT_TYPE_FLOAT, texcoord.size() / 2, TINYGLTF_TYPE_VEC2);
+  }
+  // One morph target per frame (POSITION deltas, and NORMAL deltas), shared by every primitive.
+  std::vector<std::map<std::string, int>> targets;
   std::vector<float> delta(values);
   for (std::size_t k = 0; k < n; ++k) {
+    std::map<std::string, int> target;
     const float* frame = a.frames.data() + k * values;
     for (std::size_t i = 0; i < values; ++i) delta[i] = frame[i] - a.rest[i];
-    prim.targets.push_back({{"POSITION", addVec3(model, delta)}});
+    expand(delta.data(), scratch);
+    target["POSITION"] = addVec3(model, scratch);
+    if (normals) {
+      const float* normal = a.frame_normals.data() + k * values;
+      for (std::size_t i = 0; i < values; ++i) delta[i] = normal[i] - a.rest_normals[i];
+      expand(delta.data(), scratch);
+      target["NORMAL"] = addVec3(model, scratch);
+    }
+    targets.push_back(std::move(target));
   }
+  // Primitives: one per material used (the triangles in their order), or one for all.
   tinygltf::Mesh mesh;
   mesh.name = a.name;
-  mesh.primitives.push_back(std::move(prim));
+  const auto triangle_count = static_cast<std::int32_t>(a.triangles.size() / 3);
+  const std::int32_t first_group = materials ? -1 : 0, end_group = materials ? static_cast<std::int32_t>(surface.materials.size()) : 1;
+  for (std::int32_t group = first_group; group < end_group; ++group) {
+    std::vector<std::uint32_t> indices;
+    for (std::int32_t t = 0; t < triangle_count; ++t) {
+      if (materials && surface.triangle_materials[static_cast<std::size_t>(t)] != group) continue;
+      for (std::size_t k = 0; k < 3; ++k) indices.push_back(static_cast<std::uint32_t>(split.triangles[3 * static_cast<std::size_t>(t) + k]));
+    }
+    if (materials && indices.empty()) continue;  // a material no triangle uses
+    tinygltf::Primitive prim;
+    prim.mode = TINYGLTF_MODE_TRIANGLES;
+    prim.attributes = attributes;
+    prim.targets = targets;
+    if (materials && group >= 0) prim.material = group;
+    if (!indices.empty()) {
+      const int view = addView(model, indices.data(), indices.size() * 4, TINYGLTF_TARGET_ELEMENT_ARRAY_BUFFER);
+      prim.indices = addAccessor(model, view, TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT, indices.size(), TINYGLTF_TYPE_SCALAR);
+    }
+    mesh.primitives.push_back(std::move(prim));
+  }
   mesh.weights.assign(n, 0.0);  // without the animation: the rest pose
   model.meshes.push_back(std::move(mesh));
   tinygltf::Node node;
@@ -233,6 +484,7 @@ std::vector<std::uint8_t> gltfBytes(const GltfAnimation& a, bool binary) {
 
   std::ostringstream stream(std::ios::binary);
   tinygltf::TinyGLTF writer;
+  writer.SetImageWriter(keepImageUri, nullptr);
   if (!writer.WriteGltfSceneToStream(&model, stream, false, binary)) throw std::runtime_error("glTF: tinygltf could not serialize the model");
   const std::string text = std::move(stream).str();
   return std::vector<std::uint8_t>(text.begin(), text.end());

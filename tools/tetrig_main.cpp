@@ -485,9 +485,21 @@ int main(int argc, char** argv) {
       ->group(kEssentials);
   export_cmd->add_option("--out", exp.out,
                          "Output, format from the extension: FILE.pc2 (+ FILE.rest.obj, the rest mesh), NAME_####.obj or NAME_####.ply "
-                         "(one file per frame; the #s become the clip frame number), FILE.gltf or FILE.glb (docs/export.md)")
+                         "(one file per frame; the #s become the clip frame number), FILE.gltf or FILE.glb (which for which tool: below)")
       ->required()
       ->group(kEssentials);
+  export_cmd->footer(
+      "Which file for which tool (docs/export.md):\n"
+      "  FILE.pc2       Blender, 3ds Max, Maya: the point cache plays on its rest mesh FILE.rest.obj (Blender: File > Import >\n"
+      "                 tetrig export, or a Mesh Cache modifier on the imported rest OBJ). The rest OBJ has the asset's vertex\n"
+      "                 order, texture coordinates and materials (mtllib, vt, usemtl), so the cache also plays on the original OBJ\n"
+      "                 (one without duplicate or unused vertices).\n"
+      "  FILE.glb/.gltf game engines: one morph target per frame (positions and normals), the asset's texture coordinates\n"
+      "                 (vertices split at uv seams) and materials (a texture by its path relative to the file); at most 1000 frames.\n"
+      "  NAME_####.obj  other tools: one OBJ per frame with the rest OBJ's texture coordinates and materials; normals are the\n"
+      "                 reader's (as for the rest OBJ).\n"
+      "  NAME_####.ply  one PLY per frame; texture coordinates (s, t) only when each vertex has one (no seams).\n"
+      "Texture coordinates and materials come from an OBJ asset (build-rig reads its vt, usemtl and .mtl files).");
   export_cmd->add_option("--range,--frames", exp.frames,
                          "Clip frames A:B (0-based, B exclusive; A: or :B), default the whole clip (--frames is the old spelling)")
       ->group(kEssentials);

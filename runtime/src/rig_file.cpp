@@ -53,6 +53,7 @@ constexpr std::uint32_t kTagPoseSensors = tag("PSNS");
 constexpr std::uint32_t kTagCoarse = tag("CRSE");  // the coarse level: a whole rig file (its own header and checksum)
 constexpr std::uint32_t kTagMarkerRegions = tag("MKRG");  // regions driven by marker clusters
 constexpr std::uint32_t kTagVolumeWeights = tag("VOLW");  // per-tet volume-term weights (DeformerSetup::volume_weights)
+constexpr std::uint32_t kTagSurface = tag("UVMT");  // the asset's texture coordinates and materials (Rig::surface)
 constexpr std::size_t kPoseSensorMinBytes = 4 + 4 + 1 + 1 + 8;  // empty label, region, mode, buttons, scale
 
 std::string tagName(std::uint32_t t) {
@@ -211,6 +212,48 @@ void writeSection(Writer& w, std::vector<std::array<std::uint64_t, 3>>& table, s
 }
 
 bool finite3(const Eigen::Vector3d& v) { return v.allFinite(); }
+
+// Why the texture coordinates and materials do not fit a fine mesh of `triangles` triangles ("" when they do).
+std::string surfaceAttributesFault(const RigSurfaceAttributes& a, std::int32_t triangles) {
+  auto num = [](auto v) { return std::to_string(v); };
+  if (a.empty()) {
+    if (a.corner_uvs.rows() != 0 || !a.triangle_materials.empty() || !a.material_libraries.empty() || !a.asset.empty()) {
+      return "texture coordinates and materials: per-triangle data or file names without a uv table or materials";
+    }
+    return {};
+  }
+  if (a.corner_uvs.rows() != triangles || a.triangle_materials.size() != static_cast<std::size_t>(triangles)) {
+    return "texture coordinates and materials: " + num(a.corner_uvs.rows()) + " corner rows and " + num(a.triangle_materials.size()) +
+           " triangle materials for " + num(triangles) + " fine triangles";
+  }
+  if (!a.uvs.allFinite()) return "texture coordinates: a uv is not finite";
+  const auto uv_count = static_cast<std::int32_t>(a.uvs.rows());
+  for (Eigen::Index f = 0; f < a.corner_uvs.rows(); ++f) {
+    for (int k = 0; k < 3; ++k) {
+      const std::int32_t u = a.corner_uvs(f, k);
+      if (u < -1 || u >= uv_count) return "texture coordinates: fine triangle " + num(f) + " names uv " + num(u) + " of " + num(uv_count);
+    }
+  }
+  const auto material_count = static_cast<std::int32_t>(a.materials.size());
+  for (std::size_t f = 0; f < a.triangle_materials.size(); ++f) {
+    const std::int32_t m = a.triangle_materials[f];
+    if (m < -1 || m >= material_count) return "materials: fine triangle " + num(f) + " names material " + num(m) + " of " + num(material_count);
+  }
+  auto utf8 = [](const std::string& text, const std::string& what) -> std::string {
+    return isWellFormedUtf8(text) ? std::string() : what + " is not valid UTF-8 ('" + printableText(text, 64) + "')";
+  };
+  if (std::string e = utf8(a.asset, "the asset's path"); !e.empty()) return e;
+  for (std::size_t i = 0; i < a.material_libraries.size(); ++i) {
+    if (std::string e = utf8(a.material_libraries[i], "material library " + num(i)); !e.empty()) return e;
+  }
+  for (std::size_t i = 0; i < a.materials.size(); ++i) {
+    const RigMaterial& m = a.materials[i];
+    if (std::string e = utf8(m.name, "the name of material " + num(i)); !e.empty()) return e;
+    if (std::string e = utf8(m.diffuse_texture, "the texture of material " + num(i)); !e.empty()) return e;
+    if (!m.diffuse_color.allFinite()) return "material " + num(i) + " has a non-finite colour";
+  }
+  return {};
+}
 
 }  // namespace
 
@@ -440,6 +483,7 @@ std::string validateRig(const Rig& rig) {
   for (std::size_t p = 0; p < rig.pose_sensors.size(); ++p) {
     if (std::string e = utf8(rig.pose_sensors[p].sensor_label, "the label of pose sensor " + num(p)); !e.empty()) return e;
   }
+  if (std::string e = surfaceAttributesFault(rig.surface, static_cast<std::int32_t>(rig.fine_triangles.rows())); !e.empty()) return e;
   const DeformerOptions& o = s.options;
   if (o.rotation_steps < 0 || o.rotation_steps > 64) return "rotation_steps " + num(o.rotation_steps) + " is not in [0, 64]";
   if (!(o.point_handle_weight > 0.0) || !std::isfinite(o.point_handle_weight) || !(o.max_abs_coordinate > 0.0) ||
@@ -638,6 +682,30 @@ std::vector<std::uint8_t> serializeRig(const Rig& rig) {
     w.count(rig.setup.volume_weights.size(), "volume weights");
     for (const double x : rig.setup.volume_weights) w.f64(x);
     writeSection(out, table, kTagVolumeWeights, w.bytes());
+  }
+  if (!rig.surface.empty()) {
+    Writer w;
+    const RigSurfaceAttributes& a = rig.surface;
+    w.str(a.asset);
+    w.count(a.material_libraries.size(), "material libraries");
+    for (const std::string& l : a.material_libraries) w.str(l);
+    w.count(a.materials.size(), "materials");
+    for (const RigMaterial& m : a.materials) {
+      w.str(m.name);
+      w.str(m.diffuse_texture);
+      for (int k = 0; k < 3; ++k) w.f64(m.diffuse_color[k]);
+    }
+    w.count(static_cast<std::size_t>(a.uvs.rows()), "texture coordinates");
+    for (Eigen::Index i = 0; i < a.uvs.rows(); ++i) {
+      w.f64(a.uvs(i, 0));
+      w.f64(a.uvs(i, 1));
+    }
+    w.count(static_cast<std::size_t>(a.corner_uvs.rows()), "textured triangles");
+    for (Eigen::Index f = 0; f < a.corner_uvs.rows(); ++f) {
+      for (int k = 0; k < 3; ++k) w.i32(a.corner_uvs(f, k));
+      w.i32(a.triangle_materials[static_cast<std::size_t>(f)]);
+    }
+    writeSection(out, table, kTagSurface, w.bytes());
   }
   if (rig.coarse) writeSection(out, table, kTagCoarse, serializeRig(*rig.coarse));
   // No padding after the last section: the file ends where it does.
@@ -965,6 +1033,30 @@ Rig parseRigAt(std::span<const std::uint8_t> bytes, std::string_view source_name
     for (double& x : rig.setup.volume_weights) x = c.f64("volume weight");
     c.end();
   }
+  if (has_section(kTagSurface)) {
+    Cursor c = section(kTagSurface);
+    RigSurfaceAttributes& a = rig.surface;
+    a.asset = c.str("asset path");
+    a.material_libraries.resize(c.count("material libraries", 4));
+    for (std::string& l : a.material_libraries) l = c.str("material library");
+    a.materials.resize(c.count("materials", 32));
+    for (RigMaterial& m : a.materials) {
+      m.name = c.str("material name");
+      m.diffuse_texture = c.str("material texture");
+      for (int k = 0; k < 3; ++k) m.diffuse_color[k] = c.f64("material colour");
+    }
+    const std::size_t uvs = c.count("texture coordinates", 16);
+    c.rows(a.uvs, uvs, "texture coordinates");
+    const std::size_t triangles = c.count("textured triangles", 16);
+    a.corner_uvs.resize(static_cast<Eigen::Index>(triangles), 3);
+    a.triangle_materials.resize(triangles);
+    for (std::size_t f = 0; f < triangles; ++f) {
+      for (int k = 0; k < 3; ++k) a.corner_uvs(static_cast<Eigen::Index>(f), k) = c.i32("corner uv");
+      a.triangle_materials[f] = c.i32("triangle material");
+    }
+    c.end();
+    if (a.empty()) c.fail("the section holds neither texture coordinates nor materials");
+  }
   if (has_section(kTagCoarse)) {
     if (nested) fail("the coarse level has a coarse level of its own (section CRSE)");
     for (const Entry& e : entries) {
@@ -1000,6 +1092,8 @@ std::int64_t rigMemoryBytes(const Rig& rig) {
   for (const RigMarkerRegion& mr : rig.marker_regions) bytes += static_cast<std::int64_t>(8 + mr.markers.size() * 4);
   for (const RegionHandle& r : rig.setup.region_handles) bytes += static_cast<std::int64_t>(r.tets.size() * 4);
   for (const RigidGroup& g : rig.setup.rigid_groups) bytes += static_cast<std::int64_t>(g.tets.size() * 4);
+  const RigSurfaceAttributes& a = rig.surface;
+  bytes += static_cast<std::int64_t>(a.uvs.size() * 8 + a.corner_uvs.size() * 4 + a.triangle_materials.size() * 4);
   if (rig.coarse) bytes += rigMemoryBytes(*rig.coarse);
   return bytes;
 }

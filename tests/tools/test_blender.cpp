@@ -9,12 +9,16 @@
 //    of that id as the C reader read it;
 //  - a `tetrig export` PC2 imported through the add-on (OBJ + Mesh Cache modifier) reproduces the
 //    exported samples at several scene frames (evaluated depsgraph mesh), with scene frame = clip
-//    frame and the scene rate set from the export.
+//    frame and the scene rate set from the export;
+//  - exports of a rig built from a UV-mapped OBJ (uv_box_asset.hpp): Blender's glTF importer and
+//    its OBJ importer (the PC2's rest mesh) show the asset's texture coordinates on every polygon
+//    loop, its materials and its texture file, and the PC2 still plays on the textured rest mesh.
 // Blender: $TETRIG_BLENDER or `blender` on PATH. Missing, the tests are skipped with a message,
 // and fail under CI=true (CI installs it: apt-get install blender python3-numpy).
 #include "export.hpp"
 #include "moving_clip.hpp"
 #include "small_rig.hpp"
+#include "uv_box_asset.hpp"
 #include "tetrig/live_rig.hpp"
 #include "tetrig/shm_publisher.hpp"
 #include "tetrig_shm.h"
@@ -34,6 +38,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
+#include <functional>
 #include <map>
 #include <mutex>
 #include <optional>
@@ -340,6 +345,129 @@ TEST(Blender, ExportedPc2PlaysThroughTheMeshCacheModifier) {
   EXPECT_EQ(settings["fps_base"], 1.0);
   EXPECT_NEAR(settings["rotation_x"].get<double>(), M_PI / 2, 1e-6);  // the Y-up rig stands on Blender's floor
   EXPECT_EQ(settings["vertices"], values / 3);
+}
+
+// ---- the asset's texture coordinates and materials (uv_box_asset.hpp) ----
+
+struct UvScene {
+  UvScene() : asset(test::writeUvBoxAsset(asset_dir)), rig(test::buildUvBoxRig(dir, asset)) {
+    rig_path = dir.writeBytes("uv.rig", serializeRig(rig));
+  }
+  TempDir asset_dir, dir;
+  test::UvBoxAsset asset;
+  Rig rig;
+  std::filesystem::path rig_path;
+};
+const UvScene& uvScene() {
+  static const UvScene s;
+  return s;
+}
+
+// The polygons Blender shows (check_*.py's "surface"): each a triangle on one face of the asset
+// (its vertices found by position, `to_rig` taking Blender's basis coordinates to the rig's), each
+// loop's uv the asset's vt of that face at that vertex (within float rounding), the polygon's
+// material the face's; every quad covered by two triangles; the textured material's image is the
+// asset's texture file. With `same_order` a loop's vertex index is the asset's vertex index.
+void expectTheAssetsUvs(const nlohmann::json& surface, const test::UvBoxAsset& asset,
+                        const std::function<std::array<double, 3>(double, double, double)>& to_rig, bool same_order) {
+  EXPECT_EQ(surface["uv_layers"], 1);
+  const auto& polygons = surface["polygons"];
+  ASSERT_EQ(polygons.size(), 2 * asset.faces.size());
+  std::vector<int> covered(asset.faces.size(), 0);
+  double worst = 0;
+  for (const auto& polygon : polygons) {
+    const auto& loops = polygon["loops"];
+    ASSERT_EQ(loops.size(), 3u);
+    std::array<int, 3> v{-1, -1, -1};
+    for (std::size_t k = 0; k < 3; ++k) {
+      const auto p = to_rig(loops[k][1].get<double>(), loops[k][2].get<double>(), loops[k][3].get<double>());
+      for (std::size_t i = 0; i < asset.vertices.size(); ++i) {
+        const double d = std::abs(p[0] - asset.vertices[i][0]) + std::abs(p[1] - asset.vertices[i][1]) + std::abs(p[2] - asset.vertices[i][2]);
+        if (d < 1e-6) v[k] = static_cast<int>(i);
+      }
+      ASSERT_GE(v[k], 0) << "a loop at no vertex of the asset";
+      if (same_order) {
+        EXPECT_EQ(loops[k][0].get<int>(), v[k]);
+      }
+    }
+    int face = -1;
+    for (std::size_t f = 0; f < asset.faces.size() && face < 0; ++f) {
+      int found = 0;
+      for (const int x : v)
+        for (const auto& corner : asset.faces[f]) found += corner[0] == x ? 1 : 0;
+      if (found == 3) face = static_cast<int>(f);
+    }
+    ASSERT_GE(face, 0) << "a polygon on no face of the asset";
+    ++covered[static_cast<std::size_t>(face)];
+    EXPECT_EQ(polygon["material"], asset.face_materials[static_cast<std::size_t>(face)]);
+    for (std::size_t k = 0; k < 3; ++k) {
+      for (const auto& corner : asset.faces[static_cast<std::size_t>(face)]) {
+        if (corner[0] != v[k]) continue;
+        const auto& uv = asset.uvs[static_cast<std::size_t>(corner[1])];
+        worst = std::max({worst, std::abs(loops[k][4].get<double>() - uv[0]), std::abs(loops[k][5].get<double>() - uv[1])});
+      }
+    }
+  }
+  EXPECT_LT(worst, 1e-6);  // float uvs (glTF: 1 - (1 - v) in float)
+  EXPECT_EQ(covered, std::vector<int>(asset.faces.size(), 2));
+  ASSERT_TRUE(surface["images"].contains("skin")) << surface["images"].dump();
+  ASSERT_EQ(surface["images"]["skin"].size(), 1u) << surface["images"].dump();
+  EXPECT_EQ(std::filesystem::weakly_canonical(surface["images"]["skin"][0].get<std::string>()), std::filesystem::weakly_canonical(asset.texture));
+}
+
+// The glTF export of the UV rig through Blender's glTF importer (the add-on's import): one object
+// with the asset's uvs on every loop, its two materials and the texture, and a shape key per frame.
+TEST(BlenderUv, GltfImporterShowsTheAssetsTextureCoordinates) {
+  TETRIG_REQUIRE_BLENDER(blender);
+  const UvScene& uv = uvScene();
+  const TempDir dir;
+  tools::ExportOptions o;
+  o.rig_path = uv.rig_path;
+  o.clip_path = scene().clip_path;
+  o.iterations = 3;
+  o.quiet = true;
+  o.out = dir.path() / "walk.glb";
+  (void)tools::exportClip(o);
+  const auto out = dir.path() / "gltf.dump";
+  const auto [status, log] = runBlender(*blender, "check_gltf.py", {kAddonDir.string(), o.out.string(), "0,5", out.string()}, dir);
+  ASSERT_EQ(status, 0) << log;
+  const auto settings = nlohmann::json::parse(slurpText(out.string() + ".json"));
+  EXPECT_EQ(settings["shape_keys"], 13);
+  // glTF's +Y up became Blender's +Z up: (x, y, z)_glTF = (x, z, -y)_Blender; the rig is Y up.
+  expectTheAssetsUvs(settings["surface"], uv.asset, [](double x, double y, double z) { return std::array<double, 3>{x, z, -y}; }, false);
+}
+
+// The PC2 export of the UV rig: its rest OBJ (mtllib, vt, usemtl, f v/vt) through Blender's OBJ
+// importer keeps the vertex order, so the Mesh Cache plays the samples exactly, and shows the
+// asset's uvs, materials and texture.
+TEST(BlenderUv, Pc2OnTheTexturedRestObjStillPlays) {
+  TETRIG_REQUIRE_BLENDER(blender);
+  const UvScene& uv = uvScene();
+  const TempDir dir;
+  tools::ExportOptions o;
+  o.rig_path = uv.rig_path;
+  o.clip_path = scene().clip_path;
+  o.out = dir.path() / "walk.pc2";
+  o.frames = "2:10";
+  o.iterations = 3;
+  o.quiet = true;
+  (void)tools::exportClip(o);
+  std::ifstream in(o.out, std::ios::binary);
+  std::vector<char> bytes((std::istreambuf_iterator<char>(in)), {});
+  const std::size_t values = uv.asset.vertices.size() * 3;
+  ASSERT_EQ(bytes.size(), 32 + 8 * values * 4);
+  const auto out = dir.path() / "pc2.dump";
+  const auto [status, log] = runBlender(*blender, "check_pc2.py", {kAddonDir.string(), o.out.string(), "2,6,9", out.string()}, dir);
+  ASSERT_EQ(status, 0) << log;
+  const auto frames = readDump(out);
+  ASSERT_EQ(frames.size(), 3u) << log;
+  for (const DumpFrame& f : frames) {
+    std::vector<float> sample(values);
+    std::memcpy(sample.data(), bytes.data() + 32 + (f.frame - 2) * values * 4, values * 4);
+    EXPECT_EQ(f.positions, sample) << "scene frame " << f.frame;
+  }
+  const auto settings = nlohmann::json::parse(slurpText(out.string() + ".json"));
+  expectTheAssetsUvs(settings["surface"], uv.asset, [](double x, double y, double z) { return std::array<double, 3>{x, y, z}; }, true);
 }
 
 // A glTF export through Blender's own glTF importer (called by the add-on, which sets the scene

@@ -9,6 +9,7 @@
 #include "export_formats.hpp"
 #include "moving_clip.hpp"
 #include "small_rig.hpp"
+#include "uv_box_asset.hpp"
 #include "tetrig/drivers/c3d_playback.hpp"
 #include "tetrig/drivers/c3d_reader.hpp"
 #include "tetrig/live_rig.hpp"
@@ -29,6 +30,7 @@
 #include <cstring>
 #include <fstream>
 #include <map>
+#include <set>
 #include <sstream>
 #include <tuple>
 
@@ -557,6 +559,12 @@ void checkGltf(const std::filesystem::path& path, bool binary) {
   };
   const std::vector<float> rest = floats(prim.attributes.at("POSITION"));
   EXPECT_EQ(rest, rigRest());
+  // A rig without texture coordinates: no split, no TEXCOORD_0, no material; normals all the same.
+  EXPECT_EQ(prim.attributes.count("NORMAL"), 1u);
+  EXPECT_EQ(prim.attributes.count("TEXCOORD_0"), 0u);
+  EXPECT_TRUE(model.materials.empty());
+  EXPECT_EQ(prim.material, -1);
+  EXPECT_EQ(model.asset.extras.Get("tetrig_export").Get("seam_copies").ArrayLen(), 0u);
   const tinygltf::Accessor& ia = model.accessors[static_cast<std::size_t>(prim.indices)];
   ASSERT_EQ(ia.componentType, TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT);
   const tinygltf::BufferView& iv = model.bufferViews[static_cast<std::size_t>(ia.bufferView)];
@@ -570,6 +578,7 @@ void checkGltf(const std::filesystem::path& path, bool binary) {
     std::vector<float> pos = floats(prim.targets[f].at("POSITION"));
     for (std::size_t i = 0; i < pos.size(); ++i) pos[i] += rest[i];
     EXPECT_LT(maxDifference(pos, reference[f]), 1e-7) << "frame " << f;
+    EXPECT_EQ(prim.targets[f].count("NORMAL"), 1u);
   }
   // The animation: sample k at k / rate has weight 1 on target k only.
   ASSERT_EQ(model.animations.size(), 1u);
@@ -609,6 +618,389 @@ TEST(Export, GltfIsOneSelfContainedFile) {
   (void)tools::exportClip(options(out.path() / "anim.gltf"));
   checkGltf(out.path() / "anim.gltf", false);
   EXPECT_EQ(listDir(out.path()), std::vector<std::string>{"anim.gltf"});
+}
+
+// ---- the asset's texture coordinates and materials (uv_box_asset.hpp: a UV-mapped OBJ with seams,
+// quads, two materials used alternately, relative indices) ----
+
+// The rig built from the UV box, once per binary; the asset lies in a folder of its own, the
+// exports go elsewhere (their references to box.mtl and the texture are relative paths with "..").
+struct UvScene {
+  UvScene() : asset(test::writeUvBoxAsset(asset_dir)), rig(test::buildUvBoxRig(dir, asset, &report)) {
+    rig_path = dir.writeBytes("uv.rig", serializeRig(rig));
+  }
+  TempDir asset_dir, dir;
+  test::UvBoxAsset asset;
+  rigbuild::BuildRigReport report;
+  Rig rig;
+  std::filesystem::path rig_path;
+};
+const UvScene& uvScene() {
+  static const UvScene s;
+  return s;
+}
+
+// Reference frames of the UV rig (as liveRigFrames), and its live normals when `normals`.
+std::vector<std::vector<float>> uvRigFrames(int iterations, std::vector<std::vector<float>>* normals = nullptr) {
+  const drivers::C3DClip clip = drivers::C3DClip::load(scene().clip_path);
+  drivers::C3DPlaybackOptions po;
+  po.pacing = drivers::Pacing::kAsFastAsPossible;
+  const drivers::C3DPlayback playback(clip, po);
+  LiveRigOptions lo;
+  lo.normals = normals != nullptr;
+  LiveRig live(uvScene().rig, lo);
+  EXPECT_EQ(live.bindLabels(clip.labels()).matched, 5);
+  std::vector<std::vector<float>> out;
+  if (normals) normals->assign(1, std::vector<float>(live.restNormals().begin(), live.restNormals().end()));  // [0]: rest
+  MarkerFrame frame{};
+  for (std::size_t f = 0; f < kFrames; ++f) {
+    playback.fillFrame(f, f, frame);
+    std::vector<float> x(static_cast<std::size_t>(live.fineVertexCount()) * 3), n(x.size());
+    live.processFrame(frame, StepBudget{iterations}, x.data(), normals ? n.data() : nullptr);
+    out.push_back(std::move(x));
+    if (normals) normals->push_back(std::move(n));
+  }
+  return out;
+}
+
+tools::ExportOptions uvOptions(const std::filesystem::path& out) {
+  auto o = options(out);
+  o.rig_path = uvScene().rig_path;
+  return o;
+}
+
+// An OBJ with texture coordinates, read as text: v, vt, mtllib, and per face its (v, vt) corners
+// (vt -1 when absent) and the material in force.
+struct TexturedObj {
+  std::vector<float> v;
+  std::vector<std::array<double, 2>> vt;
+  std::vector<std::string> mtllib;
+  std::vector<std::vector<std::array<int, 2>>> faces;
+  std::vector<std::string> materials;
+};
+TexturedObj readTexturedObj(const std::filesystem::path& p) {
+  std::ifstream in(p);
+  TexturedObj m;
+  std::string line, material;
+  while (std::getline(in, line)) {
+    std::istringstream s(line);
+    std::string tag;
+    s >> tag;
+    if (tag == "v") {
+      float x, y, z;
+      s >> x >> y >> z;
+      m.v.insert(m.v.end(), {x, y, z});
+    } else if (tag == "vt") {
+      std::string u, w;
+      s >> u >> w;
+      m.vt.push_back({std::stod(u), std::stod(w)});
+    } else if (tag == "mtllib") {
+      m.mtllib.push_back(line.substr(7));
+    } else if (tag == "usemtl") {
+      material = line.substr(7);
+    } else if (tag == "f") {
+      std::vector<std::array<int, 2>> face;
+      std::string corner;
+      while (s >> corner) {
+        const std::size_t slash = corner.find('/');
+        face.push_back({std::stoi(corner.substr(0, slash)) - 1, slash == std::string::npos ? -1 : std::stoi(corner.substr(slash + 1)) - 1});
+      }
+      m.faces.push_back(face);
+      m.materials.push_back(material);
+    }
+  }
+  return m;
+}
+
+// The source face holding fine vertices a, b, c (the UV box has no duplicate or unused vertex:
+// fine vertex i is file vertex i), or -1.
+int sourceFace(const test::UvBoxAsset& asset, int a, int b, int c) {
+  for (std::size_t f = 0; f < asset.faces.size(); ++f) {
+    int found = 0;
+    for (const int v : {a, b, c})
+      for (const auto& corner : asset.faces[f]) found += corner[0] == v ? 1 : 0;
+    if (found == 3) return static_cast<int>(f);
+  }
+  return -1;
+}
+// The vt of source face f at vertex v.
+int sourceUv(const test::UvBoxAsset& asset, int f, int v) {
+  for (const auto& corner : asset.faces[static_cast<std::size_t>(f)])
+    if (corner[0] == v) return corner[1];
+  return -1;
+}
+
+// Triangles that each lie on one source face, with each corner's vt the source face's at that
+// vertex and the face's material, in the source's face order, every quad covered by two.
+void expectTheSourcesFaces(const TexturedObj& obj, const test::UvBoxAsset& asset, const std::string& what) {
+  SCOPED_TRACE(what);
+  ASSERT_EQ(obj.faces.size(), 2 * asset.faces.size());
+  std::vector<int> covered(asset.faces.size(), 0);
+  int previous = -1;
+  for (std::size_t t = 0; t < obj.faces.size(); ++t) {
+    const auto& tri = obj.faces[t];
+    ASSERT_EQ(tri.size(), 3u);
+    const int f = sourceFace(asset, tri[0][0], tri[1][0], tri[2][0]);
+    ASSERT_GE(f, 0) << "triangle " << t << " lies on no source face";
+    EXPECT_GE(f, previous) << "triangle " << t << ": not in the source's face order";
+    previous = f;
+    ++covered[static_cast<std::size_t>(f)];
+    for (const auto& [v, vt] : tri) EXPECT_EQ(vt, sourceUv(asset, f, v)) << "triangle " << t << " vertex " << v;
+    EXPECT_EQ(obj.materials[t], asset.face_materials[static_cast<std::size_t>(f)]) << "triangle " << t;
+  }
+  EXPECT_EQ(covered, std::vector<int>(asset.faces.size(), 2));
+}
+
+std::filesystem::path resolved(const std::filesystem::path& p) { return std::filesystem::weakly_canonical(p); }
+
+TEST(ExportUv, TheRigKeepsTheAssetsUvsMaterialsAndFaceOrder) {
+  const UvScene& uv = uvScene();
+  const RigSurfaceAttributes& s = uv.rig.surface;
+  ASSERT_FALSE(s.empty());
+  // The fine mesh is the asset's vertex list, in its order.
+  ASSERT_EQ(uv.rig.fine_vertices.rows(), static_cast<Eigen::Index>(uv.asset.vertices.size()));
+  for (std::size_t i = 0; i < uv.asset.vertices.size(); ++i)
+    for (int k = 0; k < 3; ++k) EXPECT_EQ(uv.rig.fine_vertices(static_cast<Eigen::Index>(i), k), uv.asset.vertices[i][static_cast<std::size_t>(k)]);
+  // The vt list, exactly, in file order.
+  ASSERT_EQ(s.uvs.rows(), static_cast<Eigen::Index>(uv.asset.uvs.size()));
+  for (std::size_t i = 0; i < uv.asset.uvs.size(); ++i) {
+    EXPECT_EQ(s.uvs(static_cast<Eigen::Index>(i), 0), uv.asset.uvs[i][0]);
+    EXPECT_EQ(s.uvs(static_cast<Eigen::Index>(i), 1), uv.asset.uvs[i][1]);
+  }
+  // Materials in order of first use, with the .mtl's colour and texture (relative to the asset's folder).
+  ASSERT_EQ(s.materials.size(), 2u);
+  EXPECT_EQ(s.materials[0].name, "paint");
+  EXPECT_EQ(s.materials[0].diffuse_color, Eigen::Vector3d(0.8, 0.1, 0.1));
+  EXPECT_EQ(s.materials[0].diffuse_texture, "");
+  EXPECT_EQ(s.materials[1].name, "skin");
+  EXPECT_EQ(s.materials[1].diffuse_texture, "textures/skin.png");
+  EXPECT_EQ(s.material_libraries, std::vector<std::string>{"box.mtl"});
+  EXPECT_EQ(std::filesystem::path(s.asset), resolved(uv.asset.obj));
+  // Every fine triangle in the source's face order with its corners' vt and its face's material.
+  TexturedObj as_obj;
+  for (Eigen::Index t = 0; t < uv.rig.fine_triangles.rows(); ++t) {
+    std::vector<std::array<int, 2>> tri;
+    for (int k = 0; k < 3; ++k) tri.push_back({uv.rig.fine_triangles(t, k), s.corner_uvs(t, k)});
+    as_obj.faces.push_back(tri);
+    as_obj.materials.push_back(s.materials[static_cast<std::size_t>(s.triangle_materials[static_cast<std::size_t>(t)])].name);
+  }
+  expectTheSourcesFaces(as_obj, uv.asset, "rig");
+  // Kept through the file.
+  const Rig back = loadRigFile(uv.rig_path);
+  EXPECT_EQ(back.surface.uvs, s.uvs);
+  EXPECT_EQ(back.surface.corner_uvs, s.corner_uvs);
+  EXPECT_EQ(back.surface.triangle_materials, s.triangle_materials);
+  bool noted = false;
+  for (const std::string& n : uv.report.notes) noted |= n.find("texture coordinates and materials of box.obj kept: ") == 0;
+  EXPECT_TRUE(noted) << ::testing::PrintToString(uv.report.notes);
+}
+
+TEST(ExportUv, RestObjAndObjSequenceCarryTheAssetsUvsAndMaterials) {
+  const UvScene& uv = uvScene();
+  const TempDir out;
+  (void)tools::exportClip(uvOptions(out.path() / "anim.pc2"));
+  (void)tools::exportClip(uvOptions(out.path() / "seq_##.obj"));
+  const auto reference = uvRigFrames(3);
+  const TexturedObj rest = readTexturedObj(out.path() / "anim.rest.obj");
+  // The same vertex order (the PC2 plays on it), the asset's vt list exactly, its faces with their
+  // vt and materials, and the asset's material library referenced from the export's folder.
+  const LiveRig live(uv.rig);
+  EXPECT_EQ(rest.v, std::vector<float>(live.restPositions().begin(), live.restPositions().end()));
+  EXPECT_EQ(rest.vt, uv.asset.uvs);
+  expectTheSourcesFaces(rest, uv.asset, "anim.rest.obj");
+  ASSERT_EQ(rest.mtllib.size(), 1u);
+  EXPECT_EQ(rest.mtllib[0].rfind("../", 0), 0u) << rest.mtllib[0];  // relative, out of the export's folder
+  EXPECT_EQ(resolved(out.path() / rest.mtllib[0]), resolved(uv.asset.mtl));
+  EXPECT_EQ(readPc2(out.path() / "anim.pc2").frames, reference);
+  for (std::size_t f = 0; f < kFrames; ++f) {
+    char name[32];
+    std::snprintf(name, sizeof name, "seq_%02zu.obj", f);
+    const TexturedObj frame = readTexturedObj(out.path() / name);
+    EXPECT_EQ(frame.v, reference[f]) << name;
+    EXPECT_EQ(frame.vt, rest.vt) << name;
+    EXPECT_EQ(frame.faces, rest.faces) << name;
+    EXPECT_EQ(frame.materials, rest.materials) << name;
+    EXPECT_EQ(frame.mtllib, rest.mtllib) << name;
+  }
+}
+
+// glTF: vertices split at the seams (vertex i < #V is fine vertex i, the copies follow), TEXCOORD_0
+// = the source corner's (u, 1 - v), NORMAL and per-frame NORMAL deltas the live rig's normals, a
+// material per asset material (the texture by a relative URI), a primitive per material; every
+// morph target moves each copy as its vertex (rest + delta = the PC2's frame).
+TEST(ExportUv, GltfSplitsAtSeamsAndCarriesUvsNormalsAndMaterials) {
+  const UvScene& uv = uvScene();
+  const TempDir out;
+  (void)tools::exportClip(uvOptions(out.path() / "anim.glb"));
+  std::vector<std::vector<float>> normals;
+  const auto reference = uvRigFrames(3, &normals);
+  tinygltf::Model model;
+  tinygltf::TinyGLTF loader;
+  std::string err, warn;
+  ASSERT_TRUE(loader.LoadBinaryFromFile(&model, &err, &warn, (out.path() / "anim.glb").string())) << err;
+  EXPECT_TRUE(warn.empty()) << warn;
+  auto floats = [&](int accessor_index) {
+    const tinygltf::Accessor& a = model.accessors[static_cast<std::size_t>(accessor_index)];
+    const tinygltf::BufferView& v = model.bufferViews[static_cast<std::size_t>(a.bufferView)];
+    const std::size_t n = a.count * static_cast<std::size_t>(tinygltf::GetNumComponentsInType(static_cast<std::uint32_t>(a.type)));
+    std::vector<float> values(n);
+    std::memcpy(values.data(), model.buffers[0].data.data() + v.byteOffset + a.byteOffset, n * 4);
+    return values;
+  };
+  const std::size_t fine = uv.asset.vertices.size();
+  const tinygltf::Value& info = model.asset.extras.Get("tetrig_export");
+  EXPECT_EQ(info.Get("vertices").GetNumberAsInt(), static_cast<int>(fine));
+  std::vector<int> source(fine);
+  for (std::size_t v = 0; v < fine; ++v) source[v] = static_cast<int>(v);
+  const tinygltf::Value& copies = info.Get("seam_copies");
+  for (std::size_t c = 0; c < copies.ArrayLen(); ++c) source.push_back(copies.Get(static_cast<int>(c)).GetNumberAsInt());
+  EXPECT_GT(source.size(), fine);  // the box's edges are seams
+  // Materials: paint (its colour, not metal), skin (the texture by a relative URI, not embedded).
+  ASSERT_EQ(model.materials.size(), 2u);
+  EXPECT_EQ(model.materials[0].name, "paint");
+  EXPECT_EQ(model.materials[0].pbrMetallicRoughness.metallicFactor, 0.0);
+  EXPECT_EQ(model.materials[0].pbrMetallicRoughness.baseColorFactor, (std::vector<double>{0.8, 0.1, 0.1, 1.0}));
+  EXPECT_EQ(model.materials[1].name, "skin");
+  EXPECT_EQ(model.materials[1].pbrMetallicRoughness.metallicFactor, 0.0);
+  const int texture = model.materials[1].pbrMetallicRoughness.baseColorTexture.index;
+  ASSERT_GE(texture, 0);
+  const tinygltf::Image& image = model.images[static_cast<std::size_t>(model.textures[static_cast<std::size_t>(texture)].source)];
+  EXPECT_EQ(image.uri.rfind("../", 0), 0u) << image.uri;
+  EXPECT_EQ(resolved(out.path() / image.uri), resolved(uv.asset.texture));
+  EXPECT_EQ(image.bufferView, -1);
+  ASSERT_EQ(model.meshes.size(), 1u);
+  const auto& prims = model.meshes[0].primitives;
+  ASSERT_EQ(prims.size(), 2u);
+  std::size_t triangles = 0;
+  for (const tinygltf::Primitive& prim : prims) {
+    // Every primitive shares the vertices and the morph targets.
+    EXPECT_EQ(prim.attributes, prims[0].attributes);
+    EXPECT_EQ(prim.targets, prims[0].targets);
+    ASSERT_TRUE(prim.attributes.count("TEXCOORD_0") && prim.attributes.count("NORMAL"));
+    const std::vector<float> texcoord = floats(prim.attributes.at("TEXCOORD_0")), position = floats(prim.attributes.at("POSITION"));
+    ASSERT_EQ(texcoord.size(), 2 * source.size());
+    ASSERT_EQ(position.size(), 3 * source.size());
+    const std::string material = model.materials[static_cast<std::size_t>(prim.material)].name;
+    const tinygltf::Accessor& ia = model.accessors[static_cast<std::size_t>(prim.indices)];
+    std::vector<std::uint32_t> indices(ia.count);
+    std::memcpy(indices.data(), model.buffers[0].data.data() + model.bufferViews[static_cast<std::size_t>(ia.bufferView)].byteOffset, ia.count * 4);
+    for (std::size_t t = 0; t < indices.size(); t += 3, ++triangles) {
+      int v[3];
+      for (int k = 0; k < 3; ++k) v[k] = source[indices[t + static_cast<std::size_t>(k)]];
+      const int f = sourceFace(uv.asset, v[0], v[1], v[2]);
+      ASSERT_GE(f, 0);
+      EXPECT_EQ(material, uv.asset.face_materials[static_cast<std::size_t>(f)]);
+      for (int k = 0; k < 3; ++k) {
+        const std::size_t split = indices[t + static_cast<std::size_t>(k)];
+        const auto& src = uv.asset.uvs[static_cast<std::size_t>(sourceUv(uv.asset, f, v[k]))];
+        EXPECT_NEAR(texcoord[2 * split], src[0], 1e-7) << "split vertex " << split;
+        EXPECT_NEAR(1.0 - texcoord[2 * split + 1], src[1], 1e-7) << "split vertex " << split;
+      }
+    }
+  }
+  EXPECT_EQ(triangles, 2 * uv.asset.faces.size());
+  // Positions and normals: the rest and every frame, each split vertex as its source vertex.
+  const tinygltf::Primitive& prim = prims[0];
+  auto expectPerSource = [&](const std::vector<float>& got, const std::vector<float>& fine_values, double tolerance, const std::string& what) {
+    ASSERT_EQ(got.size(), 3 * source.size()) << what;
+    double worst = 0;
+    for (std::size_t v = 0; v < source.size(); ++v)
+      for (std::size_t k = 0; k < 3; ++k)
+        worst = std::max(worst, std::abs(double{got[3 * v + k]} - fine_values[3 * static_cast<std::size_t>(source[v]) + k]));
+    EXPECT_LE(worst, tolerance) << what;
+  };
+  const std::vector<float> rest = floats(prim.attributes.at("POSITION")), rest_normals = floats(prim.attributes.at("NORMAL"));
+  const LiveRig live(uv.rig);
+  expectPerSource(rest, std::vector<float>(live.restPositions().begin(), live.restPositions().end()), 0.0, "rest");
+  expectPerSource(rest_normals, normals[0], 0.0, "rest normals");
+  ASSERT_EQ(prim.targets.size(), kFrames);
+  for (std::size_t f = 0; f < kFrames; ++f) {
+    std::vector<float> pos = floats(prim.targets[f].at("POSITION")), nrm = floats(prim.targets[f].at("NORMAL"));
+    for (std::size_t i = 0; i < pos.size(); ++i) {
+      pos[i] += rest[i];
+      nrm[i] += rest_normals[i];
+    }
+    expectPerSource(pos, reference[f], 1e-7, "frame " + std::to_string(f));
+    expectPerSource(nrm, normals[f + 1], 1e-6, "normals of frame " + std::to_string(f));
+  }
+}
+
+// PLY holds one uv per vertex: the UV box (seams) exports none, an asset whose vertices each have
+// one uv exports them as s, t.
+TEST(ExportUv, PlyCarriesUvsOnlyWithoutSeams) {
+  const TempDir out;
+  (void)tools::exportClip(uvOptions(out.path() / "seams_#.ply"));
+  auto header = [](const std::filesystem::path& p) {
+    const auto b = slurp(p);
+    const std::string text(b.begin(), b.end());
+    return text.substr(0, text.find("end_header\n"));
+  };
+  EXPECT_EQ(header(out.path() / "seams_0.ply").find("property float s"), std::string::npos);
+  const TempDir asset_dir, dir;
+  const test::UvBoxAsset seamless = test::writeUvBoxAsset(asset_dir, false);
+  const Rig rig = test::buildUvBoxRig(dir, seamless);
+  ASSERT_FALSE(rig.surface.empty());
+  auto o = options(out.path() / "one_#.ply");
+  o.rig_path = dir.writeBytes("seamless.rig", serializeRig(rig));
+  (void)tools::exportClip(o);
+  const auto b = slurp(out.path() / "one_3.ply");
+  const std::string h = header(out.path() / "one_3.ply");
+  EXPECT_NE(h.find("property float z\nproperty float s\nproperty float t\n"), std::string::npos) << h;
+  const std::size_t at = h.size() + std::string("end_header\n").size();
+  ASSERT_GE(b.size(), at + seamless.vertices.size() * 20);
+  for (std::size_t v = 0; v < seamless.vertices.size(); ++v) {
+    EXPECT_EQ(readAt<float>(b, at + 20 * v + 12), static_cast<float>(seamless.uvs[v][0])) << v;
+    EXPECT_EQ(readAt<float>(b, at + 20 * v + 16), static_cast<float>(seamless.uvs[v][1])) << v;
+  }
+}
+
+// The encoders on their own: OBJ lines, the seam split, per-vertex uvs.
+TEST(ExportUv, EncodersFromArrays) {
+  // Two triangles sharing the edge 1-2; vertex 2's corners disagree on their uv (a seam), vertex 1's agree.
+  const std::vector<float> v = {0, 0, 0, 1, 0, 0, 0, 1, 0, 1, 1, 0};
+  const std::vector<std::int32_t> f = {0, 1, 2, 2, 1, 3};
+  const std::vector<double> uvs = {0, 0, 1, 0, 0, 1, 0.5, 0.75, 1, 1};
+  const std::vector<std::int32_t> corner_uvs = {0, 1, 2, 3, 1, 4}, materials = {1, 0};
+  tools::SurfaceLayout s;
+  s.material_libraries = {"../assets/a b.mtl"};
+  s.materials = {{"red", "", {1, 0, 0}}, {"skin", "tex/skin 1.png", {1, 1, 1}}};
+  s.uvs = uvs;
+  s.corner_uvs = corner_uvs;
+  s.triangle_materials = materials;
+  const std::vector<std::string> comment = {"c"};
+  EXPECT_EQ(tools::objText(v, f, comment, &s),
+            "# c\nmtllib ../assets/a b.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nvt 0.5 0.75\nvt 1 1\n"
+            "usemtl skin\nf 1/1 2/2 3/3\nusemtl red\nf 3/4 2/2 4/5\n");
+  const tools::SeamSplit split = tools::splitAtSeams(4, f, s);
+  EXPECT_EQ(split.source, (std::vector<std::int32_t>{0, 1, 2, 3, 2}));
+  EXPECT_EQ(split.triangles, (std::vector<std::int32_t>{0, 1, 2, 4, 1, 3}));
+  EXPECT_EQ(split.uvs, (std::vector<float>{0, 0, 1, 0, 0, 1, 1, 1, 0.5f, 0.75f}));
+  EXPECT_FALSE(tools::perVertexUvs(4, f, s).has_value());  // vertex 2 has two uvs
+  const std::vector<std::int32_t> agreeing = {0, 1, 2, 2, 1, 4};
+  s.corner_uvs = agreeing;
+  EXPECT_EQ(tools::perVertexUvs(4, f, s), (std::vector<float>{0, 0, 1, 0, 0, 1, 1, 1}));
+  const std::vector<std::int32_t> partial = {0, 1, 2, -1, 1, 4};
+  s.corner_uvs = partial;
+  EXPECT_FALSE(tools::perVertexUvs(4, f, s).has_value());  // a corner without a uv
+  EXPECT_EQ(tools::objText(v, f, {}, &s),
+            "mtllib ../assets/a b.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nvt 0.5 0.75\nvt 1 1\n"
+            "usemtl skin\nf 1/1 2/2 3/3\nusemtl red\nf 3 2 4\n");
+  const std::vector<std::int32_t> bad = {0, 1, 5, 2, 1, 4};
+  s.corner_uvs = bad;
+  EXPECT_THROW((void)tools::objText(v, f, {}, &s), std::invalid_argument);
+  // The texture's URI is percent-encoded (a space), the image not embedded.
+  s.corner_uvs = corner_uvs;
+  tools::GltfAnimation a;
+  a.name = "t";
+  a.rest = v;
+  a.triangles = f;
+  a.frames = v;
+  a.frame_count = 1;
+  a.rate_hz = 30;
+  a.surface = &s;
+  const std::vector<std::uint8_t> gltf = tools::gltfBytes(a, false);
+  const std::string json(gltf.begin(), gltf.end());
+  EXPECT_NE(json.find("\"uri\":\"tex/skin%201.png\""), std::string::npos) << json.substr(0, 2000);
 }
 
 TEST(Export, ClearErrorsAndNothingWritten) {
@@ -659,7 +1051,7 @@ TEST(Export, ClearErrorsAndNothingWritten) {
     auto o = with("a.glb");
     o.clip_path = clips.writeBytes("long.c3d", test::movingClip(tools::kMaxGltfFrames + 1));
     o.on_frame = [](std::size_t, std::size_t) { ADD_FAILURE() << "a frame was solved"; };
-    EXPECT_THROW_CONTAINS(tools::exportClip(o), "1001 frames is more than 1000; export a range with --frames A:B");
+    EXPECT_THROW_CONTAINS(tools::exportClip(o), "1001 frames is more than 1000; export a range with --range A:B");
     o.frames = "0:1000";
     o.on_frame = {};
     (void)tools::exportClip(o);  // the limit itself is fine
@@ -874,6 +1266,9 @@ TEST(Export, CommandLine) {
   EXPECT_EQ(std::get<0>(help), 0);
   for (const char* flag : {"--rig", "--c3d", "--out", "--frames", "--iterations", "--tolerance", "--max-iterations", "--rate"})
     EXPECT_NE(std::get<2>(help).find(flag), std::string::npos) << flag;
+  // Which file for which tool, texture coordinates and materials included.
+  for (const char* text : {"Which file for which tool", "Mesh Cache modifier", "game engines", "texture coordinates", "no seams"})
+    EXPECT_NE(std::get<2>(help).find(text), std::string::npos) << text;
 }
 
 // Ctrl-C (SIGINT) during a long export: one line, exit 1, and no file or temporary left.

@@ -573,6 +573,127 @@ TEST_F(SmallRig, InvalidPoseSensorsAreNotWritten) {
   EXPECT_EQ(validateRig(ok), "");
 }
 
+// Texture coordinates and materials (the optional UVMT section): a made-up set on the small rig's
+// fine triangles (corners with and without a uv, triangles with and without a material).
+Rig withSurface(const Rig& rig) {
+  Rig r = rig;
+  RigSurfaceAttributes& s = r.surface;
+  s.asset = "/assets/block.obj";
+  s.material_libraries = {"block.mtl", "more/extra.mtl"};
+  s.materials = {{"paint", "", Eigen::Vector3d(0.8, 0.1, 0.1)}, {"skin", "textures/skin.png", Eigen::Vector3d::Ones()}};
+  s.uvs.resize(5, 2);
+  s.uvs << 0, 0, 1, 0, 0, 1, 0.25, 0.75, 1, 1;
+  const Eigen::Index f = r.fine_triangles.rows();
+  s.corner_uvs.resize(f, 3);
+  s.triangle_materials.resize(static_cast<std::size_t>(f));
+  for (Eigen::Index t = 0; t < f; ++t) {
+    for (int k = 0; k < 3; ++k) s.corner_uvs(t, k) = static_cast<std::int32_t>((t + k) % 6) - 1;
+    s.triangle_materials[static_cast<std::size_t>(t)] = static_cast<std::int32_t>(t % 3) - 1;
+  }
+  return r;
+}
+
+TEST_F(SmallRig, SurfaceAttributesRoundTripInTheirOwnOptionalSection) {
+  const Rig with = withSurface(*rig_);
+  const std::vector<std::uint8_t> bytes = serializeRig(with);
+  EXPECT_EQ(bytes[12], 15u);  // the thirteen, PSNS and UVMT
+  const auto [offset, size] = findSection(bytes, "UVMT");
+  ASSERT_GT(size, 0u);
+  EXPECT_EQ(offset + size, bytes.size());  // the last section here
+  const Rig back = parseRig(bytes, "uv.rig");
+  EXPECT_EQ(back.surface.asset, with.surface.asset);
+  EXPECT_EQ(back.surface.material_libraries, with.surface.material_libraries);
+  ASSERT_EQ(back.surface.materials.size(), 2u);
+  EXPECT_EQ(back.surface.materials[1].name, "skin");
+  EXPECT_EQ(back.surface.materials[1].diffuse_texture, "textures/skin.png");
+  EXPECT_EQ(back.surface.materials[0].diffuse_color, Eigen::Vector3d(0.8, 0.1, 0.1));
+  EXPECT_EQ(back.surface.uvs, with.surface.uvs);
+  EXPECT_EQ(back.surface.corner_uvs, with.surface.corner_uvs);
+  EXPECT_EQ(back.surface.triangle_materials, with.surface.triangle_materials);
+  EXPECT_EQ(serializeRig(back), bytes);
+  // Without them, no section: the file written before it existed.
+  EXPECT_EQ(findSection(*bytes_, "UVMT").second, 0u);
+  EXPECT_TRUE(parseRig(*bytes_, "plain.rig").surface.empty());
+  // A reader that predates the section sees an unknown tag and loads the rest (here: the tag
+  // renamed to one this reader does not know either).
+  std::vector<std::uint8_t> renamed = bytes;
+  for (std::size_t i = 0; i < 15; ++i) {
+    if (std::memcmp(renamed.data() + 32 + 24 * i, "UVMT", 4) == 0) std::memcpy(renamed.data() + 32 + 24 * i, "ZZZZ", 4);
+  }
+  fixChecksum(renamed);
+  const Rig older = parseRig(renamed, "older-reader.rig");
+  EXPECT_TRUE(older.surface.empty());
+  EXPECT_EQ(older.fine_triangles, with.fine_triangles);
+  // Materials alone (an OBJ with usemtl but no vt) and uvs alone are fine too.
+  Rig materials_only = with;
+  materials_only.surface.uvs.resize(0, 2);
+  materials_only.surface.corner_uvs.setConstant(-1);
+  EXPECT_EQ(parseRig(serializeRig(materials_only), "m.rig").surface.materials.size(), 2u);
+  Rig uvs_only = with;
+  uvs_only.surface.materials.clear();
+  uvs_only.surface.material_libraries.clear();
+  std::fill(uvs_only.surface.triangle_materials.begin(), uvs_only.surface.triangle_materials.end(), -1);
+  EXPECT_EQ(parseRig(serializeRig(uvs_only), "u.rig").surface.uvs.rows(), 5);
+}
+
+TEST_F(SmallRig, SurfaceSectionTruncatedAtEveryLengthOrCorruptIsRefused) {
+  const std::vector<std::uint8_t> bytes = serializeRig(withSurface(*rig_));
+  const auto [offset, size] = findSection(bytes, "UVMT");
+  ASSERT_GT(size, 0u);
+  ASSERT_EQ(offset + size, bytes.size());
+  std::size_t entry = 0;
+  for (std::size_t i = 0; i < 15; ++i) {
+    if (std::memcmp(bytes.data() + 32 + 24 * i, "UVMT", 4) == 0) entry = 32 + 24 * i;
+  }
+  ASSERT_NE(entry, 0u);
+  for (std::size_t cut = 0; cut < size; ++cut) {
+    std::vector<std::uint8_t> b(bytes.begin(), bytes.begin() + static_cast<std::ptrdiff_t>(offset + cut));
+    putU64(b, entry + 16, cut);
+    putU64(b, 16, b.size());
+    fixChecksum(b);
+    const std::string e = parseError(b);
+    EXPECT_CONTAINS(e, "section UVMT");
+    EXPECT_CONTAINS(e, "truncated");
+  }
+  // Random bytes of the section behind the checksum: refused naming the file, or a valid rig.
+  std::mt19937 rng(77);
+  RigParseOptions no_crc;
+  no_crc.verify_checksum = false;
+  int refused = 0;
+  for (int trial = 0; trial < 1000; ++trial) {
+    std::vector<std::uint8_t> b = bytes;
+    for (int f = 0; f < 2; ++f) b[offset + rng() % size] = static_cast<std::uint8_t>(rng());
+    try {
+      EXPECT_EQ(validateRig(parseRig(b, "fuzz.rig", no_crc)), "");
+    } catch (const RigFileError& e) {
+      EXPECT_CONTAINS(e.what(), "fuzz.rig: ");
+      ++refused;
+    }
+  }
+  EXPECT_GT(refused, 0);
+}
+
+TEST_F(SmallRig, InvalidSurfaceAttributesAreNotWritten) {
+  auto fault = [&](auto edit) {
+    Rig bad = withSurface(*rig_);
+    edit(bad.surface);
+    EXPECT_THROW((void)serializeRig(bad), RigFileError);
+    return validateRig(bad);
+  };
+  EXPECT_CONTAINS(fault([](RigSurfaceAttributes& s) { s.corner_uvs(2, 1) = 5; }), "fine triangle 2 names uv 5 of 5");
+  EXPECT_CONTAINS(fault([](RigSurfaceAttributes& s) { s.corner_uvs(0, 0) = -2; }), "fine triangle 0 names uv -2 of 5");
+  EXPECT_CONTAINS(fault([](RigSurfaceAttributes& s) { s.triangle_materials[3] = 2; }), "fine triangle 3 names material 2 of 2");
+  EXPECT_CONTAINS(fault([](RigSurfaceAttributes& s) { s.triangle_materials.pop_back(); }), "triangle materials for");
+  EXPECT_CONTAINS(fault([](RigSurfaceAttributes& s) { s.corner_uvs.conservativeResize(s.corner_uvs.rows() - 1, 3); }), "corner rows");
+  EXPECT_CONTAINS(fault([](RigSurfaceAttributes& s) { s.uvs(1, 1) = std::numeric_limits<double>::infinity(); }), "a uv is not finite");
+  EXPECT_CONTAINS(fault([](RigSurfaceAttributes& s) { s.materials[0].name = "bad\xff"; }), "the name of material 0 is not valid UTF-8");
+  EXPECT_CONTAINS(fault([](RigSurfaceAttributes& s) {
+                    s.uvs.resize(0, 2);
+                    s.materials.clear();
+                  }),
+                  "without a uv table or materials");
+}
+
 TEST(RigBuild, MarkerBeyondTheLimitStopsTheBuildNamingIt) {
   const TempDir dir;
   // TOP, FRONT and BACK are 15 mm out, LEFT and RIGHT 12 mm: with a 13.5 mm limit the build stops

@@ -607,7 +607,7 @@ def import_gltf_export(path, set_scene=True):
         scene.render.fps_base = fps / info["rate_hz"]
     before = set(bpy.data.objects)
     # import_shading "NORMALS" (the default) fails in Debian's Blender 3.4.1 with NumPy >= 1.24
-    # (np.bool); the export has no normals, so "SMOOTH" loses nothing.
+    # (np.bool); the export's normals are smooth vertex normals, which "SMOOTH" computes alike.
     bpy.ops.import_scene.gltf(filepath=path, import_shading="SMOOTH")
     new = [o for o in bpy.data.objects if o not in before and o.type == "MESH"]
     if len(new) != 1:

@@ -5,6 +5,7 @@
 #include "tetrig/rigbuild/bind_markers.hpp"
 #include "tetrig/rigbuild/boundary_surface.hpp"
 #include "tetrig/rigbuild/import_surface.hpp"
+#include "tetrig/rigbuild/obj_surface_attributes.hpp"
 #include "tetrig/rigbuild/tet_quality.hpp"
 #include "tetrig/rigbuild/tetrahedralize_surface.hpp"
 #include "tetrig/rigbuild/validate_surface.hpp"
@@ -481,6 +482,17 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
       ctx.file_to_fine.resize(static_cast<std::size_t>(fine.vertexCount()));
       for (std::int32_t v = 0; v < fine.vertexCount(); ++v) ctx.file_to_fine[static_cast<std::size_t>(v)] = v;
       report.notes.push_back("vertex ids refer to the repaired surface's order (the format has no shared vertex list)");
+    }
+    // An OBJ's texture coordinates and materials, per fine-triangle corner; the fine triangles take
+    // the file's face order (obj_surface_attributes.hpp). The coarse level's fine mesh is sorted
+    // the same way but carries none (the rig has them).
+    if (import_stats.file_order && lowercaseExtension(inputs.mesh) == ".obj") {
+      std::string note;
+      std::optional<RigSurfaceAttributes> surface = objSurfaceAttributes(inputs.mesh, ctx.file_to_fine, fine.triangles, &note);
+      if (!inputs.coarse_level) {
+        if (surface) rig.surface = std::move(*surface);
+        if (!note.empty()) report.notes.push_back(note);
+      }
     }
   }
   // Unit and axes of the rig.

@@ -129,6 +129,20 @@ std::string describeRig(const Rig& rig, std::int64_t file_bytes, bool list_marke
       line("  [% .6g % .6g % .6g | % .6g]", a.linear(r, 0), a.linear(r, 1), a.linear(r, 2), a.translation[r]);
     }
   }
+  if (const RigSurfaceAttributes& sa = rig.surface; !sa.empty()) {
+    std::size_t textured = 0;
+    for (Eigen::Index f = 0; f < sa.corner_uvs.rows(); ++f) textured += (sa.corner_uvs.row(f).array() >= 0).all() ? 1 : 0;
+    std::string names;
+    for (std::size_t m = 0; m < sa.materials.size() && m < 8; ++m) {
+      if (!names.empty()) names += ", ";
+      names += shown(sa.materials[m].name);
+      if (!sa.materials[m].diffuse_texture.empty()) names += " (" + shown(sa.materials[m].diffuse_texture) + ")";
+    }
+    if (sa.materials.size() > 8) names += ", ...";
+    line("surface:       %lld uvs on %zu of %lld triangles, %zu materials%s%s", static_cast<long long>(sa.uvs.rows()), textured,
+         static_cast<long long>(sa.corner_uvs.rows()), sa.materials.size(), names.empty() ? "" : ": ", names.c_str());
+    if (!sa.asset.empty()) line("  from %s", shown(sa.asset).c_str());
+  }
   line("deformer:      rotation_steps %d, point_handle_weight %.4g", s.options.rotation_steps, s.options.point_handle_weight);
   if (rig.coarse) {
     line("coarse level:  %d tet vertices (%d body + %zu marker), %d tets", rig.coarse->tet_mesh.vertexCount(), rig.coarse->body_vertex_count,

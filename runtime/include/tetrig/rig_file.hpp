@@ -12,8 +12,8 @@
 // File = 32-byte header (magic "TETRIGRF", format version, section count, file size, CRC-32C of
 // every byte after the header) + a section table (tag, offset, size per section) + sections.
 // Thirteen sections are required; optional ones (PSNS: pose sensors; CRSE: the coarse level, a
-// whole rig file of its own) are written only when the rig has something to put in them, and a
-// file without them loads as before.
+// whole rig file of its own; UVMT: the asset's texture coordinates and materials) are written only
+// when the rig has something to put in them, and a file without them loads as before.
 // The loader checks magic, version, file size, checksum, the layout (every section on an 8-byte
 // boundary, no overlap, only zero padding between sections, nothing after the last, reserved
 // words 0), every section's bounds and exact size, every count against the bytes present (before
@@ -105,6 +105,26 @@ struct RigMarkerRegion {
   std::vector<std::int32_t> markers;   // indices into Rig::markers, at least 3, not collinear at rest
 };
 
+// A material of the asset the rig was built from (OBJ `usemtl` / .mtl `newmtl`).
+struct RigMaterial {
+  std::string name;             // as in `usemtl`
+  std::string diffuse_texture;  // the .mtl's map_Kd, relative to the asset's folder ("" none)
+  Eigen::Vector3d diffuse_color = Eigen::Vector3d::Ones();  // the .mtl's Kd ((1, 1, 1) when it gives none)
+};
+
+// The asset's texture coordinates and materials on the fine mesh (optional section UVMT; built
+// from OBJ assets, docs/rig-format.md "Texture coordinates and materials"). Present when `uvs` or
+// `materials` is not empty; then corner_uvs and triangle_materials have one row per fine triangle.
+struct RigSurfaceAttributes {
+  std::string asset;                               // the asset's absolute path when the rig was built ("" unknown)
+  std::vector<std::string> material_libraries;     // `mtllib` files, relative to the asset's folder
+  std::vector<RigMaterial> materials;              // in order of first use
+  Eigen::Matrix<double, Eigen::Dynamic, 2, Eigen::RowMajor> uvs;  // the asset's `vt` list in file order (u, v; v up)
+  Triangles corner_uvs;                            // #F by 3: the uvs row of each fine-triangle corner, -1: none
+  std::vector<std::int32_t> triangle_materials;    // #F: index into materials, -1: none
+  bool empty() const { return uvs.rows() == 0 && materials.empty(); }
+};
+
 struct Rig {
   std::string name;              // free text: source mesh, clip
   std::string unit = "m";        // rig unit name ("m", "mm", "cm", "mesh")
@@ -132,6 +152,8 @@ struct Rig {
   // level of its own, every marker of it is a marker of this rig (by label), and it has as many
   // region handles.
   std::shared_ptr<const Rig> coarse;
+  // Optional texture coordinates and materials of the asset (section UVMT; empty(): absent).
+  RigSurfaceAttributes surface;
 };
 
 // Serialises a rig into the file format (header, section table, sections, checksum). Validates the
@@ -158,7 +180,8 @@ std::vector<std::array<float, 3>> markerRestPositionsMm(const Rig& rig);
 // tets of three body corners and one marker, bound-face counts = invisible tets, marker labels
 // non-empty and distinct, positive alignment scales, every string well-formed UTF-8, pose sensors:
 // label non-empty, region in range and oriented, one sensor per region, clutch buttons non-zero in
-// clutch mode, finite positive translation scale, and a coarse level as coarseLevelMismatch says).
+// clutch mode, finite positive translation scale, texture coordinates and materials with one row per
+// fine triangle and their indices in range, and a coarse level as coarseLevelMismatch says).
 // Returns "" when valid, else a one-line description of the first fault (file text in it escaped
 // with printableText).
 std::string validateRig(const Rig& rig);

@@ -3,7 +3,8 @@
 # Imports a `tetrig export` through the add-on's import operator (the rest OBJ, the PC2 on a Mesh
 # Cache modifier), sets each scene frame of the comma-separated FRAMES and writes the evaluated
 # depsgraph mesh's vertices to OUT in tetrig-shm-cat's --dump layout (instance id 0, "frame id" =
-# the scene frame), and OUT.json with the scene and modifier settings the import made.
+# the scene frame), and OUT.json with the scene and modifier settings the import made and the
+# polygons' uvs and materials.
 import json
 import os
 import struct
@@ -16,6 +17,30 @@ addon_dir, pc2, frames, out = sys.argv[sys.argv.index("--") + 1:]
 bpy.ops.wm.read_factory_settings(use_empty=True)
 sys.path.insert(0, addon_dir)
 import tetrig_live  # noqa: E402
+
+
+def surface(obj):
+    """The object's polygons as Blender holds them: per polygon its material's name and per loop
+    (vertex index, basis x, y, z, u, v); and per material the image files its nodes use."""
+    me = obj.data
+    uv = me.uv_layers.active
+    slots = obj.material_slots
+    polygons = []
+    for p in me.polygons:
+        loops = []
+        for li in p.loop_indices:
+            vi = me.loops[li].vertex_index
+            co = me.vertices[vi].co
+            t = uv.data[li].uv if uv else (0.0, 0.0)
+            loops.append([vi, co.x, co.y, co.z, t[0], t[1]])
+        material = slots[p.material_index].material if p.material_index < len(slots) else None
+        polygons.append({"material": material.name if material else "", "loops": loops})
+    images = {}
+    for slot in slots:
+        m = slot.material
+        if m is not None and m.use_nodes:
+            images[m.name] = [bpy.path.abspath(n.image.filepath) for n in m.node_tree.nodes if n.type == "TEX_IMAGE" and n.image]
+    return {"uv_layers": len(me.uv_layers), "polygons": polygons, "images": images}
 
 tetrig_live.register()
 assert bpy.ops.tetrig.import_export(filepath=pc2) == {"FINISHED"}
@@ -37,5 +62,6 @@ mod = obj.modifiers[0]
 with open(out + ".json", "w") as f:
     json.dump({"modifier": mod.type, "cache_format": mod.cache_format, "frame_start": mod.frame_start,
                "scene_frame_start": scene.frame_start, "scene_frame_end": scene.frame_end, "fps": scene.render.fps,
-               "fps_base": scene.render.fps_base, "rotation_x": obj.rotation_euler[0], "vertices": len(obj.data.vertices)}, f)
+               "fps_base": scene.render.fps_base, "rotation_x": obj.rotation_euler[0], "vertices": len(obj.data.vertices),
+               "surface": surface(obj)}, f)
 print("check_pc2: %s frames %s" % (obj.name, frames))
