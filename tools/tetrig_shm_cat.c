@@ -114,9 +114,9 @@ static int parseInteger(const char* text, long long min, long long* out) {
 
 static void usage(void) {
   fprintf(stderr,
-          "usage: tetrig-shm-cat NAME [--frames N] [--timeout-ms T] [--json FILE] [--dump FILE]\n"
+          "usage: tetrig-shm-cat [NAME] [--frames N] [--timeout-ms T] [--json FILE] [--dump FILE]\n"
           "                      [--follow] [--quiet] [--markers] [--poll-us U] [--stale-ms S] [--owner UID]\n"
-          "  NAME          segment name, e.g. /tetrig (a leading '/' is added when missing)\n"
+          "  NAME          segment name (default tetrig, tetrig run's; a leading '/' is added when missing)\n"
           "  --frames N    exit 0 after N new frames (default: until the producer stops)\n"
           "  --timeout-ms  give up (exit 2) after T ms without a segment or a new frame (default 5000)\n"
           "  --json FILE   write frames seen/missed and p50/p99/max latencies in microseconds\n"
@@ -176,10 +176,7 @@ static int parseOptions(int argc, char** argv, Options* o, char* name_buf, size_
       return 0;
     }
   }
-  if (o->name == NULL) {
-    fprintf(stderr, "tetrig-shm-cat: missing segment NAME\n");
-    return 0;
-  }
+  if (o->name == NULL) o->name = "tetrig"; /* tetrig run's default --publish name */
   if (o->name[0] != '/') {
     if (strlen(o->name) + 2 > name_cap) {
       fprintf(stderr, "tetrig-shm-cat: segment name too long\n");

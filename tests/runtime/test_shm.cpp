@@ -2152,6 +2152,17 @@ TEST(ShmCat, RefusesAnotherUsersSegmentUnlessToldItsOwner) {
   }
 }
 
+// Without NAME the cat reads tetrig run's default segment, /tetrig.
+TEST(ShmCat, WithoutANameItReadsTetrigRunsDefaultSegment) {
+  if (std::filesystem::exists("/dev/shm/tetrig")) GTEST_SKIP() << "a segment /tetrig exists on this machine (a tetrig run): not touched";
+  CatRun run;
+  ASSERT_TRUE(spawnCat(run, {"--timeout-ms", "200"}));
+  for (int i = 0; i < 500 && !run.exited(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  ASSERT_TRUE(run.exited());
+  EXPECT_EQ(run.exit_code, 2);  // timed out: no such segment
+  EXPECT_NE(run.read("err.txt").find("timed out after 200 ms waiting for segment /tetrig\n"), std::string::npos) << run.read("err.txt");
+}
+
 #else   // TETRIG_SHM_CAT_PATH
 
 TEST(ShmCat, NeedsTheConsumerProgram) {

@@ -294,10 +294,11 @@ TEST(RealRig, ImplausiblePairingsAreRefused) {
   TETRIG_REQUIRE_DATA(elephant, "meshes/libigl-tutorial-data/elephant.obj");
   TETRIG_REQUIRE_DATA(pig, "mocap/btkdata/PiG_Calibration-FlatFoot-Full.c3d");
   TETRIG_REQUIRE_DATA(cmu, "mocap/cmu/85_02.c3d");
-  // A human marker set on a four-legged animal (unit from the mesh's height: mm): fit scale 0.061.
+  // A human marker set on a four-legged animal (unit auto: the one that makes the mesh as tall as
+  // the performer, cm for its 1277 units): fit scale 0.61.
   const std::string animal = buildError(elephant, hdm05, 0, "auto");
-  EXPECT_NE(animal.find("frame 0: the marker alignment is implausible: fit scale 0.06"), std::string::npos) << animal;
-  EXPECT_NE(animal.find("check the mesh's unit (taken as mm"), std::string::npos) << animal;
+  EXPECT_NE(animal.find("frame 0: the marker alignment is implausible: fit scale 0.60"), std::string::npos) << animal;
+  EXPECT_NE(animal.find("check the mesh's unit (taken as cm"), std::string::npos) << animal;
   EXPECT_NE(animal.find("of its width short of one end and 5.9 % beyond the other"), std::string::npos) << animal;
   // Arms down on the T-pose mesh, at a plausible scale (0.865): only the pose check sees it (the
   // wrist markers end 35 % of the arm span short of the hands).

@@ -78,11 +78,12 @@ TEST(WriteFileAtomically, DemoOutThroughTheAtomicWriter) {
   EXPECT_EQ(readText(dir / "final.obj").rfind("# tetrig: last published pose of ", 0), 0u);
   EXPECT_EQ(modeOf(dir / "final.obj"), 0600u);  // the umask of the shell that ran it
   EXPECT_TRUE(temporaries(dir.path()).empty());
-  // A failing --out (a directory there): one error line, exit 1, no temporary, no partial file.
+  // A failing --out (a directory there): refused before the run (tools/rigbuild/output_guard.cpp),
+  // one error line, exit 1, no temporary, no partial file.
   std::filesystem::create_directory(dir / "taken.obj");
   EXPECT_EQ(shell(exe + " demo --frames 10 --quiet --no-report --out '" + (dir / "taken.obj").string() + "'" + quiet), 1);
-  const std::string err = readText(dir / "err.txt");  // the consumer's status lines, then ours
-  const std::string line = "tetrig demo: error: " + (dir / "taken.obj").string() + ": cannot rename the temporary file into place: Is a directory\n";
+  const std::string err = readText(dir / "err.txt");
+  const std::string line = "tetrig demo: error: --out " + (dir / "taken.obj").string() + " is a directory; give a file name\n";
   EXPECT_CONTAINS(err, line);
   EXPECT_EQ(err.find("error"), err.find(line) + 13) << err;  // the only error line
   EXPECT_TRUE(std::filesystem::is_empty(dir / "taken.obj"));
