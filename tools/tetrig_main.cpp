@@ -33,10 +33,13 @@ namespace {
 using namespace tetrig;
 using namespace tetrig::rigbuild;
 
+// build-rig's coarse level when --coarse-tet-vertices is not given (docs/rig-builder.md).
+constexpr std::int32_t kDefaultCoarseTetVertices = 150;
+
 struct BuildArgs {
   std::string mesh, out, rig_json, markers;
   std::int32_t tet_vertices = 0;
-  std::int32_t coarse_tet_vertices = 0;  // > 0: also build the coarse level
+  std::int32_t coarse_tet_vertices = -1;  // > 0: also build the coarse level; 0: none; -1: the default (kDefaultCoarseTetVertices)
   std::string frame;                 // "" (the description's, default 0), a 0-based frame, or "auto"
   double max_marker_distance = 0;
   double min_fit_scale = 0, max_fit_scale = 0;
@@ -122,7 +125,16 @@ int buildRigCommand(const BuildArgs& a) {
   in.description = desc;
   if (!a.markers.empty()) in.clip = a.markers;
   if (a.tet_vertices > 0) in.tet_vertices = a.tet_vertices;
-  if (a.coarse_tet_vertices > 0) in.coarse_tet_vertices = a.coarse_tet_vertices;
+  if (a.coarse_tet_vertices > 0) {
+    in.coarse_tet_vertices = a.coarse_tet_vertices;
+  } else if (a.coarse_tet_vertices < 0 && !rigbuild::isTetMeshPath(a.mesh) && (!a.markers.empty() || !desc.markers.clip.empty()) &&
+             desc.vertex_handles.empty() && desc.region_handles.empty() && desc.point_handles.empty()) {
+    // The coarse level by default for a rig driven by markers (what tetrig run plays) from a surface
+    // mesh several times finer (a description's own handles may select too little for a coarse mesh:
+    // it asks for the level itself).
+    const std::int32_t fine = a.tet_vertices > 0 ? a.tet_vertices : desc.tet_vertices;
+    if (fine >= 4 * kDefaultCoarseTetVertices) in.coarse_tet_vertices = kDefaultCoarseTetVertices;
+  }
   if (a.frame == "auto") {
     in.frame_auto = true;
   } else if (!a.frame.empty()) {
@@ -287,9 +299,9 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(4, 10000000))
       ->group("Accuracy and cost");
   build_cmd->add_option("--coarse-tet-vertices", build.coarse_tet_vertices,
-                        "Also build a coarse level with this tet-vertex budget (e.g. 150) into the rig: tetrig run solves it first every "
-                        "frame: the skin lands nearer its final shape in a frame's few iterations (docs/fidelity.md)")
-      ->check(CLI::Range(4, 10000000))
+                        "The coarse level's tet-vertex budget (default 150; 0: none): tetrig run solves it first every frame, so the "
+                        "skin lands nearer its final shape in a frame's few iterations (docs/fidelity.md)")
+      ->check(CLI::Range(0, 10000000))
       ->group("Accuracy and cost");
   build_cmd->add_option("--frame", build.frame,
                         "Rest frame of the clip, 0-based (default 0: the first), or auto: the frame that best fits the mesh's rest pose")

@@ -6,6 +6,7 @@
 #include "tetrig/rigbuild/boundary_surface.hpp"
 #include "tetrig/rigbuild/import_surface.hpp"
 #include "tetrig/rigbuild/obj_surface_attributes.hpp"
+#include "tetrig/rigbuild/rigid_marker_groups.hpp"
 #include "tetrig/rigbuild/tet_quality.hpp"
 #include "tetrig/rigbuild/tetrahedralize_surface.hpp"
 #include "tetrig/rigbuild/validate_surface.hpp"
@@ -528,6 +529,7 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
   // Markers: rest frame (given or searched), alignment, plausibility and distance checks, all
   // before decimation and TetGen: a clip that does not fit the mesh stops the build in seconds.
   MarkerSet markers;
+  std::vector<RigidMarkerGroup> rigid_groups;  // found in the clip (rigid_marker_groups.hpp)
   std::vector<Eigen::Vector3d> marker_rig;
   std::vector<double> marker_distance;
   if (clip || given) {
@@ -669,6 +671,20 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
                           " from the surface after alignment, beyond the limit " + limit_text + " (too far: " + far +
                           "); check the clip's rest frame and axes, exclude the marker, or raise --max-marker-distance");
     }
+    // Markers that move as one rigid body over the clip drive the skin around them as a region.
+    if (clip && mopt.rigid_regions && desc.region_handles.empty()) {
+      const MarkerClip& mc = *source;
+      const double k = mc.clip.unitsToMm();
+      const MarkerFrameReader read = [&mc, k](std::int64_t f, std::vector<Eigen::Vector3d>& x, std::vector<std::uint8_t>& valid) {
+        const float* pos = mc.clip.positions(static_cast<std::size_t>(f));
+        for (std::size_t i = 0; i < mc.points.size(); ++i) {
+          const int p = mc.points[i];
+          valid[i] = mc.clip.isValid(static_cast<std::size_t>(f), p);
+          if (valid[i]) x[i] = Eigen::Vector3d(k * pos[3 * p], k * pos[3 * p + 1], k * pos[3 * p + 2]);
+        }
+      };
+      rigid_groups = findRigidMarkerGroups(static_cast<std::int64_t>(mc.clip.frameCount()), mc.points.size(), read, marker_rig);
+    }
   }
 
   // Surface input: the coarse tet mesh and B.
@@ -757,6 +773,79 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
     for (const std::int32_t v : corners) claim(v, who);
     setup.region_handles.push_back(std::move(region));
     rig.region_handle_names.push_back(n.name);
+  }
+  // Regions of the rigid marker groups: the tets whose four corners lie in the group's skin and
+  // belong to no other handle.
+  std::vector<std::vector<std::int32_t>> group_regions;  // per rigid group: its region handle's tets (empty: none)
+  for (const RigidMarkerGroup& g : rigid_groups) {
+    std::string name;
+    for (const std::int32_t m : g.markers) name += (name.empty() ? "" : "+") + markers.labels[static_cast<std::size_t>(m)];
+    double extent = 0.0;
+    for (const std::int32_t ga : g.markers) {
+      for (const std::int32_t gb : g.markers) extent = std::max(extent, (marker_rig[static_cast<std::size_t>(ga)] - marker_rig[static_cast<std::size_t>(gb)]).norm());
+    }
+    const std::vector<std::uint8_t> mask = groupSkinMask(body.vertices, marker_rig, g.markers, extent);
+    // The fine level takes the tets wholly in the skin; the coarse level's few large tets rarely are,
+    // so it takes those with a corner in it (and, failing that, the tet nearest the markers' centre),
+    // so that both levels have the same regions.
+    const int needed = inputs.coarse_level ? 1 : 4;
+    const std::string who = "markers:" + name;
+    const auto free_of_others = [&](std::int32_t t) {
+      for (int c = 0; c < 4; ++c) {
+        const std::string& owner = vertex_owner[static_cast<std::size_t>(body.tets(t, c))];
+        if (!owner.empty() && owner != who) return false;
+      }
+      return true;
+    };
+    RegionHandle region;
+    region.oriented = true;
+    for (std::int32_t t = 0; t < body.tetCount(); ++t) {
+      int in = 0;
+      for (int c = 0; c < 4; ++c) in += mask[static_cast<std::size_t>(body.tets(t, c))];
+      if (in >= needed && free_of_others(t)) {
+        region.tets.push_back(t);
+        for (int c = 0; c < 4; ++c) claim(body.tets(t, c), who);
+      }
+    }
+    if (region.tets.empty() && inputs.coarse_level) {
+      Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+      for (const std::int32_t m : g.markers) centre += marker_rig[static_cast<std::size_t>(m)] / static_cast<double>(g.markers.size());
+      std::int32_t best = -1;
+      double best_d = std::numeric_limits<double>::infinity();
+      for (std::int32_t t = 0; t < body.tetCount(); ++t) {
+        Eigen::Vector3d c = Eigen::Vector3d::Zero();
+        for (int k = 0; k < 4; ++k) c += 0.25 * body.vertices.row(body.tets(t, k)).transpose();
+        if ((c - centre).norm() < best_d && free_of_others(t)) {
+          best_d = (c - centre).norm();
+          best = t;
+        }
+      }
+      if (best >= 0) {
+        region.tets.push_back(best);
+        for (int c = 0; c < 4; ++c) claim(body.tets(best, c), who);
+      }
+    }
+    std::vector<std::int32_t> corners;
+    for (const std::int32_t t : region.tets) {
+      for (int c = 0; c < 4; ++c) corners.push_back(body.tets(t, c));
+    }
+    std::sort(corners.begin(), corners.end());
+    corners.erase(std::unique(corners.begin(), corners.end()), corners.end());
+    report.rigid_groups.push_back({name, g.spread_mm, static_cast<std::int32_t>(corners.size())});
+    if (!region.tets.empty() && !inputs.coarse_level) {
+      report.notes.push_back("markers " + name + " move as one rigid body over the clip (their distances within " + fmt("%.1f", g.spread_mm) +
+                             " mm): they drive the skin around them, " + std::to_string(corners.size()) + " tet vertices, as region '" + who +
+                             "' (a description's region_handles, or \"markers\": {\"rigid_regions\": false}, turn this off)");
+    }
+    if (region.tets.empty()) {
+      report.notes.push_back("markers " + name + " move rigidly together (distances within " + fmt("%.1f", g.spread_mm) +
+                             " mm) but no tet lies wholly in the skin around them: they drive no region");
+      group_regions.emplace_back();
+      continue;
+    }
+    group_regions.push_back(region.tets);
+    setup.region_handles.push_back(std::move(region));
+    rig.region_handle_names.push_back("markers:" + name);
   }
   for (const PointHandleSpec& p : desc.point_handles) {
     // The tet holding the point best (largest smallest barycentric coordinate).
@@ -876,6 +965,13 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
       }
       mr.markers.push_back(found);
     }
+    rig.marker_regions.push_back(std::move(mr));
+  }
+  for (std::size_t g = 0, h = desc.region_handles.size(); g < rigid_groups.size(); ++g) {
+    if (group_regions[g].empty()) continue;
+    RigMarkerRegion mr;
+    mr.region_handle = static_cast<std::int32_t>(h++);
+    mr.markers = rigid_groups[g].markers;  // rig.markers is in the order of markers.labels
     rig.marker_regions.push_back(std::move(mr));
   }
 

@@ -280,7 +280,7 @@ RigDescription parseRigDescription(const std::string& json_text, const std::file
     r.allowKeys(m, "markers", {"clip", "frame", "labels", "exclude", "device_up", "alignment", "matrix", "icp_iterations", "icp_scale",
                                "max_scale_change", "marker_offset", "fit_power", "max_distance", "max_distance_fraction", "checks",
                                "faces_per_marker", "face_spread", "fan_spread", "fan_spokes", "fan_weight",
-                               "invisible_stiffness"});
+                               "invisible_stiffness", "rigid_regions"});
     MarkerOptions& o = d.markers;
     if (m.contains("clip")) o.clip = r.path(m["clip"], "markers.clip");
     if (m.contains("frame")) {
@@ -347,6 +347,7 @@ RigDescription parseRigDescription(const std::string& json_text, const std::file
     if (m.contains("fan_spokes")) o.fan_spokes = r.integer<int>(m["fan_spokes"], "markers.fan_spokes", 3, 32);
     if (m.contains("fan_weight")) o.fan_weight = r.number(m["fan_weight"], "markers.fan_weight");
     if (!(o.fan_weight >= 0 && o.fan_weight <= 1000)) r.fail("markers.fan_weight", "must be in [0, 1000]");
+    if (m.contains("rigid_regions")) o.rigid_regions = r.boolean(m["rigid_regions"], "markers.rigid_regions");
     if (m.contains("invisible_stiffness")) o.invisible_stiffness = r.number(m["invisible_stiffness"], "markers.invisible_stiffness");
     if (!(o.invisible_stiffness > 0)) r.fail("markers.invisible_stiffness", "must be positive");
   }

@@ -74,6 +74,12 @@ struct BuildRigReport {
          check_seconds = 0, factorize_seconds = 0;
   std::vector<std::string> notes;                 // repairs and choices worth telling the user
   double coarse_seconds = 0;                      // building the coarse level (0: none)
+  struct RigidRegion {
+    std::string markers;        // their labels, '+'-separated
+    double spread_mm = 0;       // the largest spread of their distances over the clip
+    std::int32_t tet_vertices = 0;  // the skin they drive (0: none)
+  };
+  std::vector<RigidRegion> rigid_groups;          // markers found moving rigidly together (rigid_marker_groups.hpp)
 };
 
 // Throws RigBuildError before any heavy work when the rig would have no handle (no markers, no

@@ -67,12 +67,16 @@ struct MarkerOptions {
   std::optional<double> max_distance;      // rig units; a marker further from the surface stops the build
   double max_distance_fraction = 0.06;     // ... without max_distance: this fraction of the mesh's bounding-box diagonal
   AlignmentCheckLimits checks;             // plausibility of an automatic alignment (alignment_checks.hpp)
-  int faces_per_marker = 3;                // invisible tets per marker (closest qualifying boundary faces)
+  int faces_per_marker = 6;                // invisible tets per marker (closest qualifying boundary faces)
   double face_spread = 0.0;                // MarkerBindOptions::face_spread (0: the nearest faces)
   double fan_spread = 0.0;                 // MarkerBindOptions::fan_spread (0: faces)
   int fan_spokes = 6;                      // MarkerBindOptions::fan_spokes
   double fan_weight = 1.0;                 // MarkerBindOptions::fan_weight
-  double invisible_stiffness = 0.1;        // stiffness weight of invisible tets (body tets: 1)
+  double invisible_stiffness = 10.0;       // stiffness weight of invisible tets (body tets: 1): a marker's offset
+                                           // from the skin turns with the skin (docs/fidelity.md)
+  bool rigid_regions = true;               // markers that move rigidly together over the clip drive the skin
+                                           // around them as an oriented region (rigid_marker_groups.hpp);
+                                           // only when the description has no region_handles
   bool keep_zero_points = false;           // C3D samples at x = y = z = 0 with residual 0 are valid, not
                                            // gaps (drivers::C3DReadOptions; CLI --keep-zero-markers)
 };
