@@ -785,10 +785,9 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
       for (const std::int32_t gb : g.markers) extent = std::max(extent, (marker_rig[static_cast<std::size_t>(ga)] - marker_rig[static_cast<std::size_t>(gb)]).norm());
     }
     const std::vector<std::uint8_t> mask = groupSkinMask(body.vertices, marker_rig, g.markers, extent);
-    // The fine level takes the tets wholly in the skin; the coarse level's few large tets rarely are,
-    // so it takes those with a corner in it (and, failing that, the tet nearest the markers' centre),
-    // so that both levels have the same regions.
-    const int needed = inputs.coarse_level ? 1 : 4;
+    // The tets wholly in the skin (the coarse level: with a corner in it); where none is, those with
+    // fewer corners in it, then the tet nearest the markers' centre: every group drives a region, and
+    // both levels have the same regions.
     const std::string who = "markers:" + name;
     const auto free_of_others = [&](std::int32_t t) {
       for (int c = 0; c < 4; ++c) {
@@ -799,15 +798,17 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
     };
     RegionHandle region;
     region.oriented = true;
-    for (std::int32_t t = 0; t < body.tetCount(); ++t) {
-      int in = 0;
-      for (int c = 0; c < 4; ++c) in += mask[static_cast<std::size_t>(body.tets(t, c))];
-      if (in >= needed && free_of_others(t)) {
-        region.tets.push_back(t);
-        for (int c = 0; c < 4; ++c) claim(body.tets(t, c), who);
+    for (int needed = inputs.coarse_level ? 1 : 4; needed >= 1 && region.tets.empty(); --needed) {
+      for (std::int32_t t = 0; t < body.tetCount(); ++t) {
+        int in = 0;
+        for (int c = 0; c < 4; ++c) in += mask[static_cast<std::size_t>(body.tets(t, c))];
+        if (in >= needed && free_of_others(t)) {
+          region.tets.push_back(t);
+          for (int c = 0; c < 4; ++c) claim(body.tets(t, c), who);
+        }
       }
     }
-    if (region.tets.empty() && inputs.coarse_level) {
+    if (region.tets.empty()) {
       Eigen::Vector3d centre = Eigen::Vector3d::Zero();
       for (const std::int32_t m : g.markers) centre += marker_rig[static_cast<std::size_t>(m)] / static_cast<double>(g.markers.size());
       std::int32_t best = -1;
