@@ -260,7 +260,7 @@ void applyHalfWeightsPortable(const BlockedPoseTransferView& b, const float* x_t
 
 // With F16C (x86-64-v3 and up; GCC function multiversioning, the loader picks) each entry's weights
 // are widened as they are loaded: 0.7-0.8x the time of widening a chunk into scratch and summing
-// it (the shipped asset's B^T; docs/fidelity.md, "The volume constraint's frame, cheaper again").
+// it (measured on the shipped asset's B^T).
 // flatten inlines F16cWeights into this v3 code.
 #if defined(TETRIG_MULTIVERSION_ENABLED)
 __attribute__((target("arch=x86-64-v3"), flatten)) void applyHalfWeights(const BlockedPoseTransferView& b, const float* x_tet4,
