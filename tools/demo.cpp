@@ -83,10 +83,10 @@ int runDemo(const DemoOptions& options) {
     run.source = character.source_spec;
     run.frames = options.frames != 0 ? options.frames : character.performance_frames;
   } else {
-    // "-checked": rigs cached by builders before the alignment checks (and the relative distance
-    // limit that 0 now means) are not reused.
+    // "-checked-coarse": rigs cached by older builders (before the alignment checks, the stiff
+    // marker binding, the rigid marker groups and the default coarse level) are not reused.
     const std::filesystem::path cached =
-        cacheDir() / (cacheKey(options.mesh, options.c3d) + "-" + std::to_string(options.max_marker_distance) + "-checked.rig");
+        cacheDir() / (cacheKey(options.mesh, options.c3d) + "-" + std::to_string(options.max_marker_distance) + "-checked-coarse.rig");
     if (std::filesystem::exists(cached)) {
       if (!options.quiet) std::printf("tetrig demo: reusing the rig %s\n", cached.string().c_str());
     } else {
@@ -94,6 +94,7 @@ int runDemo(const DemoOptions& options) {
       in.mesh = options.mesh;
       in.clip = options.c3d;
       if (options.max_marker_distance > 0) in.max_marker_distance = options.max_marker_distance;
+      in.coarse_tet_vertices = rigbuild::kDefaultCoarseTetVertices;  // as build-rig builds it
       rigbuild::Progress progress("tetrig demo", options.quiet ? rigbuild::Progress::Mode::kQuiet : rigbuild::Progress::Mode::kAuto);
       const Rig rig = rigbuild::buildRig(in, nullptr, &progress);
       std::filesystem::create_directories(cached.parent_path());

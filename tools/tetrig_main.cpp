@@ -33,9 +33,6 @@ namespace {
 using namespace tetrig;
 using namespace tetrig::rigbuild;
 
-// build-rig's coarse level when --coarse-tet-vertices is not given (docs/rig-builder.md).
-constexpr std::int32_t kDefaultCoarseTetVertices = 150;
-
 struct BuildArgs {
   std::string mesh, out, rig_json, markers;
   std::int32_t tet_vertices = 0;

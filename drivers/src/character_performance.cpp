@@ -426,4 +426,17 @@ void characterMarkersAt(double t, std::span<CharacterVec3, kCharacterMarkerCount
   for (std::size_t i = 0; i < markers.size(); ++i) out[i] = characterTransformPoint(pose, markers[i].bone, markers[i].tpose);
 }
 
+double characterPosedSkinField(const CharacterPose& pose, const CharacterVec3& point) noexcept {
+  const Eigen::Vector3d p = vec(point);
+  double f = 0.0;
+  for (std::size_t i = 0; i < std::size(kCapsules); ++i) {
+    CharacterCapsule c = kCapsules[i];
+    c.a = characterTransformPoint(pose, c.bone, c.a);
+    c.b = characterTransformPoint(pose, c.bone, c.b);
+    const double fi = capsuleField(c, p);
+    f = i == 0 ? fi : smoothMin(f, fi, kCharacterSkinBlendMm);
+  }
+  return f;
+}
+
 }  // namespace tetrig::drivers

@@ -170,6 +170,50 @@ TEST(CharacterPerformance, ForwardKinematicsIsRigidPerBone) {
   EXPECT_GT(widest_change, 300.0);
 }
 
+// The posed skin: in the T-pose it is the T-pose skin; a point fixed to a bone, beside the middle of
+// that bone's capsule and away from every other capsule's blend, keeps its field value in every pose
+// (the capsule moves with the bone), while the same point left where it was does not.
+TEST(CharacterPerformance, ThePosedSkinMovesEachCapsuleWithItsBone) {
+  CharacterPose tpose, pose;
+  characterPoseAt(0.0, tpose);
+  for (double x = -900; x <= 900; x += 150) {
+    for (double z = 0; z <= 1800; z += 150) {
+      const CharacterVec3 p{x, 37.0, z};
+      EXPECT_NEAR(characterPosedSkinField(tpose, p), characterSkinField(p), 1e-9);
+    }
+  }
+  const auto capsules = characterSkinCapsules();
+  int checked = 0, moved = 0;
+  for (const CharacterCapsule& c : capsules) {
+    // Beside the middle of the segment, 10 mm outside the skin, on a side perpendicular to it.
+    const CharacterVec3 ab{c.b[0] - c.a[0], c.b[1] - c.a[1], c.b[2] - c.a[2]};
+    // The axis most across the segment, minus its component along it.
+    std::size_t across = 0;
+    for (std::size_t k = 1; k < 3; ++k) across = std::abs(ab[k]) < std::abs(ab[across]) ? k : across;
+    CharacterVec3 side{};
+    side[across] = 1.0;
+    const double len2 = ab[0] * ab[0] + ab[1] * ab[1] + ab[2] * ab[2];
+    const double along = (side[0] * ab[0] + side[1] * ab[1] + side[2] * ab[2]) / len2;
+    CharacterVec3 n{side[0] - along * ab[0], side[1] - along * ab[1], side[2] - along * ab[2]};
+    const double nn = std::hypot(n[0], n[1], n[2]);
+    const double r = 0.5 * (c.a_radius + c.b_radius) + 10.0;
+    const CharacterVec3 q{0.5 * (c.a[0] + c.b[0]) + r * n[0] / nn, 0.5 * (c.a[1] + c.b[1]) + r * n[1] / nn,
+                          0.5 * (c.a[2] + c.b[2]) + r * n[2] / nn};
+    ASSERT_TRUE(std::isfinite(characterSkinField(q)));
+    if (std::abs(characterSkinField(q) - 10.0) > 1e-9) continue;  // another capsule's blend reaches it
+    ++checked;
+    bool left_behind_differs = false;
+    for (double t = 0.5; t < characterPerformanceSeconds(); t += 0.75) {
+      characterPoseAt(t, pose);
+      EXPECT_NEAR(characterPosedSkinField(pose, characterTransformPoint(pose, c.bone, q)), 10.0, 1e-9) << "bone " << c.bone << ", t " << t;
+      left_behind_differs = left_behind_differs || std::abs(characterPosedSkinField(pose, q) - 10.0) > 1.0;
+    }
+    moved += left_behind_differs ? 1 : 0;
+  }
+  EXPECT_GE(checked, 10);
+  EXPECT_EQ(moved, checked);
+}
+
 TEST(CharacterPerformance, WalksTurnsRaisesTheArmsTwistsAndCrouches) {
   const Markers rest = markersAt(0.0);
   const CharacterVec3 pelvis_rest = mean(rest, {"LFWT", "RFWT", "LBWT", "RBWT"});

@@ -117,9 +117,8 @@ SurfaceMesh makeCharacterSkin(double voxel_mm, std::int32_t target_vertices, Cha
   mesh.vertices.resize(static_cast<Eigen::Index>(points.size()), 3);
   for (std::size_t v = 0; v < points.size(); ++v) {
     const auto r = static_cast<Eigen::Index>(v);
-    mesh.vertices(r, 0) = printed(points[v][0] / 1000.0);
-    mesh.vertices(r, 1) = printed(points[v][2] / 1000.0);
-    mesh.vertices(r, 2) = printed(-points[v][1] / 1000.0);
+    const Eigen::Vector3d obj = characterObjFromDevice(Eigen::Vector3d(points[v][0], points[v][1], points[v][2]));
+    for (int k = 0; k < 3; ++k) mesh.vertices(r, k) = printed(obj[k]);
   }
   // The level set's faces wind inward: reversed here. Quads split along the shorter diagonal.
   mesh.triangles.resize(static_cast<Eigen::Index>(triangles.size() + 2 * quads.size()), 3);

@@ -20,6 +20,8 @@
 
 #include "tetrig/rigbuild/surface_mesh.hpp"
 
+#include <Eigen/Dense>
+
 #include <cstdint>
 #include <filesystem>
 #include <string>
@@ -28,6 +30,15 @@ namespace tetrig::character {
 
 inline constexpr double kSkinVoxelMm = 10.0;        // grid spacing of the level set
 inline constexpr std::int32_t kSkinVertices = 3000;  // vertex budget of the decimated skin
+
+// The assets' axes: a point in the device's millimetres (Z up, facing -Y) in the OBJ's metres
+// (Y up, facing +Z), and back.
+inline Eigen::Vector3d characterObjFromDevice(const Eigen::Vector3d& device_mm) {
+  return Eigen::Vector3d(device_mm.x(), device_mm.z(), -device_mm.y()) / 1000.0;
+}
+inline Eigen::Vector3d characterDeviceFromObj(const Eigen::Vector3d& obj_m) {
+  return Eigen::Vector3d(obj_m.x(), -obj_m.z(), obj_m.y()) * 1000.0;
+}
 inline constexpr int kBandVoxels = 3;         // narrow band half-width
 
 struct CharacterSkinStats {

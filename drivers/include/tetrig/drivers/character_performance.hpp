@@ -100,4 +100,10 @@ void characterMarkersAt(double t, std::span<CharacterVec3, kCharacterMarkerCount
 // Moves a T-pose point fixed to `bone` by `pose`. No allocation.
 [[nodiscard]] CharacterVec3 characterTransformPoint(const CharacterPose& pose, int bone, const CharacterVec3& tpose) noexcept;
 
+// The skin's implicit function at `p` (mm) in `pose`: every capsule carried rigidly by its bone,
+// joined by the same smooth union as in the T-pose. The character's true skin in that pose (where
+// the skeleton bends, the union of the moved capsules; no flesh model), against which a deformed
+// mesh is measured. Equals characterSkinField() in the T-pose. No allocation.
+[[nodiscard]] double characterPosedSkinField(const CharacterPose& pose, const CharacterVec3& p) noexcept;
+
 }  // namespace tetrig::drivers

@@ -39,6 +39,11 @@ struct MarkerPositions {
   std::string what = "the given marker positions";  // names them in messages
 };
 
+// The coarse level's tet-vertex budget when a marker-driven rig from a surface mesh is built
+// without one being asked for (tetrig build-rig, the demo's rigs; docs/rig-builder.md): it is built
+// when the rig has at least 4 times as many tet vertices.
+inline constexpr std::int32_t kDefaultCoarseTetVertices = 150;
+
 struct BuildRigInputs {
   std::filesystem::path mesh;                     // surface (OBJ, PLY, OFF, ...) or tet mesh (.node/.ele, .mesh)
   RigDescription description;                     // defaults when no JSON is given
