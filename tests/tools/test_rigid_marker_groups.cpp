@@ -131,6 +131,23 @@ TEST(RigidMarkerGroups, NoiseWithinTheToleranceKeepsTheGroupsAndASlidingMarkerLe
   EXPECT_TRUE(head);
 }
 
+// A static trial (the T-pose held) keeps every distance: one group of all markers, which spans the
+// whole body and is left out, reported. The performance itself gives the bones' groups, none left
+// out.
+TEST(RigidMarkerGroups, AStaticClipGivesNoGroupButReportsWhy) {
+  const MarkerFrameReader still = [](std::int64_t, std::vector<Eigen::Vector3d>& x, std::vector<std::uint8_t>& valid) {
+    performance()(0, x, valid);
+  };
+  std::vector<RigidMarkerGroup> too_large;
+  EXPECT_TRUE(findRigidMarkerGroups(300, dr::kCharacterMarkerCount, still, restPositions(), {}, &too_large).empty());
+  ASSERT_EQ(too_large.size(), 1u);
+  EXPECT_EQ(too_large[0].markers.size(), static_cast<std::size_t>(dr::kCharacterMarkerCount));
+  EXPECT_GT(too_large[0].extent_mm, 1500.0);
+  const std::vector<RigidMarkerGroup> moving = findRigidMarkerGroups(kFrames, dr::kCharacterMarkerCount, performance(), restPositions(), {}, &too_large);
+  EXPECT_FALSE(moving.empty());
+  EXPECT_TRUE(too_large.empty());
+}
+
 TEST(RigidMarkerGroups, CollinearMarkersGiveNoGroupAndGapsAreSkipped) {
   // Three markers on one line move rigidly: no orientation, so no group.
   const MarkerFrameReader line = [](std::int64_t f, std::vector<Eigen::Vector3d>& x, std::vector<std::uint8_t>& valid) {

@@ -683,7 +683,16 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
           if (valid[i]) x[i] = Eigen::Vector3d(k * pos[3 * p], k * pos[3 * p + 1], k * pos[3 * p + 2]);
         }
       };
-      rigid_groups = findRigidMarkerGroups(static_cast<std::int64_t>(mc.clip.frameCount()), mc.points.size(), read, marker_rig);
+      std::vector<RigidMarkerGroup> too_large;
+      rigid_groups = findRigidMarkerGroups(static_cast<std::int64_t>(mc.clip.frameCount()), mc.points.size(), read, marker_rig, {}, &too_large);
+      for (const RigidMarkerGroup& g : too_large) {
+        if (inputs.coarse_level) break;
+        std::string names;
+        for (const std::int32_t m : g.markers) names += (names.empty() ? "" : ", ") + markers.labels[static_cast<std::size_t>(m)];
+        report.notes.push_back(std::to_string(g.markers.size()) + " markers (" + names + ") keep their distances over the clip but span " +
+                               fmt("%.0f", g.extent_mm) + " mm, too much of the body for one part: the clip does not move the joints between "
+                               "them, so no rigid groups are taken from it there (build the rig from a clip in which the performer moves)");
+      }
     }
   }
 

@@ -75,7 +75,8 @@ std::vector<double> markerDistanceSpreads(std::int64_t frame_count, std::size_t 
 }
 
 std::vector<RigidMarkerGroup> findRigidMarkerGroups(std::int64_t frame_count, std::size_t marker_count, const MarkerFrameReader& frame,
-                                                    const std::vector<Eigen::Vector3d>& rest, const RigidMarkerGroupOptions& options) {
+                                                    const std::vector<Eigen::Vector3d>& rest, const RigidMarkerGroupOptions& options,
+                                                    std::vector<RigidMarkerGroup>* too_large) {
   const std::size_t n = marker_count;
   std::vector<double> median;
   const std::vector<double> spread = markerDistanceSpreads(frame_count, n, frame, options, &median);
@@ -109,6 +110,9 @@ std::vector<RigidMarkerGroup> findRigidMarkerGroups(std::int64_t frame_count, st
     }
     members[static_cast<std::size_t>(b)].clear();
   }
+  double set_extent = 0.0;  // the whole marker set's: the largest median distance of any pair
+  for (const double d : median) set_extent = std::isfinite(d) ? std::max(set_extent, d) : set_extent;
+  if (too_large) too_large->clear();
   std::vector<RigidMarkerGroup> groups;
   for (std::vector<std::int32_t>& m : members) {
     if (static_cast<int>(m.size()) < options.min_markers) continue;
@@ -122,6 +126,10 @@ std::vector<RigidMarkerGroup> findRigidMarkerGroups(std::int64_t frame_count, st
         g.spread_mm = std::max(g.spread_mm, spread[k]);
         g.extent_mm = std::max(g.extent_mm, median[k]);
       }
+    }
+    if (g.extent_mm > options.max_extent_fraction * set_extent) {
+      if (too_large) too_large->push_back(std::move(g));
+      continue;
     }
     groups.push_back(std::move(g));
   }

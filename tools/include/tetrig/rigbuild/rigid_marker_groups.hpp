@@ -10,6 +10,12 @@
 // (their rest triangle of largest area has an area of at least min_area_fraction of the
 // squared largest distance), else it cannot give an orientation and is dropped.
 //
+// A clip shows which markers move together only where the performer moved the joints between
+// them: in a static calibration trial every pair keeps its distance, and all markers would form
+// one group. So a group whose extent (its largest median marker distance) exceeds
+// max_extent_fraction of the whole marker set's (the largest median distance of any pair) is not
+// a body part the clip has told apart: it is left out (returned in `too_large`, for the report).
+//
 // The skin a group drives (groupSkinMask): the tet vertices whose nearest marker at rest (over
 // every marker of the rig, not only the group's) is one of the group's, within
 // radius_fraction times the group's largest marker distance of it. The nearest-marker rule keeps
@@ -36,6 +42,7 @@ struct RigidMarkerGroupOptions {
   double min_area_fraction = 0.05;     // non-collinearity at rest (see above)
   int max_frames = 2000;               // frames sampled from the clip
   double min_valid_fraction = 0.5;     // a pair needs both markers valid in this fraction of the sample
+  double max_extent_fraction = 0.35;   // a group spans at most this fraction of the marker set (see above)
 };
 
 struct RigidMarkerGroup {
@@ -49,7 +56,8 @@ struct RigidMarkerGroup {
 using MarkerFrameReader = std::function<void(std::int64_t, std::vector<Eigen::Vector3d>&, std::vector<std::uint8_t>&)>;
 
 std::vector<RigidMarkerGroup> findRigidMarkerGroups(std::int64_t frame_count, std::size_t marker_count, const MarkerFrameReader& frame,
-                                                    const std::vector<Eigen::Vector3d>& rest, const RigidMarkerGroupOptions& options = {});
+                                                    const std::vector<Eigen::Vector3d>& rest, const RigidMarkerGroupOptions& options = {},
+                                                    std::vector<RigidMarkerGroup>* too_large = nullptr);
 
 // The spread_ij of every pair (row-major marker_count x marker_count; +inf where a pair had too few
 // frames together), as findRigidMarkerGroups measures it. For reports and tests.
