@@ -105,6 +105,7 @@
 #define TETRIG_SHM_MARKER_MEASURED 1u  /* the measurement itself */
 #define TETRIG_SHM_MARKER_PREDICTED 2u /* no measurement this frame: predicted (occluded) */
 #define TETRIG_SHM_MARKER_BLENDED 3u   /* measured again, blending from the prediction back */
+#define TETRIG_SHM_MARKER_REJECTED 4u  /* measured, but the sample was implausible (rejected): predicted instead */
 
 /* TetrigShmHeader.state (the producer's state; 0 only before the first heartbeat) */
 #define TETRIG_SHM_STATE_RUNNING 1u      /* frames arrive from the source */

@@ -62,6 +62,10 @@ void stageMarkers(const LiveRig& live, float* positions, std::uint8_t* states, s
     p[0] = static_cast<float>(t.x());
     p[1] = static_cast<float>(t.y());
     p[2] = static_cast<float>(t.z());
+    if (live.markerRejected()[k] != 0) {
+      states[k] = kShmMarkerRejected;
+      continue;
+    }
     switch (live.markerState(static_cast<std::int32_t>(k))) {
       case MarkerTrackState::kMeasured: states[k] = kShmMarkerMeasured; break;
       case MarkerTrackState::kReturning: states[k] = kShmMarkerBlended; break;

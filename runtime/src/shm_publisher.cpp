@@ -39,6 +39,7 @@ static_assert(kShmMarkerUnknown == TETRIG_SHM_MARKER_UNKNOWN);
 static_assert(kShmMarkerMeasured == TETRIG_SHM_MARKER_MEASURED);
 static_assert(kShmMarkerPredicted == TETRIG_SHM_MARKER_PREDICTED);
 static_assert(kShmMarkerBlended == TETRIG_SHM_MARKER_BLENDED);
+static_assert(kShmMarkerRejected == TETRIG_SHM_MARKER_REJECTED);
 
 namespace {
 

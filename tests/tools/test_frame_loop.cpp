@@ -123,8 +123,8 @@ TEST_P(FrameLoopBitExact, EveryPublishedFrameEqualsAnOfflineRunBitForBit) {
   offline.bindLabels(rigLabels(demoRig()));
   auto frame = std::make_unique<MarkerFrame>();
   int predicted_frames = 0, held_frames = 0;
-  int state_counts[4] = {0, 0, 0, 0};
-  constexpr std::uint64_t kThrow = 100;  // one valid marker thrown 100 m in this frame: rejected and counted
+  int state_counts[5] = {0, 0, 0, 0, 0};
+  constexpr std::uint64_t kThrow = 100;  // one valid marker thrown 100 m in this frame: rejected, counted, published so
   for (std::uint64_t k = 0; k < 240; ++k) {
     source->fillFrame(k, *frame);
     if (k == kThrow) {
@@ -158,20 +158,25 @@ TEST_P(FrameLoopBitExact, EveryPublishedFrameEqualsAnOfflineRunBitForBit) {
       for (int c = 0; c < 3; ++c)
         ASSERT_EQ(marker_positions[3 * m + static_cast<std::size_t>(c)], static_cast<float>(t[c])) << "marker " << m << " frame " << k;
       const MarkerTrackState state = offline.markerState(static_cast<std::int32_t>(m));
-      const std::uint8_t want_state = state == MarkerTrackState::kMeasured    ? TETRIG_SHM_MARKER_MEASURED
+      const std::uint8_t want_state = offline.markerRejected()[m] != 0         ? TETRIG_SHM_MARKER_REJECTED
+                                      : state == MarkerTrackState::kMeasured  ? TETRIG_SHM_MARKER_MEASURED
                                       : state == MarkerTrackState::kReturning ? TETRIG_SHM_MARKER_BLENDED
                                                                               : TETRIG_SHM_MARKER_PREDICTED;
       ASSERT_EQ(marker_states[m], want_state) << "marker " << m << " frame " << k;
-      ASSERT_LT(marker_states[m], 4);
+      ASSERT_LT(marker_states[m], 5);
       ++state_counts[marker_states[m]];
-      if (marker_states[m] == TETRIG_SHM_MARKER_PREDICTED) ++occluded;
+      if (marker_states[m] == TETRIG_SHM_MARKER_REJECTED) {
+        EXPECT_EQ(k, kThrow) << "marker " << m;
+      }
+      if (marker_states[m] == TETRIG_SHM_MARKER_PREDICTED || marker_states[m] == TETRIG_SHM_MARKER_REJECTED) ++occluded;
     }
-    EXPECT_EQ(occluded, info.occluded_markers) << "frame " << k << ": predicted markers are the occluded ones";
+    EXPECT_EQ(occluded, info.occluded_markers) << "frame " << k << ": predicted and rejected markers are the occluded ones";
   }
   EXPECT_EQ(state_counts[TETRIG_SHM_MARKER_UNKNOWN], 0);
   EXPECT_GT(state_counts[TETRIG_SHM_MARKER_MEASURED], 0);
   EXPECT_GT(state_counts[TETRIG_SHM_MARKER_PREDICTED], 0) << "the dropouts were meant to occlude markers";
   EXPECT_GT(state_counts[TETRIG_SHM_MARKER_BLENDED], 0) << "returning markers were meant to blend back";
+  EXPECT_EQ(state_counts[TETRIG_SHM_MARKER_REJECTED], 1) << "the thrown marker, in its frame";
   h.loop->requestStop();
   h.loop->join();
   EXPECT_GT(predicted_frames, 0) << "the dropouts were meant to exercise the occlusion prediction";

@@ -156,8 +156,10 @@ void main() { o_color = texture(u_image, v_uv); }
 // bound framebuffer, like the picture sheet's dots.
 constexpr float kMarkerPx = 9.0f;
 // Colour of each TETRIG_SHM_MARKER_* state: unknown grey, measured green, predicted (occluded)
-// red-orange, blended (returning) yellow.
-constexpr float kMarkerRgb[4][3] = {{0.62f, 0.62f, 0.66f}, {0.20f, 0.85f, 0.30f}, {1.00f, 0.30f, 0.10f}, {1.00f, 0.85f, 0.10f}};
+// red-orange, blended (returning) yellow, rejected (implausible sample) magenta.
+constexpr unsigned kMarkerStates = 5;
+constexpr float kMarkerRgb[kMarkerStates][3] = {
+    {0.62f, 0.62f, 0.66f}, {0.20f, 0.85f, 0.30f}, {1.00f, 0.30f, 0.10f}, {1.00f, 0.85f, 0.10f}, {0.90f, 0.20f, 0.90f}};
 
 class MarkerDots {
  public:
@@ -210,7 +212,7 @@ void main() {
     for (std::size_t k = 0; k < states.size() && 3 * k + 2 < xyz.size(); ++k) {
       const float* p = &xyz[3 * k];
       if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2])) continue;
-      const float* c = kMarkerRgb[states[k] < 4 ? states[k] : 0];
+      const float* c = kMarkerRgb[states[k] < kMarkerStates ? states[k] : 0];
       data_.insert(data_.end(), {p[0], p[1], p[2], c[0], c[1], c[2]});
     }
     glBindBuffer(GL_ARRAY_BUFFER, vbo_);
@@ -457,7 +459,7 @@ class Viewer {
     if (info.frame_id <= last_id_) return false;
     if (has_marker_positions_) {
       std::fill(std::begin(state_counts_), std::end(state_counts_), 0u);
-      for (const std::uint8_t st : marker_states_) ++state_counts_[st < 4 ? st : 0];
+      for (const std::uint8_t st : marker_states_) ++state_counts_[st < kMarkerStates ? st : 0];
       if (dots_) dots_->set(marker_positions_, marker_states_);
     }
     const std::int64_t seen = tetrig_shm_now_ns();
@@ -560,9 +562,10 @@ class Viewer {
     if (!producer_note_.empty()) lines.push_back(producer_note_);
     if (show_markers_ && instances_ > 0) {
       if (has_marker_positions_ && have_frame_) {
-        lines.push_back(format("markers %u: measured %u  blended %u  predicted %u  unknown %u", marker_count_,
+        lines.push_back(format("markers %u: measured %u  blended %u  predicted %u  rejected %u  unknown %u", marker_count_,
                                state_counts_[TETRIG_SHM_MARKER_MEASURED], state_counts_[TETRIG_SHM_MARKER_BLENDED],
-                               state_counts_[TETRIG_SHM_MARKER_PREDICTED], state_counts_[TETRIG_SHM_MARKER_UNKNOWN]));
+                               state_counts_[TETRIG_SHM_MARKER_PREDICTED], state_counts_[TETRIG_SHM_MARKER_REJECTED],
+                               state_counts_[TETRIG_SHM_MARKER_UNKNOWN]));
       } else {
         lines.push_back(format("markers: %u labelled, %u occluded this frame%s%s", marker_count_,
                                have_frame_ ? static_cast<unsigned>(info_.occluded_markers) : 0u,
@@ -712,7 +715,7 @@ class Viewer {
   bool has_marker_positions_ = false;             // the segment carries the marker block (layout 1.1)
   std::vector<float> marker_positions_;           // the newest frame's markers (rig units, label order)
   std::vector<std::uint8_t> marker_states_;       // TETRIG_SHM_MARKER_* per marker
-  unsigned state_counts_[4] = {0, 0, 0, 0};       // markers per state in the newest frame
+  unsigned state_counts_[kMarkerStates] = {0, 0, 0, 0, 0};       // markers per state in the newest frame
   std::string rig_name_, status_, producer_note_;
   std::vector<std::uint32_t> triangles_, drawn_triangles_;
   std::vector<float> positions_;

@@ -50,6 +50,7 @@ inline constexpr std::uint8_t kShmMarkerUnknown = 0;    // no (finite) target
 inline constexpr std::uint8_t kShmMarkerMeasured = 1;   // the measurement itself
 inline constexpr std::uint8_t kShmMarkerPredicted = 2;  // no measurement: predicted (occluded)
 inline constexpr std::uint8_t kShmMarkerBlended = 3;    // measured again, blending back from the prediction
+inline constexpr std::uint8_t kShmMarkerRejected = 4;   // its sample was rejected as implausible: predicted instead
 
 struct ShmPublisherOptions {
   std::string name;              // "/name": a leading '/', no other '/', at most 255 bytes
