@@ -147,7 +147,7 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
 
   // 2. The source, its labels, the binding.
   devices::SourceOpenOptions open;
-  open.pacing = options.as_fast_as_possible ? drivers::Pacing::kAsFastAsPossible : drivers::Pacing::kRealTime;
+  open.pacing = options.as_fast_as_possible ? drivers::Pacing::kLockstep : drivers::Pacing::kRealTime;
   open.speed = options.speed;
   open.loop = options.loop;
   open.rate_hz = options.rate_hz;

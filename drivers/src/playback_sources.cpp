@@ -32,6 +32,7 @@ namespace {
 
 constexpr auto kRelaxed = std::memory_order_relaxed;
 constexpr std::int64_t kSleepSliceNs = 10'000'000;  // longest single wait of a paced sleep
+constexpr int kLockstepSliceUs = 50;  // as-fast-as-possible: poll of the mailbox while the solver has not taken a frame
 constexpr std::size_t kRateFrames = 64;             // frames whose intervals give a replay's rate
 
 // prefix + decimal number (built by appending: GCC 12 warns falsely about "literal" + to_string).
@@ -52,6 +53,7 @@ double arrivalRate(double rate, Pacing pacing, double speed) { return pacing == 
 
 std::string pacingText(Pacing pacing, double speed) {
   if (pacing == Pacing::kAsFastAsPossible) return ", as fast as possible";
+  if (pacing == Pacing::kLockstep) return ", as fast as the solver takes frames";
   if (speed != 1.0) {
     char buffer[40];
     std::snprintf(buffer, sizeof(buffer), ", speed x%g", speed);
@@ -77,6 +79,12 @@ class StopSignal {
     cv_.notify_all();
   }
   [[nodiscard]] bool requested() const noexcept { return stop_.load(std::memory_order_acquire); }
+  // Driver thread: waits, without spinning, while `busy()` holds, until stop is requested.
+  template <class Busy>
+  void waitWhile(Busy busy) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    while (!stop_.load(kRelaxed) && busy()) cv_.wait_for(lock, std::chrono::microseconds(kLockstepSliceUs));
+  }
   [[nodiscard]] const std::atomic<bool>* flag() const noexcept { return &stop_; }
 
   // Driver thread: returns at `target_ns` (monotonicNowNs clock) or as soon as stop is requested.
@@ -115,11 +123,14 @@ struct SourceCounters {
 
 // The driver thread's side of the mailbox: stamps, commits and counts frames. As a sink
 // (operator()) it copies a playback's frame into the producer slot; slot()/commit() are the
-// zero-copy form for decoders. Driver thread only; no allocation, no exception, no lock.
+// zero-copy form for decoders. Driver thread only; no allocation, no exception.
+// In lockstep (Pacing::kLockstep) commit() first waits until the solver has taken the
+// previous frame: no frame is dropped, and the driver thread sleeps instead of spinning a core
+// against the solver and the segment's readers.
 class Publisher {
  public:
-  Publisher(FrameMailbox& mailbox, const StopSignal& signal, SourceCounters& counters) noexcept
-      : mailbox_(mailbox), signal_(signal), counters_(counters) {}
+  Publisher(FrameMailbox& mailbox, StopSignal& signal, SourceCounters& counters, bool lockstep) noexcept
+      : mailbox_(mailbox), signal_(signal), counters_(counters), lockstep_(lockstep) {}
 
   // Sink for C3DPlayback::run / SyntheticSource::run: false (= stop the run) once stop was
   // requested, without publishing.
@@ -131,6 +142,7 @@ class Publisher {
   }
   [[nodiscard]] MarkerFrame& slot() noexcept { return mailbox_.producerSlot(); }
   void commit() noexcept {
+    if (lockstep_) signal_.waitWhile([this] { return mailbox_.hasPending(); });
     MarkerFrame& frame = mailbox_.producerSlot();
     frame.receive_timestamp_ns = monotonicNowNs();
     const std::uint16_t rejected = frame.rejected_count;
@@ -144,8 +156,9 @@ class Publisher {
 
  private:
   FrameMailbox& mailbox_;
-  const StopSignal& signal_;
+  StopSignal& signal_;
   SourceCounters& counters_;
+  bool lockstep_;
 };
 
 // What differs between the kinds: one playback from the beginning, on the driver thread.
@@ -159,12 +172,13 @@ class Producer {
 class PlaybackSource final : public MarkerSource {
  public:
   PlaybackSource(std::unique_ptr<Producer> producer, std::string description, double rate_hz, bool has_labels,
-                 std::vector<std::string> labels)
+                 std::vector<std::string> labels, Pacing pacing)
       : producer_(std::move(producer)),
         description_(std::move(description)),
         rate_hz_(rate_hz),
         has_labels_(has_labels),
-        labels_(std::move(labels)) {}
+        labels_(std::move(labels)),
+        lockstep_(pacing == Pacing::kLockstep) {}
   ~PlaybackSource() override { stop(); }
   PlaybackSource(const PlaybackSource&) = delete;
   PlaybackSource& operator=(const PlaybackSource&) = delete;
@@ -223,7 +237,7 @@ class PlaybackSource final : public MarkerSource {
 
  private:
   void body(FrameMailbox& mailbox) noexcept {
-    Publisher publisher(mailbox, signal_, counters_);
+    Publisher publisher(mailbox, signal_, counters_, lockstep_);
     const InterruptiblePacingClock clock{&signal_};
     try {
       const PacedRunStats run = producer_->run(publisher, clock);
@@ -245,6 +259,7 @@ class PlaybackSource final : public MarkerSource {
   const double rate_hz_;
   const bool has_labels_;
   const std::vector<std::string> labels_;
+  const bool lockstep_;  // Pacing::kLockstep: the publisher waits for the solver (Publisher)
   StopSignal signal_;
   SourceCounters counters_;
   std::atomic<bool> running_{false};
@@ -462,7 +477,7 @@ std::unique_ptr<MarkerSource> makeC3DSource(std::shared_ptr<const C3DClip> clip,
                             (rate > 0.0 ? formatHz(rate) : std::string("no frame rate")) + pacingText(pacing, speed) +
                             (loop ? ", loop" : "");
   return std::make_unique<PlaybackSource>(std::move(producer), std::move(description), arrivalRate(rate, pacing, speed), true,
-                                          std::move(labels));
+                                          std::move(labels), pacing);
 }
 
 std::unique_ptr<MarkerSource> makeSyntheticSource(SyntheticOptions options, std::vector<std::string> labels) {
@@ -479,7 +494,7 @@ std::unique_ptr<MarkerSource> makeSyntheticSource(SyntheticOptions options, std:
   std::string description = "synthetic, " + std::to_string(count) + " markers, " + formatHz(o.rate_hz) +
                             pacingText(o.pacing, o.speed);
   return std::make_unique<PlaybackSource>(std::move(producer), std::move(description), arrivalRate(o.rate_hz, o.pacing, o.speed), true,
-                                          std::move(labels));
+                                          std::move(labels), o.pacing);
 }
 
 std::unique_ptr<MarkerSource> makeReplaySource(std::filesystem::path recording, Pacing pacing, double speed) {
@@ -501,7 +516,7 @@ std::unique_ptr<MarkerSource> makeReplaySource(std::filesystem::path recording, 
   auto producer = std::make_unique<ReplayProducer>(std::move(loaded), kind, pacing, speed);
   return std::make_unique<PlaybackSource>(std::move(producer), std::move(description), arrivalRate(scan.rate_hz, pacing, speed),
                                           scan.has_labels,
-                                          std::move(scan.labels));
+                                          std::move(scan.labels), pacing);
 }
 
 }  // namespace tetrig::drivers

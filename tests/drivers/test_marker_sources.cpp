@@ -420,6 +420,44 @@ TEST(SyntheticSourceShape, EndlessSourceNeverFinishesAndStops) {
   source->stop();  // idempotent
 }
 
+// Lockstep (tetrig run --as-fast-as-possible): the source publishes the next frame only once the
+// consumer took the last one. Without a consumer it waits (one frame published) and still stops at
+// once; with a slow consumer every frame is taken in order and none is dropped.
+TEST(SyntheticSourceShape, LockstepWaitsForTheConsumerAndDropsNothing) {
+  SyntheticOptions options;
+  options.marker_count = 3;
+  options.max_frames = 200;
+  options.pacing = Pacing::kLockstep;
+  auto source = makeSyntheticSource(options);
+  EXPECT_NE(source->describe().find("as fast as the solver takes frames"), std::string::npos) << source->describe();
+  auto mailbox = std::make_unique<FrameMailbox>();
+  ASSERT_TRUE(source->start(*mailbox));
+  EXPECT_TRUE(waitFor([&] { return mailbox->published() >= 1; }));
+  std::this_thread::sleep_for(30ms);
+  EXPECT_EQ(mailbox->published(), 1u) << "no consumer took the first frame: the source waits";
+  const auto t0 = std::chrono::steady_clock::now();
+  source->stop();
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, 500ms);
+
+  auto source2 = makeSyntheticSource(options);
+  auto mailbox2 = std::make_unique<FrameMailbox>();
+  ASSERT_TRUE(source2->start(*mailbox2));
+  auto frame = std::make_unique<MarkerFrame>();
+  std::uint64_t taken = 0;
+  std::int64_t last = -1;
+  while (taken < 200 && waitFor([&] { return mailbox2->hasPending(); }, 2s)) {
+    ASSERT_TRUE(mailbox2->tryTakeLatest(*frame));
+    EXPECT_EQ(static_cast<std::int64_t>(frame->frame_counter), last + 1);
+    last = static_cast<std::int64_t>(frame->frame_counter);
+    ++taken;
+    if (taken % 50 == 0) std::this_thread::sleep_for(5ms);  // a slow consumer now and then
+  }
+  EXPECT_EQ(taken, 200u);
+  EXPECT_TRUE(waitFor([&] { return source2->finished(); }));
+  EXPECT_EQ(mailbox2->dropped(), 0u);
+  source2->stop();
+}
+
 // The driver thread allocates nothing per frame: a run of 2000 frames costs the same number of
 // allocations (thread start) as a run of 10.
 TEST(SourceShape, NoAllocationPerFrame) {

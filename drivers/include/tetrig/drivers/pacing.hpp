@@ -17,8 +17,11 @@
 namespace tetrig::drivers {
 
 enum class Pacing : std::uint8_t {
-  kRealTime,        // item k is released at start + (its time - first time) / speed
-  kAsFastAsPossible // no sleeping at all
+  kRealTime,         // item k is released at start + (its time - first time) / speed
+  kAsFastAsPossible, // no sleeping at all
+  kLockstep          // a MarkerSource only: as fast as its consumer takes frames (each frame waits, sleeping,
+                     // until the mailbox's previous one was taken: none dropped, no core spun); the
+                     // pacing loops themselves treat it as kAsFastAsPossible
 };
 
 // The default clock: std::chrono::steady_clock (CLOCK_MONOTONIC on Linux, the clock of
