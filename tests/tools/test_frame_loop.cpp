@@ -105,8 +105,10 @@ TEST_P(FrameLoopBitExact, EveryPublishedFrameEqualsAnOfflineRunBitForBit) {
   options.lock_memory = false;
   LiveRigOptions live_options;
   live_options.normals = true;
-  live_options.volume_constraint = GetParam();
-  live_options.after_publish_iterations = GetParam() ? 2 : 0;
+  // false: the plain settings; true: the defaults (prediction, implicit guard, volume constraint)
+  // and iterations after publishing.
+  if (!GetParam()) live_options.solver = SolverSettings::plain();
+  live_options.solver.after_publish_iterations = GetParam() ? 2 : 0;
   LiveRigOptions split_options = live_options;
   split_options.split_pose_transfer = true;  // the live side on two threads, the offline side on one
   Harness h("bitexact", options, split_options);
