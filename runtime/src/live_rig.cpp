@@ -511,6 +511,8 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
       stats.step.flags |= more.flags;
       stats.step.energy = more.energy;
       stats.step.exact_rotations += more.exact_rotations;
+      stats.step.guarded_solves += more.guarded_solves;  // the guard of every iteration of the frame
+      stats.step.guarded_tets = more.guarded_tets;        // held after the frame's last iteration
       stats.step.solve_ns += more.solve_ns;
       stats.step.rotation_ns += more.rotation_ns;
       stats.step.interpolation_ns += more.interpolation_ns;

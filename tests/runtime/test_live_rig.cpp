@@ -1364,6 +1364,55 @@ TEST(LiveRigCoarse, TheCoarseLevelStartsTheFrameNearerTheConvergedPose) {
   EXPECT_LT(lag_guided, 0.5 * lag_plain);
 }
 
+// A frame split into steps (the volume constraint's cold start: one iteration per step; the
+// re-prediction of an occluded marker: one iteration, then the rest) reports the inversion guard of
+// all its iterations, as an unsplit frame does: guarded_solves summed over the steps.
+TEST(LiveRig, ASplitFrameReportsTheGuardOfAllItsIterations) {
+  const Rig rig = makeBarRig();
+  LiveRigOptions options;
+  options.solver = SolverSettings::plain();
+  options.solver.inversion_guard = 3.0;
+  options.solver.inversion_guard_solves = 1;
+  options.solver.inversion_guard_threshold = 1.0;  // every squashed tet is held
+  LiveRigOptions constrained = options;
+  constrained.solver.volume_constraint = true;
+  LiveRig whole(rig, options), split(rig, constrained);
+  whole.bindLabels(labelTable());
+  split.bindLabels(labelTable());
+  ASSERT_FALSE(split.volumeNotKept());
+  // The bar squashed to 0.6 of its length: its tets are held in every iteration.
+  std::vector<Eigen::Vector3d> squashed;
+  for (const RigMarker& m : rig.markers) squashed.emplace_back(m.rest_position.x(), m.rest_position.y(), 0.6 * m.rest_position.z());
+  std::vector<float> x(static_cast<std::size_t>(whole.fineVertexCount()) * 3);
+  const std::vector<bool> all(kMarkers, true);
+  const MarkerFrame first = makeFrame(rig, squashed, all, 0);
+  // Unsplit, from rest: the first iteration's global step holds nothing yet (the rest pose squashes
+  // no tet), the next two do.
+  LiveRig reference(rig, options);
+  reference.bindLabels(labelTable());
+  const LiveFrameStats unsplit = reference.processFrame(first, StepBudget{3}, x.data(), nullptr);
+  ASSERT_EQ(unsplit.step.iterations, 3);
+  ASSERT_EQ(unsplit.step.guarded_solves, 2);
+  ASSERT_GT(unsplit.step.guarded_tets, 0);
+  // From the squashed pose every iteration holds tets (unsplit).
+  const LiveFrameStats again = reference.processFrame(makeFrame(rig, squashed, all, 1), StepBudget{3}, x.data(), nullptr);
+  ASSERT_EQ(again.step.guarded_solves, 3);
+  // The cold start of the volume constraint: three steps of one iteration, the first holding nothing.
+  const LiveFrameStats cold = split.processFrame(first, StepBudget{3}, x.data(), nullptr);
+  EXPECT_EQ(cold.step.iterations, 3);
+  EXPECT_EQ(cold.step.guarded_solves, 2) << "the guard of the second and third steps";
+  EXPECT_GT(cold.step.guarded_tets, 0);
+  // An occluded marker, from the squashed pose: one iteration, the predictions refreshed, then two more.
+  (void)whole.processFrame(first, StepBudget{3}, x.data(), nullptr);
+  std::vector<bool> valid(kMarkers, true);
+  valid[3] = false;
+  const LiveFrameStats refreshed = whole.processFrame(makeFrame(rig, squashed, valid, 1), StepBudget{3}, x.data(), nullptr);
+  ASSERT_TRUE(refreshed.flags & kLiveMarkersPredicted);
+  EXPECT_EQ(refreshed.step.iterations, 3);
+  EXPECT_EQ(refreshed.step.guarded_solves, 3);
+  EXPECT_GT(refreshed.step.guarded_tets, 0);
+}
+
 // The volume constraint needs a closed fine mesh: on a rig whose fine mesh is open the live rig
 // skips it and says so (volumeNotKept), and runs as without it; on a closed one it keeps it.
 TEST(LiveRig, TheVolumeIsNotKeptOnAnOpenFineMeshAndSaysSo) {
