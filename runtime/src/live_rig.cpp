@@ -76,12 +76,6 @@ std::vector<std::int32_t> markerVertices(const Rig& rig) {
   return v;
 }
 
-MarkerPredictionOptions predictionOptions(const LiveRigOptions& options) {
-  MarkerPredictionOptions p;
-  p.rings = options.prediction_rings;
-  return p;
-}
-
 std::string_view afterLastColon(std::string_view s) {
   const std::size_t colon = s.rfind(':');
   return colon == std::string_view::npos ? s : s.substr(colon + 1);
@@ -126,7 +120,7 @@ LiveRig::LiveRig(const Rig& rig, const LiveRigOptions& options, const Rig* coars
     : rig_(&validated(rig)),
       options_(options),
       deformer_(rig.tet_mesh, liveSetup(rig, options, coarseRigOf(rig, options, coarse_rig) != nullptr)),
-      predictor_(rig.tet_mesh, rig.body_vertex_count, rig.body_tet_count, markerVertices(rig), predictionOptions(options)) {
+      predictor_(rig.tet_mesh, rig.body_vertex_count, rig.body_tet_count, markerVertices(rig), MarkerPredictionOptions{}) {
   if (!(options.occlusion_blend_s >= 0.0) || !std::isfinite(options.occlusion_blend_s)) {
     throw std::invalid_argument("live rig: occlusion_blend_s must be finite and >= 0");
   }
@@ -462,7 +456,7 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
   // predictions would only chase the body they drive.
   std::uint32_t anchored = 0;
   for (std::size_t k = 0; k < markers; ++k) anchored += tracks_[k].state == MarkerTrackState::kMeasured ? 1u : 0u;
-  const bool refresh = options_.refresh_predictions && budget.max_iterations >= 2 && anchored > 0 &&
+  const bool refresh = budget.max_iterations >= 2 && anchored > 0 &&
                        (stats.occluded_markers > 0 || blending > 0);
   if (coarse_) {
     // The coarse level on the same frame's marker targets: it sets the fine frame's start.

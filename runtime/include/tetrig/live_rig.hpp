@@ -41,7 +41,7 @@
 // is taken again (blending back from the prediction).
 // Published poses: outside tetrig/pose_bound.hpp's box (kPoseBoundReach rest diagonals around the
 // per-axis median of the markers' targets) the last pose is written again and flagged.
-// Refresh (refresh_predictions, on by default): when some markers are predicted or blending and
+// Refresh: when some markers are predicted or blending and
 // some are fully measured, the step runs one iteration, the predictions are recomputed from the
 // pose that iteration gave, and the remaining iterations run with the new targets (predictions
 // otherwise lag the measured markers by one frame); the iteration count and deadline are those
@@ -79,7 +79,6 @@ namespace tetrig {
 struct LiveRigOptions {
   double occlusion_blend_s = 0.15;   // blend time when a marker drops out and when it returns (0: no blend)
   bool normals = false;              // also write per-vertex normals of the fine mesh
-  int prediction_rings = 3;          // anchor rings of the occlusion prediction (MarkerPredictionOptions::rings)
   double untimed_frame_period_s = 1.0 / 120.0;  // clock advance of a frame with neither timestamp
   bool fade_dropout_offset = true;   // false: keep the dropout offset (in the anchor's frame) for the whole occlusion
   bool compact_pose_transfer = true;  // stream a copy of B in blocks of 8 nearby fine vertices, float
@@ -94,7 +93,6 @@ struct LiveRigOptions {
   bool predict_all_markers = false;  // false: predict only the markers that need it (not measured, or
                                      // blending); true: every marker every frame (markerPredictions()
                                      // then holds a current prediction for measured markers too; tools, tests)
-  bool refresh_predictions = true;   // with predicted markers and >= 2 iterations: re-predict after the first
   // The solver's settings (tetrig/solver_settings.hpp): the accurate ones by default. The fine-volume
   // constraint (solver.volume_constraint) is skipped on a rig whose fine mesh is not closed
   // (volumeNotKept()).
