@@ -43,11 +43,13 @@ inline void checkSolverSettings(const SolverSettings& s) {
 //   --no-coarse                           ignore the rig's own coarse level
 //   --relax, --inversion-guard, --inversion-guard-solves, --inversion-guard-threshold,
 //   --after-publish-iterations
-// `group` names the flags' help section ("" for none). Range errors come from CLI11 at parse time;
+// A flag given twice takes its last value. `group` names the flags' help section ("" for none).
+// Range errors come from CLI11 at parse time;
 // call checkSolverSettings after parsing for the checks across flags.
 inline void addSolverFlags(CLI::App& cmd, SolverSettings& s, const std::string& group = "") {
   auto grouped = [&group](auto* option) {
     if (!group.empty()) option->group(group);
+    option->multi_option_policy(CLI::MultiOptionPolicy::TakeLast);  // given twice: the last one counts
     return option;
   };
   CLI::Option* predict = grouped(cmd.add_flag_callback(

@@ -85,6 +85,8 @@ TEST(SolverSettings, TheFlagsSetWhatTheySay) {
   EXPECT_EQ(parsed("--inversion-guard-solves 2").inversion_guard_solves, 2);
   EXPECT_EQ(parsed("--inversion-guard-threshold 0.4").inversion_guard_threshold, 0.4);
   EXPECT_EQ(parsed("--after-publish-iterations 2").after_publish_iterations, 2);
+  EXPECT_EQ(parsed("--relax 1.2 --relax 1.4").rotation_relaxation, 1.4) << "given twice: the last one counts";
+  EXPECT_FALSE(parsed("--keep-volume --no-keep-volume").volume_constraint);
   // The plain settings by flags.
   SolverSettings plain = parsed("--no-predict --no-keep-volume --inversion-guard 0 --inversion-guard-solves 0 --inversion-guard-threshold 0.5");
   EXPECT_EQ(plain, SolverSettings::plain());
