@@ -65,6 +65,7 @@ int runDemo(const DemoOptions& options) {
   if (!options.no_report) checkDemoReportTarget(options.report);
   RunOptions run;
   run.iterations = options.iterations;
+  run.solver = options.solver;
   run.budget_ms = options.frame_budget_ms;
   run.quiet = options.quiet;
   run.final_obj = options.out_obj;

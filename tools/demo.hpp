@@ -6,6 +6,8 @@
 // (tools/demo_report.hpp, docs/demo.md): summary.json, a picture sheet and a latency plot.
 #pragma once
 
+#include "tetrig/solver_settings.hpp"
+
 #include <cstdint>
 #include <string>
 
@@ -14,6 +16,7 @@ namespace tetrig::tools {
 struct DemoOptions {
   std::uint64_t frames = 0;         // frames to solve; 0: one pass of the default performance, or the whole clip with --c3d
   int iterations = 3;               // iterations per frame (also bounded by the budget)
+  SolverSettings solver;            // the solver (tools/solver_flags.hpp: the flags of `tetrig run`)
   double frame_budget_ms = 0;       // receive -> published deadline; 0: from the source rate
   std::string out_obj;              // write the final deformed surface here (optional)
   std::string mesh, c3d;            // real data: build (or reuse) a rig from these and play the clip

@@ -236,6 +236,8 @@ nlohmann::json reportJson(const ExportReport& r, const ExportOptions& o, const R
           {"markers_missing", r.markers_missing},
           {"frames_held", r.held_frames},
           {"frames_with_predicted_markers", r.predicted_frames},
+          {"solver", solverJson(r.solver)},
+          {"volume_not_kept", r.volume_not_kept},
           {"files", std::move(files)},
           {"tracking_mm", std::move(tracking)}};
 }
@@ -364,14 +366,11 @@ ExportReport exportClip(const ExportOptions& o) {
   if (o.iterations == 0 && (!(o.tolerance > 0.0) || !std::isfinite(o.tolerance)))
     throw std::invalid_argument("--tolerance must be a positive number");
   if (o.iterations == 0 && o.max_iterations < 1) throw std::invalid_argument("--max-iterations must be at least 1");
-  if (o.after_publish_iterations < 0) throw std::invalid_argument("--after-publish-iterations must be >= 0");
-  if (o.after_publish_iterations > 0 && o.iterations == 0)
+  checkSolverSettings(o.solver);  // before anything is written
+  if (o.solver.after_publish_iterations > 0 && o.iterations == 0)
     throw std::invalid_argument("--after-publish-iterations needs --iterations N: a frame solved to convergence has nothing left to refine");
-  if (o.predict && o.iterations == 0)
-    throw std::invalid_argument("--predict needs --iterations N: it predicts where a frame starts, and a frame solved to convergence "
-                                "lands where it lands from any start");
   LiveRigOptions live_options;
-  setRelaxAndGuard(o.relax, o.inversion_guard, o.inversion_guard_solves, o.inversion_guard_threshold, live_options);  // checked before anything is written
+  live_options.solver = o.solver;
   ExportReport report;
   report.target = parseExportTarget(o.out);
   const ExportTarget& target = report.target;
@@ -431,15 +430,18 @@ ExportReport exportClip(const ExportOptions& o) {
 
   // 2. The live rig and the binding, exactly as `tetrig run` binds a c3d: source.
   live_options.occlusion_blend_s = o.occlusion_blend_ms * 1e-3;
-  // The rig's coarse level (docs/fidelity.md) only sets where a frame starts: with --iterations N
-  // (one call per frame) it is used as in `tetrig run`; iterating to convergence calls processFrame
-  // again on the same frame, where it would start the frame again, so it is off.
-  live_options.use_coarse_level = o.iterations > 0;
-  live_options.volume_constraint = o.keep_volume;
-  live_options.after_publish_iterations = o.after_publish_iterations;
-  if (o.predict) live_options.rotation_extrapolation = 1.0;
+  // The temporal prediction and the rig's coarse level (docs/fidelity.md) only set where a frame
+  // starts: with --iterations N (one call per frame) they run as in `tetrig run`; iterating to
+  // convergence calls processFrame again on the same frame, where they would start the frame again,
+  // so they are off.
+  if (o.iterations == 0) {
+    live_options.solver.rotation_extrapolation = 0.0;
+    live_options.solver.use_coarse_level = false;
+  }
   live_options.normals = gltf;  // glTF carries the live rig's vertex normals (base NORMAL and morph-target deltas)
   LiveRig live(rig, live_options);
+  report.solver = live_options.solver;
+  report.volume_not_kept = live.volumeNotKept();
   std::vector<std::string> labels;
   {
     const auto source = drivers::makeC3DSource(clip, playback_options, o.clip_path.string());
@@ -466,6 +468,8 @@ ExportReport exportClip(const ExportOptions& o) {
   rigbuild::Progress progress("tetrig export", o.quiet ? rigbuild::Progress::Mode::kQuiet
                                                        : o.simple_progress ? rigbuild::Progress::Mode::kSimple
                                                                            : rigbuild::Progress::Mode::kAuto);
+  if (live.volumeNotKept())
+    progress.note("note: the rig's fine mesh is not closed, so its volume is not kept (the volume constraint needs a watertight surface)");
   if (!binding.missing.empty())
     progress.note("note: " + std::to_string(binding.missing.size()) + " rig markers the clip never names are predicted in every frame: " +
                   joinLabels(binding.missing));

@@ -13,6 +13,7 @@
 #pragma once
 
 #include "tetrig/live_rig.hpp"
+#include "tetrig/solver_settings.hpp"
 
 #include <cstddef>
 #include <cstdint>
@@ -58,13 +59,10 @@ struct ExportOptions {
                                         // of the rest mesh's bounding-box diagonal in the last chunk
   int max_iterations = 300;             // converge: at most this many iterations per frame
   double occlusion_blend_ms = 150;      // as `tetrig run --occlusion-blend-ms`
-  bool keep_volume = false;             // as `tetrig run --keep-volume` (LiveRigOptions::volume_constraint)
-  int after_publish_iterations = 0;     // as `tetrig run --after-publish-iterations` (needs iterations > 0)
-  bool predict = false;                 // as `tetrig run --predict` (needs iterations > 0)
-  double relax = LiveRigOptions{}.rotation_relaxation;   // as `tetrig run --relax`
-  double inversion_guard = LiveRigOptions{}.inversion_guard;  // as `tetrig run --inversion-guard`
-  int inversion_guard_solves = LiveRigOptions{}.inversion_guard_solves;  // as `tetrig run --inversion-guard-solves`
-  double inversion_guard_threshold = LiveRigOptions{}.inversion_guard_threshold;  // as `tetrig run --inversion-guard-threshold`
+  // The solver (tools/solver_flags.hpp: the flags of `tetrig run`). Iterating to convergence uses no
+  // temporal prediction and no coarse level (they only set where a frame starts, and each converge
+  // chunk calls processFrame on the same frame again); after_publish_iterations needs iterations > 0.
+  SolverSettings solver;
   double rate_hz = 0;                   // > 0: overrides the clip's frame rate (needed for glTF without one)
   bool keep_zero_markers = false;       // as `tetrig run --keep-zero-markers`: samples at x = y = z = 0 with
                                         // residual 0 stay valid (default: gaps)
@@ -93,6 +91,8 @@ struct ExportReport {
   double worst_last_change = 0;               // converge: largest last-chunk change of a capped frame, rig units
   std::size_t held_frames = 0;                // no rig marker measured: last pose kept
   std::size_t predicted_frames = 0;           // some rig marker predicted (occluded or never named)
+  SolverSettings solver;                      // the settings the live rig ran with (the report's "solver")
+  bool volume_not_kept = false;               // the volume constraint was asked for, but the fine mesh is not closed
   double solve_seconds = 0, write_seconds = 0;
   // The tracking measure over every exported frame (rigbuild/tracking_measure.hpp): the change of
   // each measured marker's distance to its skin point, mm; per rig marker in rig.markers order.

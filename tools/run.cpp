@@ -134,16 +134,15 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
   live_options.normals = options.normals;
   const int pose_threads = options.pose_threads > 0 ? options.pose_threads : 1;
   live_options.split_pose_transfer = pose_threads >= 2;
-  live_options.compact_pose_transfer = !options.double_pose_transfer;
-  live_options.use_coarse_level = !options.no_coarse;
-  if (options.predict) live_options.rotation_extrapolation = 1.0;
-  live_options.volume_constraint = options.keep_volume;
-  if (options.after_publish_iterations < 0) throw std::invalid_argument("--after-publish-iterations must be >= 0");
-  live_options.after_publish_iterations = options.after_publish_iterations;
-  setRelaxAndGuard(options.relax, options.inversion_guard, options.inversion_guard_solves, options.inversion_guard_threshold, live_options);
+  checkSolverSettings(options.solver);
+  live_options.solver = options.solver;
   std::optional<Rig> coarse;
   if (!options.coarse_rig_path.empty()) coarse = loadRigFile(options.coarse_rig_path);
   LiveRig live(rig, live_options, coarse ? &*coarse : nullptr);
+
+  if (live.volumeNotKept())
+    std::fprintf(stderr, "tetrig run: note: the rig's fine mesh is not closed, so its volume is not kept (the volume constraint needs "
+                         "a watertight surface)\n");
 
   // 2. The source, its labels, the binding.
   devices::SourceOpenOptions open;
@@ -227,19 +226,20 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
     if (live.coarseLevel() != nullptr)
       std::printf("  coarse level: %d tets, %d iterations per frame\n", live.coarseLevel()->deformer().tetCount(),
                   live.coarseLevel()->options().iterations);
-    if (options.predict) std::printf("  temporal prediction of each frame's start: on\n");
-    if (options.keep_volume) std::printf("  fine-mesh volume kept at rest: on (its linearization runs after each publish)\n");
-    if (options.after_publish_iterations > 0)
-      std::printf("  %d iterations after each publish (on that frame's targets, within its budget)\n", options.after_publish_iterations);
-    if (options.relax != LiveRigOptions{}.rotation_relaxation)
-      std::printf("  over-relaxation of the rotation update: omega %.3g\n", options.relax);
-    if (options.inversion_guard > 0.0 && options.inversion_guard_solves > 0)
+    const SolverSettings& solver = options.solver;
+    if (solver.rotation_extrapolation > 0.0) std::printf("  temporal prediction of each frame's start: on\n");
+    if (solver.volume_constraint && !live.volumeNotKept())
+      std::printf("  fine-mesh volume kept at rest: on (its linearization runs after each publish)\n");
+    if (solver.after_publish_iterations > 0)
+      std::printf("  %d iterations after each publish (on that frame's targets, within its budget)\n", solver.after_publish_iterations);
+    std::printf("  over-relaxation of the rotation update: omega %.3g\n", solver.rotation_relaxation);
+    if (solver.inversion_guard > 0.0 && solver.inversion_guard_solves > 0)
       std::printf("  inversion guard: body tets squashed below %.3g of their volume up to %.3g times stiffer, implicit (%d "
                   "conjugate-gradient steps per iteration)\n",
-                  options.inversion_guard_threshold, 1.0 + options.inversion_guard, options.inversion_guard_solves);
-    else if (options.inversion_guard > 0.0)
+                  solver.inversion_guard_threshold, 1.0 + solver.inversion_guard, solver.inversion_guard_solves);
+    else if (solver.inversion_guard > 0.0)
       std::printf("  inversion guard: body tets squashed below %.3g of their volume up to %.3g times stiffer\n",
-                  options.inversion_guard_threshold, 1.0 + options.inversion_guard);
+                  solver.inversion_guard_threshold, 1.0 + solver.inversion_guard);
     if (!binding.missing.empty())
       std::printf("  note: %zu rig markers the source never names are treated as occluded: %s\n", binding.missing.size(),
                   joinLabels(binding.missing).c_str());
@@ -402,17 +402,12 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
     j["unknown_marker_frames"] = c.unknown_marker_frames;
     j["held_frames"] = c.held_frames;
     // What each frame ran, so that a stats file says which configuration its latencies belong to.
-    j["solver"] = {{"iterations", options.iterations},
-                   {"after_publish_iterations", options.after_publish_iterations},
-                   {"keep_volume", options.keep_volume},
-                   {"predict", options.predict},
-                   {"relax", options.relax},
-                   {"inversion_guard", options.inversion_guard},
-                   {"inversion_guard_solves", options.inversion_guard_solves},
-                   {"inversion_guard_threshold", options.inversion_guard_threshold},
-                   {"coarse_level", live.coarseLevel() != nullptr},
-                   {"pose_threads", pose_threads},
-                   {"compact_pose_transfer", !options.double_pose_transfer}};
+    nlohmann::json solver = solverJson(options.solver);
+    solver["iterations"] = options.iterations;
+    solver["coarse_level"] = live.coarseLevel() != nullptr;
+    solver["volume_not_kept"] = live.volumeNotKept();
+    solver["pose_threads"] = pose_threads;
+    j["solver"] = std::move(solver);
     j["rejected_target_frames"] = c.rejected_target_frames;
     j["rejected_poses"] = c.rejected_poses;
     j["rejected_marker_samples"] = c.rejected_marker_samples;

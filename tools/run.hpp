@@ -8,6 +8,7 @@
 #include "tetrig/frame_loop.hpp"
 #include "tetrig/live_rig.hpp"
 #include "tetrig/rig_file.hpp"
+#include "tetrig/solver_settings.hpp"
 
 #include <nlohmann/json.hpp>
 
@@ -24,14 +25,7 @@ struct RunOptions {
   std::string rig_path;                 // rig file (ignored when `rig` is set)
   std::string coarse_rig_path;          // optional coarse level: the same mesh and markers with fewer tet vertices
                                         // (docs/fidelity.md, "Coarse level")
-  bool no_coarse = false;               // ignore the rig's own coarse level (Rig::coarse)
-  bool predict = false;                 // temporal prediction of the warm start (LiveRigOptions::rotation_extrapolation = 1)
-  bool keep_volume = false;             // keep the fine mesh's enclosed volume (LiveRigOptions::volume_constraint)
-  int after_publish_iterations = 0;     // LiveRigOptions::after_publish_iterations
-  double relax = LiveRigOptions{}.rotation_relaxation;   // omega in [1, 2) (solver_flags.hpp)
-  double inversion_guard = LiveRigOptions{}.inversion_guard;  // k in [0, 1], or [0, 1000] when implicit (solver_flags.hpp)
-  int inversion_guard_solves = LiveRigOptions{}.inversion_guard_solves;  // > 0: the implicit guard (solver_flags.hpp)
-  double inversion_guard_threshold = LiveRigOptions{}.inversion_guard_threshold;  // volume ratio below which it holds a tet
+  SolverSettings solver;                // the solver (tools/solver_flags.hpp; SolverSettings{}: the accurate settings)
   std::optional<tetrig::Rig> rig;       // an already built rig (tetrig demo)
   std::string source = "synthetic";     // c3d:PATH, replay:PATH, synthetic[:N], hid:VID:PID, usb:VID:PID, hydra[:SERIAL]
   std::string publish = "tetrig";       // shared-memory segment name (without the leading '/')
@@ -46,7 +40,6 @@ struct RunOptions {
   bool keep_zero_markers = false;       // c3d: samples at x = y = z = 0 with residual 0 stay valid (default: gaps)
   bool normals = false;
   int pose_threads = 1;                 // pose transfer threads: 1, or 2 (the solver + one worker; docs/live.md)
-  bool double_pose_transfer = false;    // stream the rig's double B instead of its compact copy (A/B measurements)
   double occlusion_blend_ms = 150;
   double label_timeout_ms = 3000;
   std::string stats_json;               // write the run's statistics here (atomically)

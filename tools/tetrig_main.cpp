@@ -5,6 +5,7 @@
 #include "export.hpp"
 #include "pose.hpp"
 #include "run.hpp"
+#include "solver_flags.hpp"
 #include "view.hpp"
 #include "tetrig/drivers/character_performance.hpp"
 #include "tetrig/printable_text.hpp"
@@ -365,6 +366,7 @@ int main(int argc, char** argv) {
   demo_cmd->add_option("--iterations", demo.iterations, "Iterations per frame (also bounded by the budget)")
       ->capture_default_str()
       ->check(CLI::Range(1, 1000));
+  tetrig::tools::addSolverFlags(*demo_cmd, demo.solver);
   demo_cmd->add_option("--budget-ms", demo.frame_budget_ms, "Receive -> published deadline per frame (default: 0.9 of the source's period)")
       ->check(CLI::Range(0.001, 60000.0));
   demo_cmd->add_option("--out", demo.out_obj, "Write the last published surface to this OBJ file");
@@ -397,42 +399,7 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::Range(1, 1000))
       ->group(kAccuracy);
-  run_cmd->add_flag("--predict", run.predict,
-                    "Start each frame where the motion is heading: the skin lands nearer its final shape in the frame's iterations")
-      ->group(kAccuracy);
-  run_cmd->add_flag("--keep-volume", run.keep_volume,
-                    "Keep the body's volume constant: bent joints do not lose volume; about a quarter more work per frame, "
-                    "done after each publish")
-      ->group(kAccuracy);
-  run_cmd->add_option("--after-publish-iterations", run.after_publish_iterations,
-                      "Iterations on each frame after it is published, within its budget: the next frame starts nearer its final shape")
-      ->capture_default_str()
-      ->check(CLI::Range(0, 100))
-      ->group(kAccuracy);
-  run_cmd->add_option("--relax", run.relax,
-                      "How far each iteration steps toward the final shape: 1 cautious; the default 1.8 lands nearest in a few "
-                      "iterations (docs/fidelity.md)")
-      ->capture_default_str()
-      ->check(CLI::Range(1.0, 1.999))
-      ->group(kAccuracy);
-  run_cmd->add_option("--inversion-guard", run.inversion_guard,
-                      "Resist the body turning inside out where the markers bend it far: squashed parts get up to 1 + K times "
-                      "stiffer (0 off; 3 with --inversion-guard-solves 1 is the accurate setup)")
-      ->capture_default_str()
-      ->check(CLI::Range(0.0, 1000.0))
-      ->group(kAccuracy);
-  run_cmd->add_option("--inversion-guard-solves", run.inversion_guard_solves,
-                      "A stronger inversion guard: 1 (recommended) or more; each adds one solve per iteration")
-      ->capture_default_str()
-      ->check(CLI::Range(0, 64))
-      ->group(kAccuracy);
-  run_cmd->add_option("--inversion-guard-threshold", run.inversion_guard_threshold,
-                      "How squashed a part of the body must be before the guard acts, as a fraction of its volume (0.7 with "
-                      "--keep-volume)")
-      ->capture_default_str()
-      ->check(CLI::Range(0.01, 1.0))
-      ->group(kAccuracy);
-  run_cmd->add_flag("--no-coarse", run.no_coarse, "Do not use the rig's own coarse level (built with --coarse-tet-vertices)")->group(kAccuracy);
+  tetrig::tools::addSolverFlags(*run_cmd, run.solver, kAccuracy);
   run_cmd->add_option("--coarse-rig", run.coarse_rig_path,
                       "A coarse rig of the same mesh and markers (fewer --tet-vertices, e.g. 300) solved first every frame: "
                       "lands nearer the final shape")
@@ -452,9 +419,6 @@ int main(int argc, char** argv) {
   run_cmd->add_flag("--fifo", run.fifo, "Run the solver thread under SCHED_FIFO (needs the privilege; reported when refused)")->group(kLatency);
   bool no_mlock = false;
   run_cmd->add_flag("--no-mlock", no_mlock, "Do not lock the process's memory")->group(kLatency);
-  run_cmd->add_flag("--double-pose-transfer", run.double_pose_transfer,
-                    "Write the mesh from the rig's full-precision weights (twice the bytes per frame; for A/B measurements)")
-      ->group(kLatency);
   const char* kSources = "Sources";
   run_cmd->add_flag("--as-fast-as-possible", run.as_fast_as_possible, "Playback: no pacing (offline runs)")->group(kSources);
   run_cmd->add_option("--speed", run.speed, "Playback speed factor (the budget follows it)")
@@ -532,32 +496,7 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::Range(0.0, 10000.0))
       ->group(kAccuracy);
-  export_cmd->add_flag("--keep-volume", exp.keep_volume, "Keep the fine mesh's enclosed volume at its rest value (as tetrig run)")
-      ->group(kAccuracy);
-  export_cmd->add_option("--after-publish-iterations", exp.after_publish_iterations,
-                         "With --iterations N: iterations on each frame's targets after it is written (as tetrig run)")
-      ->check(CLI::Range(0, 100))
-      ->group(kAccuracy);
-  export_cmd->add_flag("--predict", exp.predict, "With --iterations N: temporal prediction of each frame's start (as tetrig run)")
-      ->group(kAccuracy);
-  export_cmd->add_option("--relax", exp.relax, "Over-relaxation omega of the rotation update (as tetrig run)")
-      ->capture_default_str()
-      ->check(CLI::Range(1.0, 1.999))
-      ->group(kAccuracy);
-  export_cmd->add_option("--inversion-guard", exp.inversion_guard, "Extra stiffness K of squashed body tets (as tetrig run)")
-      ->capture_default_str()
-      ->check(CLI::Range(0.0, 1000.0))
-      ->group(kAccuracy);
-  export_cmd->add_option("--inversion-guard-solves", exp.inversion_guard_solves,
-                         "The inversion guard implicit, S conjugate-gradient steps per iteration (as tetrig run)")
-      ->capture_default_str()
-      ->check(CLI::Range(0, 64))
-      ->group(kAccuracy);
-  export_cmd->add_option("--inversion-guard-threshold", exp.inversion_guard_threshold,
-                         "The volume ratio below which the guard holds a body tet (as tetrig run)")
-      ->capture_default_str()
-      ->check(CLI::Range(0.01, 1.0))
-      ->group(kAccuracy);
+  tetrig::tools::addSolverFlags(*export_cmd, exp.solver, kAccuracy);
   export_cmd->add_flag("--keep-zero-markers", exp.keep_zero_markers,
                        "Samples at x = y = z = 0 with residual 0 are valid points, not gaps (as tetrig run)")
       ->group(kSources);

@@ -15,6 +15,12 @@
 //   _volume: with the volume term (w 0.5) on every tet; _joint_volume: w 0.5 on the body tets of the
 //   knees and elbows only (DeformerSetup::volume_weights; the boxes of assets/human_man_fitted.json,
 //   by rest centroid; the cost does not depend on w, only on which blocks of tets have one).
+//   BM_LiveRigFrame/smpl_hdm05_defaults and _plain: the live path as a product runs it, with the
+//   default settings (SolverSettings{}: the temporal prediction, omega 1.8, the implicit inversion
+//   guard, the volume kept, the 150-vertex coarse level) and with SolverSettings::plain() (the same
+//   coarse level, no prediction, guard or volume constraint); prepareNextFrame left to the next
+//   processFrame (in the frame's time, and apart as prepare_us).
+//   The variants below start from SolverSettings::plain() and add what they measure.
 //   BM_LiveRigFrame/smpl_hdm05: the same frames through the live path's own per-frame call,
 //   LiveRig::processFrame (clip frame as the C3D playback source fills it -> labels bound once ->
 //   targets incl. occlusion prediction -> step(3) -> pose transfer into a float buffer, what
@@ -249,39 +255,50 @@ BENCHMARK(BM_RigFrameCoarseRelaxed)->Name("BM_RigFrame/smpl_hdm05_coarse_relaxed
 void BM_RigFrameCoarsePredictedRelaxed(benchmark::State& state) { rigFrame(state, 1.0, 1.8, true); }
 BENCHMARK(BM_RigFrameCoarsePredictedRelaxed)->Name("BM_RigFrame/smpl_hdm05_coarse_predicted_relaxed")->Unit(benchmark::kMicrosecond);
 
+// The settings a product runs with: SolverSettings{} (the default), or SolverSettings::plain().
+enum class Settings { kVariant, kDefaults, kPlain };
+
 void liveRigFrame(benchmark::State& state, bool feet, bool volume_constraint = false, bool after_publish = false,
-                  bool landing = false, bool implicit_guard = false, bool kept_volume_flags = false) {
+                  bool landing = false, bool implicit_guard = false, bool kept_volume_flags = false,
+                  Settings settings = Settings::kVariant) {
   const RigScene* scene = sceneOrSkip(state, feet);
   if (scene == nullptr) return;
   tetrig::LiveRigOptions live_options;
-  live_options.volume_constraint = volume_constraint;
-  if (landing) {
+  // The variants below measure what each part adds to the plain settings.
+  live_options.solver = settings == Settings::kDefaults ? tetrig::SolverSettings{} : tetrig::SolverSettings::plain();
+  tetrig::SolverSettings& solver = live_options.solver;
+  if (settings != Settings::kVariant) {
+    // As a product runs (with the coarse level: the scene's, when the rig has none of its own).
+  } else if (landing) {
+    solver.volume_constraint = volume_constraint;
     // Everything issue #12 adds to a frame, as docs/fidelity.md measures it: the coarse level, the
     // temporal prediction, omega 1.9, the inversion guard, and k iterations after publishing.
-    live_options.rotation_extrapolation = 1.0;
-    live_options.rotation_relaxation = 1.9;
-    live_options.inversion_guard = 1.0;
+    solver.rotation_extrapolation = 1.0;
+    solver.rotation_relaxation = 1.9;
+    solver.inversion_guard = 1.0;
     if (implicit_guard) {
       // The implicit guard instead (docs/deformation.md): k 3, range(0) conjugate-gradient steps.
-      live_options.inversion_guard = 3.0;
-      live_options.inversion_guard_solves = static_cast<int>(state.range(0));
+      solver.inversion_guard = 3.0;
+      solver.inversion_guard_solves = static_cast<int>(state.range(0));
       if (kept_volume_flags) {
         // The configuration recommended with the volume kept (docs/live.md): omega 1.8 and the guard
-        // holding tets from 0.7 of their volume.
-        live_options.rotation_relaxation = 1.8;
-        live_options.inversion_guard_threshold = 0.7;
+        // holding tets from 0.7 of their volume (the defaults).
+        solver.rotation_relaxation = 1.8;
+        solver.inversion_guard_threshold = 0.7;
       }
     } else {
-      live_options.after_publish_iterations = static_cast<int>(state.range(0));
+      solver.after_publish_iterations = static_cast<int>(state.range(0));
     }
   } else if (volume_constraint) {
+    solver.volume_constraint = true;
     live_options.volume_constraint_gradient_entries = static_cast<int>(state.range(0));
   } else if (after_publish) {
-    live_options.after_publish_iterations = static_cast<int>(state.range(0));
+    solver.after_publish_iterations = static_cast<int>(state.range(0));
   } else {
     live_options.split_pose_transfer = state.range(0) != 0;
   }
-  tetrig::LiveRig live(scene->rig, live_options, landing ? &scene->coarse : nullptr);
+  const bool with_coarse = landing || (settings != Settings::kVariant && scene->rig.coarse == nullptr);
+  tetrig::LiveRig live(scene->rig, live_options, with_coarse ? &scene->coarse : nullptr);
   tetrig::drivers::C3DPlaybackOptions options;
   options.pacing = tetrig::drivers::Pacing::kAsFastAsPossible;
   const tetrig::drivers::C3DPlayback playback(scene->clip, options);
@@ -309,15 +326,21 @@ void liveRigFrame(benchmark::State& state, bool feet, bool volume_constraint = f
   const auto n = static_cast<double>(state.iterations());
   state.counters["step_us"] = static_cast<double>(step_ns) / n * 1e-3;
   state.counters["pose_transfer_us"] = static_cast<double>(pose_ns) / n * 1e-3;
-  if (volume_constraint || after_publish || landing) state.counters["prepare_us"] = static_cast<double>(prepare_ns) / n * 1e-3;
+  if (volume_constraint || after_publish || landing || settings != Settings::kVariant) state.counters["prepare_us"] = static_cast<double>(prepare_ns) / n * 1e-3;
   state.counters["iterations"] = static_cast<double>(iterations) / n;
-  if (implicit_guard) state.counters["guarded_solves"] = static_cast<double>(guarded_solves) / n;  // global steps that held tets
+  if (implicit_guard || settings == Settings::kDefaults) state.counters["guarded_solves"] = static_cast<double>(guarded_solves) / n;  // global steps that held tets
 }
 void BM_LiveRigFrame(benchmark::State& state) { liveRigFrame(state, false); }
 void BM_LiveRigFrameFeet(benchmark::State& state) { liveRigFrame(state, true); }
 void BM_LiveRigFrameVolumeConstraint(benchmark::State& state) { liveRigFrame(state, false, true); }
 void BM_LiveRigFrameAfterPublish(benchmark::State& state) { liveRigFrame(state, false, false, true); }
 void BM_LiveRigFrameLanding(benchmark::State& state) { liveRigFrame(state, false, false, false, true); }
+// What a product runs: the default settings (SolverSettings{}: prediction, omega 1.8, the implicit
+// guard, the volume kept, the coarse level), against SolverSettings::plain() with the same coarse level.
+void BM_LiveRigFrameDefaults(benchmark::State& state) { liveRigFrame(state, false, false, false, false, false, false, Settings::kDefaults); }
+BENCHMARK(BM_LiveRigFrameDefaults)->Name("BM_LiveRigFrame/smpl_hdm05_defaults")->Unit(benchmark::kMicrosecond);
+void BM_LiveRigFramePlain(benchmark::State& state) { liveRigFrame(state, false, false, false, false, false, false, Settings::kPlain); }
+BENCHMARK(BM_LiveRigFramePlain)->Name("BM_LiveRigFrame/smpl_hdm05_plain")->Unit(benchmark::kMicrosecond);
 // Argument: iterations after publishing, on top of the coarse level, the prediction, omega 1.9 and the guard.
 BENCHMARK(BM_LiveRigFrameLanding)->Name("BM_LiveRigFrame/smpl_hdm05_landing")->DenseRange(0, 3)->Unit(benchmark::kMicrosecond);
 void BM_LiveRigFrameLandingImplicit(benchmark::State& state) { liveRigFrame(state, false, false, false, true, true); }

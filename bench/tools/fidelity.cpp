@@ -251,7 +251,7 @@ struct Config {
   int first_frame = 0;
   int frame_count = 0;  // 0: to the end
   bool quiet = false;
-  tetrig::LiveRigOptions live;
+  tetrig::LiveRigOptions live;  // its solver: the shared flags (tools/solver_flags.hpp); the rest: this tool's experiments
   int reference_guard_solves = 0;  // --reference-guard-solves: the reference's CG steps (set to the live rig's when not given)
   const Rig* coarse = nullptr;  // --coarse-rig
 };
@@ -270,20 +270,23 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
   // The reference solver: the rig's own setup without the frame-step aids (the converged pose does
   // not depend on how a frame step gets there), with the live rig's energy (its volume term).
   tetrig::DeformerSetup reference_setup = rig.setup;
-  reference_setup.options.volume_weight = cfg.live.volume_weight;  // the same energy as the live rig's
-  reference_setup.options.inversion_guard = cfg.live.inversion_guard;
-  reference_setup.options.inversion_guard_threshold = cfg.live.inversion_guard_threshold;
+  const tetrig::SolverSettings& solver = cfg.live.solver;
+  reference_setup.options.volume_weight = solver.volume_weight;  // the same energy as the live rig's
+  reference_setup.options.inversion_guard = solver.inversion_guard;
+  reference_setup.options.inversion_guard_threshold = solver.inversion_guard_threshold;
   // The same guarded energy; the reference may solve each global step's guarded system further
   // (--reference-guard-solves) than the live rig's frame budget allows.
   reference_setup.options.inversion_guard_solves = cfg.reference_guard_solves;
   reference_setup.guarded_tet_count = rig.body_tet_count;
-  reference_setup.options.linear_constraint = cfg.live.volume_constraint;
+  // The volume constraint as the live rig keeps it (not on a fine mesh that is not closed).
+  const bool keep_volume = solver.volume_constraint && !live.volumeNotKept();
+  reference_setup.options.linear_constraint = keep_volume;
   tetrig::Deformer reference(rig.tet_mesh, reference_setup);
   // With --volume-constraint the reference keeps the fine volume too, linearized again every 25
   // iterations (so it converges to the constrained minimum).
   std::unique_ptr<tetrig::FineVolumeConstraint> constraint;
   std::vector<double> constraint_g, constraint_fine;
-  if (cfg.live.volume_constraint) {
+  if (keep_volume) {
     constraint = std::make_unique<tetrig::FineVolumeConstraint>(
         rig.pose_transfer.view(),
         std::span<const std::int32_t>(rig.fine_triangles.data(), static_cast<std::size_t>(rig.fine_triangles.size())),
@@ -478,6 +481,7 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
       {"step_us_mean", step_us / static_cast<double>(end - first)},
       {"markers_matched", binding.matched},
       {"markers_missing", binding.missing},
+      {"volume_not_kept", live.volumeNotKept()},
   };
   nlohmann::json per_frame = nlohmann::json::array();
   for (std::size_t i = 0; i < rms.size(); ++i) {
@@ -532,93 +536,89 @@ int main(int argc, char** argv) {
   app.add_option("--frames", cfg.frame_count, "Frames to play (default: to the end)")->check(CLI::NonNegativeNumber);
   app.add_option("--json", json_path, "Write the results here (JSON)");
   app.add_flag("-q,--quiet", cfg.quiet, "No progress line");
-  app.add_option("--extrapolate", cfg.live.rotation_extrapolation,
-                 "Temporal prediction: alpha of the rotation extrapolation (0: off, the live rig's default; 1: constant velocity)")
-      ->check(CLI::Range(0.0, 1.0));
-  app.add_option("--extrapolate-max-deg", cfg.live.rotation_extrapolation_max_deg,
+  // The flags every tool shares (tools/solver_flags.hpp), then this tool's experiments.
+  tetrig::tools::addSolverFlags(app, cfg.live.solver, "Solver (as tetrig run)");
+  const char* kExperiments = "Experiments";
+  app.add_option("--extrapolate", cfg.live.solver.rotation_extrapolation,
+                 "Temporal prediction: alpha of the rotation extrapolation (0: off, as --no-predict; 1: constant velocity, as "
+                 "--predict, the default)")
+      ->check(CLI::Range(0.0, 1.0))
+      ->group(kExperiments);
+  app.add_option("--extrapolate-max-deg", cfg.live.solver.rotation_extrapolation_max_deg,
                  "Temporal prediction: cap of a tet's predicted rotation per frame, degrees (default 5)")
-      ->check(CLI::Range(0.001, 180.0));
+      ->check(CLI::Range(0.001, 180.0))
+      ->group(kExperiments);
   std::string coarse_path;
   app.add_option("--coarse-rig", coarse_path,
                  "Coarse level: a rig of the same mesh and markers with fewer tet vertices, solved every frame first")
       ->check(CLI::ExistingFile);
-  bool no_coarse = false;
-  app.add_flag("--no-coarse", no_coarse, "Do not use the rig's own coarse level (built with --coarse-tet-vertices)");
-  app.add_option("--coarse-iterations", cfg.live.coarse_iterations, "Coarse level: its iterations per frame (default 5)")
-      ->check(CLI::PositiveNumber);
-  app.add_option("--relax", cfg.live.rotation_relaxation,
-                 "Over-relaxation of each iteration's rotation update, omega (default 1.8, the live rig's; 1: off)")
-      ->check(CLI::Range(1.0, 1.999));
-  app.add_option("--volume-weight", cfg.live.volume_weight,
+  app.add_option("--coarse-iterations", cfg.live.solver.coarse_iterations, "Coarse level: its iterations per frame (default 5)")
+      ->check(CLI::PositiveNumber)
+      ->group(kExperiments);
+  app.add_option("--volume-weight", cfg.live.solver.volume_weight,
                  "Volume term's share w of each tet's energy, live rig and reference alike (docs/deformation.md; default 0)")
-      ->check(CLI::Range(0.0, 0.99));
-  app.add_flag("--volume-constraint", cfg.live.volume_constraint,
-               "Keep the fine mesh's enclosed volume at rest (a Lagrange multiplier), live rig and reference alike");
-  app.add_option("--volume-constraint-refresh", cfg.live.volume_constraint_refresh_frames,
+      ->check(CLI::Range(0.0, 0.99))
+      ->group(kExperiments);
+  app.add_flag_callback(
+         "--volume-constraint", [&cfg] { cfg.live.solver.volume_constraint = true; },
+         "The same as --keep-volume: the fine mesh's enclosed volume kept at rest, live rig and reference alike")
+      ->group(kExperiments);
+  app.add_option("--volume-constraint-refresh", cfg.live.solver.volume_constraint_refresh_frames,
                  "Volume constraint: frames between linearizations of its gradient (default 1: every frame)")
-      ->check(CLI::Range(1, 1000));
-  app.add_option("--after-publish-iterations", cfg.live.after_publish_iterations,
-                 "Live rig: iterations on each frame's targets after its pose is taken (LiveRigOptions::after_publish_iterations)")
-      ->check(CLI::Range(0, 1000));
+      ->check(CLI::Range(1, 1000))
+      ->group(kExperiments);
   app.add_option("--volume-constraint-gradient-entries", cfg.live.volume_constraint_gradient_entries,
                  "Volume constraint: entries of each row of B its gradient uses (the largest, rescaled; default 0: all)")
-      ->check(CLI::Range(0, 100000));
-  app.add_option("--inversion-guard", cfg.live.inversion_guard,
-                 "Inversion guard's k: extra stiffness of squashed body tets, live rig and reference alike "
-                 "(docs/deformation.md; default 0; at most 1, or 1000 with --inversion-guard-solves)")
-      ->check(CLI::Range(0.0, 1000.0));
-  app.add_option("--inversion-guard-solves", cfg.live.inversion_guard_solves,
-                 "Implicit inversion guard: conjugate-gradient steps per iteration, each one more solve "
-                 "(docs/deformation.md; default 0: the explicit guard)")
-      ->check(CLI::Range(0, 64));
+      ->check(CLI::Range(0, 100000))
+      ->group(kExperiments);
   app.add_option("--reference-guard-solves", cfg.reference_guard_solves,
                  "Implicit inversion guard: the reference's conjugate-gradient steps per iteration (default: the live "
                  "rig's --inversion-guard-solves). The same energy, its global steps solved further")
       ->check(CLI::Range(1, 64));
-  app.add_option("--inversion-guard-threshold", cfg.live.inversion_guard_threshold,
-                 "Volume ratio below which the inversion guard acts (default 0.5)")
-      ->check(CLI::Range(0.01, 1.0));
   CLI11_PARSE(app, argc, argv);
-  cfg.live.use_coarse_level = !no_coarse;
   try {
-    // The same checks as tetrig run and tetrig export (K above 1 only with the implicit guard).
-    tetrig::tools::setRelaxAndGuard(cfg.live.rotation_relaxation, cfg.live.inversion_guard, cfg.live.inversion_guard_solves,
-                                    cfg.live.inversion_guard_threshold, cfg.live);
-    if (cfg.reference_guard_solves > 0 && cfg.live.inversion_guard_solves == 0)
+    tetrig::tools::checkSolverSettings(cfg.live.solver);  // the same checks as tetrig run and tetrig export
+    const tetrig::SolverSettings& solver = cfg.live.solver;
+    if (cfg.reference_guard_solves > 0 && solver.inversion_guard_solves == 0)
       throw std::invalid_argument("--reference-guard-solves needs the implicit inversion guard: give --inversion-guard-solves too");
-    if (cfg.reference_guard_solves == 0) cfg.reference_guard_solves = cfg.live.inversion_guard_solves;
+    if (cfg.reference_guard_solves == 0) cfg.reference_guard_solves = solver.inversion_guard_solves;
     const std::vector<int> ks = parseIterations(iterations);
     const Rig rig = tetrig::loadRigFile(cfg.rig_path);
+    if (solver.volume_constraint &&
+        !tetrig::closedOrientedSurface(std::span<const std::int32_t>(rig.fine_triangles.data(), static_cast<std::size_t>(rig.fine_triangles.size()))))
+      std::fprintf(stderr, "tetrig_fidelity: note: the rig's fine mesh is not closed, so its volume is not kept (the volume constraint "
+                           "needs a watertight surface)\n");
     Rig coarse_rig;
     if (!coarse_path.empty()) {
       coarse_rig = tetrig::loadRigFile(coarse_path);
       cfg.coarse = &coarse_rig;
     }
-    const Measurer measurer(rig, cfg.live.volume_weight, cfg.live.inversion_guard, cfg.live.inversion_guard_threshold,
-                            cfg.live.inversion_guard_solves == 0);
+    const Measurer measurer(rig, solver.volume_weight, solver.inversion_guard, solver.inversion_guard_threshold,
+                            solver.inversion_guard_solves == 0);
     nlohmann::json out = {{"rig", cfg.rig_path},
                           {"tet_vertices", rig.tet_mesh.vertexCount()},
                           {"tets", rig.tet_mesh.tetCount()},
                           {"body_tets", rig.body_tet_count},
                           {"reference_every", cfg.reference_every},
-                          {"relax", cfg.live.rotation_relaxation},
-                          {"volume_weight", cfg.live.volume_weight},
-                          {"volume_constraint", cfg.live.volume_constraint},
-                          {"volume_constraint_refresh_frames", cfg.live.volume_constraint_refresh_frames},
+                          {"solver", tetrig::tools::solverJson(solver)},
+                          {"relax", solver.rotation_relaxation},
+                          {"volume_weight", solver.volume_weight},
+                          {"volume_constraint", solver.volume_constraint},
+                          {"volume_constraint_refresh_frames", solver.volume_constraint_refresh_frames},
                           {"volume_constraint_gradient_entries", cfg.live.volume_constraint_gradient_entries},
-                          {"after_publish_iterations", cfg.live.after_publish_iterations},
-                          {"inversion_guard", cfg.live.inversion_guard},
-                          {"inversion_guard_threshold", cfg.live.inversion_guard_threshold},
-                          {"inversion_guard_solves", cfg.live.inversion_guard_solves},
+                          {"after_publish_iterations", solver.after_publish_iterations},
+                          {"inversion_guard", solver.inversion_guard},
+                          {"inversion_guard_threshold", solver.inversion_guard_threshold},
+                          {"inversion_guard_solves", solver.inversion_guard_solves},
                           {"reference_guard_solves", cfg.reference_guard_solves},
-                          {"extrapolate", cfg.live.rotation_extrapolation},
+                          {"extrapolate", solver.rotation_extrapolation},
                           {"runs", nlohmann::json::array()}};
     // The coarse level the live rig will use: --coarse-rig, else the rig's own unless --no-coarse.
-    const Rig* coarse = cfg.coarse != nullptr ? cfg.coarse : cfg.live.use_coarse_level ? rig.coarse.get() : nullptr;
+    const Rig* coarse = cfg.coarse != nullptr ? cfg.coarse : solver.use_coarse_level ? rig.coarse.get() : nullptr;
     if (coarse != nullptr) {
       out["coarse_rig"] = cfg.coarse != nullptr ? coarse_path : std::string("(the rig's own)");
       out["coarse_tets"] = coarse->tet_mesh.tetCount();
-      out["coarse_iterations"] = cfg.live.coarse_iterations;
+      out["coarse_iterations"] = solver.coarse_iterations;
     }
     for (const std::string& clip_path : cfg.clips) {
       const auto clip = tetrig::drivers::C3DClip::load(clip_path);

@@ -126,7 +126,7 @@ void FrameLoop::join() {
 void FrameLoop::applyHygiene() {
   std::string report;
   auto add = [&report](const std::string& part) { report += (report.empty() ? "" : "; ") + part; };
-  if (options_.flush_denormals) add(flushDenormals() ? "flush-to-zero on" : "flush-to-zero not available on this CPU");
+  add(flushDenormals() ? "flush-to-zero on" : "flush-to-zero not available on this CPU");
 #if defined(__linux__)
   if (options_.lock_memory) {
     // MCL_CURRENT only: everything the frame path touches is allocated at load, and MCL_FUTURE would
@@ -147,9 +147,9 @@ void FrameLoop::applyHygiene() {
   }
   if (options_.realtime_fifo) {
     sched_param param{};
-    param.sched_priority = options_.fifo_priority;
+    param.sched_priority = kFrameLoopFifoPriority;
     const int rc = pthread_setschedparam(pthread_self(), SCHED_FIFO, &param);
-    add(rc == 0 ? "SCHED_FIFO priority " + std::to_string(options_.fifo_priority)
+    add(rc == 0 ? "SCHED_FIFO priority " + std::to_string(kFrameLoopFifoPriority)
                 : std::string("SCHED_FIFO refused: ") + std::strerror(rc));
   }
 #else
@@ -229,7 +229,9 @@ void FrameLoop::run() noexcept {
     if (stats.occluded_markers != 0) info.flags |= kShmFrameMarkersPredicted;
     if (stats.flags & kLiveTargetsRejected) info.flags |= kShmFrameInputRejected;
     if (stats.flags & kLivePoseRejected) info.flags |= kShmFramePoseRejected;
-    const bool miss = frame_deadline != 0 && pose_done_ns > frame_deadline;
+    // The budget is judged once, as the frame is handed to the segment: its flag, the counter and
+    // the frame log all take this one answer.
+    const bool miss = frameBudgetMissed(frame_deadline, monotonicNowNs());
     if (miss) info.flags |= kShmFrameBudgetMiss;
     publisher_.commit(info);
     const std::int64_t published_ns = monotonicNowNs();
@@ -266,7 +268,7 @@ void FrameLoop::run() noexcept {
       latency_.receive_to_published.record(total);
       latency_.overhead.record(total - step_ns - stats.pose_transfer_ns);
       if (prepare_ns > 0) latency_.prepare_next.record(prepare_ns);
-      if (frame_deadline != 0 && published_ns > frame_deadline) budget_misses_.fetch_add(1, std::memory_order_relaxed);
+      if (miss) budget_misses_.fetch_add(1, std::memory_order_relaxed);
       last_latency_ns_.store(total, std::memory_order_relaxed);
       recent[static_cast<std::size_t>(recent_count % kRecentWindow)] = total;
       ++recent_count;
@@ -294,7 +296,7 @@ void FrameLoop::run() noexcept {
       e.iterations = stats.step.iterations;
       e.occluded_markers = stats.occluded_markers;
       e.flags = static_cast<std::uint16_t>((receive_ns < start_ns_ ? kFrameLogBeforeStart : 0) |
-                                           (frame_deadline != 0 && published_ns > frame_deadline ? kFrameLogBudgetMiss : 0) |
+                                           (miss ? kFrameLogBudgetMiss : 0) |
                                            (stats.flags & kLivePoseHeld ? kFrameLogPoseHeld : 0));
       const int kept = std::min(static_cast<int>(frame->marker_count), options_.frame_log_markers);
       FrameLogMarker* out = frame_log_markers_.data() + frame_log_count_ * static_cast<std::size_t>(options_.frame_log_markers);

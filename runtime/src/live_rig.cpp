@@ -25,6 +25,12 @@ const Rig& validated(const Rig& rig) {
   return rig;
 }
 
+// Whether the live rig keeps the fine mesh's volume: asked for, and the fine mesh is closed.
+bool keepsVolume(const Rig& rig, const LiveRigOptions& options) {
+  return options.solver.volume_constraint &&
+         closedOrientedSurface(std::span<const std::int32_t>(rig.fine_triangles.data(), static_cast<std::size_t>(rig.fine_triangles.size())));
+}
+
 DeformerSetup liveSetup(const Rig& rig, const LiveRigOptions& options, bool frame_guide) {
   DeformerSetup setup = rig.setup;
   setup.options.frame_guide = frame_guide;
@@ -32,14 +38,15 @@ DeformerSetup liveSetup(const Rig& rig, const LiveRigOptions& options, bool fram
   const bool compact = options.compact_pose_transfer && fitsCompactPoseTransfer(rig.pose_transfer.cols);
   setup.options.padded_positions = !compact;
   setup.options.padded_float_positions = compact;
-  setup.options.rotation_extrapolation = options.rotation_extrapolation;
-  setup.options.rotation_extrapolation_max_deg = options.rotation_extrapolation_max_deg;
-  setup.options.rotation_relaxation = options.rotation_relaxation;
-  setup.options.volume_weight = options.volume_weight;
-  setup.options.inversion_guard = options.inversion_guard;
-  setup.options.inversion_guard_threshold = options.inversion_guard_threshold;
-  setup.options.inversion_guard_solves = options.inversion_guard_solves;
-  setup.options.linear_constraint = options.volume_constraint;
+  const SolverSettings& solver = options.solver;
+  setup.options.rotation_extrapolation = solver.rotation_extrapolation;
+  setup.options.rotation_extrapolation_max_deg = solver.rotation_extrapolation_max_deg;
+  setup.options.rotation_relaxation = solver.rotation_relaxation;
+  setup.options.volume_weight = solver.volume_weight;
+  setup.options.inversion_guard = solver.inversion_guard;
+  setup.options.inversion_guard_threshold = solver.inversion_guard_threshold;
+  setup.options.inversion_guard_solves = solver.inversion_guard_solves;
+  setup.options.linear_constraint = keepsVolume(rig, options);
   setup.guarded_tet_count = rig.body_tet_count;
   return setup;
 }
@@ -60,19 +67,13 @@ void restHandleTargets(const TetMesh& mesh, const DeformerSetup& setup, std::vec
 // The coarse level to use: the one given, else the rig's own (when asked for), else none.
 const Rig* coarseRigOf(const Rig& rig, const LiveRigOptions& options, const Rig* given) {
   if (given != nullptr) return given;
-  return options.use_coarse_level ? rig.coarse.get() : nullptr;
+  return options.solver.use_coarse_level ? rig.coarse.get() : nullptr;
 }
 
 std::vector<std::int32_t> markerVertices(const Rig& rig) {
   std::vector<std::int32_t> v;
   for (const RigMarker& m : rig.markers) v.push_back(m.tet_vertex);
   return v;
-}
-
-MarkerPredictionOptions predictionOptions(const LiveRigOptions& options) {
-  MarkerPredictionOptions p;
-  p.rings = options.prediction_rings;
-  return p;
 }
 
 std::string_view afterLastColon(std::string_view s) {
@@ -119,7 +120,7 @@ LiveRig::LiveRig(const Rig& rig, const LiveRigOptions& options, const Rig* coars
     : rig_(&validated(rig)),
       options_(options),
       deformer_(rig.tet_mesh, liveSetup(rig, options, coarseRigOf(rig, options, coarse_rig) != nullptr)),
-      predictor_(rig.tet_mesh, rig.body_vertex_count, rig.body_tet_count, markerVertices(rig), predictionOptions(options)) {
+      predictor_(rig.tet_mesh, rig.body_vertex_count, rig.body_tet_count, markerVertices(rig), MarkerPredictionOptions{}) {
   if (!(options.occlusion_blend_s >= 0.0) || !std::isfinite(options.occlusion_blend_s)) {
     throw std::invalid_argument("live rig: occlusion_blend_s must be finite and >= 0");
   }
@@ -159,7 +160,7 @@ LiveRig::LiveRig(const Rig& rig, const LiveRigOptions& options, const Rig* coars
     split_ = blocked_b_.rows > 0 ? std::make_unique<PoseTransferSplit>(blocked_b_.view())
                                  : std::make_unique<PoseTransferSplit>(rig.pose_transfer.view());
   }
-  if (options.volume_constraint) {
+  if (keepsVolume(rig, options)) {
     volume_constraint_ = std::make_unique<FineVolumeConstraint>(
         rig.pose_transfer.view(),
         std::span<const std::int32_t>(rig.fine_triangles.data(), static_cast<std::size_t>(rig.fine_triangles.size())),
@@ -230,15 +231,15 @@ void LiveRig::buildCoarseLevel(const Rig& coarse) {
   setup.options.padded_positions = false;
   setup.options.padded_float_positions = false;
   setup.options.rotation_extrapolation = 0.0;  // measured: no gain on the coarse chain (docs/fidelity.md)
-  setup.options.rotation_relaxation = options_.rotation_relaxation;
-  setup.options.volume_weight = options_.volume_weight;
-  setup.options.inversion_guard = options_.inversion_guard;
-  setup.options.inversion_guard_threshold = options_.inversion_guard_threshold;
-  setup.options.inversion_guard_solves = options_.inversion_guard_solves;
+  setup.options.rotation_relaxation = options_.solver.rotation_relaxation;
+  setup.options.volume_weight = options_.solver.volume_weight;
+  setup.options.inversion_guard = options_.solver.inversion_guard;
+  setup.options.inversion_guard_threshold = options_.solver.inversion_guard_threshold;
+  setup.options.inversion_guard_solves = options_.solver.inversion_guard_solves;
   setup.guarded_tet_count = coarse.body_tet_count;
   setup.options.frame_guide = false;
   CoarseLevelOptions co;
-  co.iterations = options_.coarse_iterations;
+  co.iterations = options_.solver.coarse_iterations;
   coarse_ = std::make_unique<CoarseLevel>(rig_->tet_mesh, coarse.tet_mesh, setup, co);
 }
 
@@ -455,7 +456,7 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
   // predictions would only chase the body they drive.
   std::uint32_t anchored = 0;
   for (std::size_t k = 0; k < markers; ++k) anchored += tracks_[k].state == MarkerTrackState::kMeasured ? 1u : 0u;
-  const bool refresh = options_.refresh_predictions && budget.max_iterations >= 2 && anchored > 0 &&
+  const bool refresh = budget.max_iterations >= 2 && anchored > 0 &&
                        (stats.occluded_markers > 0 || blending > 0);
   if (coarse_) {
     // The coarse level on the same frame's marker targets: it sets the fine frame's start.
@@ -504,6 +505,8 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
       stats.step.flags |= more.flags;
       stats.step.energy = more.energy;
       stats.step.exact_rotations += more.exact_rotations;
+      stats.step.guarded_solves += more.guarded_solves;  // the guard of every iteration of the frame
+      stats.step.guarded_tets = more.guarded_tets;        // held after the frame's last iteration
       stats.step.solve_ns += more.solve_ns;
       stats.step.rotation_ns += more.rotation_ns;
       stats.step.interpolation_ns += more.interpolation_ns;
@@ -543,7 +546,7 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
       body_ns_ = sample_ns_;
     }
     // The constraint linearized at this pose, then the after-publish iterations: prepareNextFrame().
-    next_frame_pending_ = volume_constraint_ != nullptr || options_.after_publish_iterations > 0;
+    next_frame_pending_ = volume_constraint_ != nullptr || options_.solver.after_publish_iterations > 0;
     if (options_.normals) {
       vertexNormals(positions, fineTriangles(), normal_sum_, last_normals_.data(), last_normals_.data());
       if (normals != nullptr) std::memcpy(normals, last_normals_.data(), n * sizeof(float));
@@ -570,18 +573,18 @@ std::int64_t LiveRig::prepareNextFrame(std::chrono::steady_clock::time_point dea
     // (last_positions_ = B x0, x0 the deformer's positions: neither has changed since), with g
     // linearized again every volume_constraint_refresh_frames frames (a stale g still keeps the
     // measured volume; it only steers less well).
-    if (!deformer_.hasLinearConstraint() || ++frames_since_linearized_ >= options_.volume_constraint_refresh_frames) {
+    if (!deformer_.hasLinearConstraint() || ++frames_since_linearized_ >= options_.solver.volume_constraint_refresh_frames) {
       linearizeVolumeConstraint(last_positions_.data());
     } else {
       deformer_.setLinearConstraintValue(volume_constraint_->value(deformer_.positions(), last_positions_.data(), constraint_gradient_));
     }
   }
-  if (options_.after_publish_iterations > 0 && std::chrono::steady_clock::now() < deadline) {
+  if (options_.solver.after_publish_iterations > 0 && std::chrono::steady_clock::now() < deadline) {
     // More iterations on the published frame's own targets (under the constraint just set): the
     // next frame starts nearer this frame's converged pose. Not published: the next frame's step
     // starts from here, and a held frame republishes last_positions_.
     StepBudget more;
-    more.max_iterations = options_.after_publish_iterations;
+    more.max_iterations = options_.solver.after_publish_iterations;
     more.deadline = deadline;
     more.continues_frame = true;
     (void)deformer_.step(frameTargets(), more);

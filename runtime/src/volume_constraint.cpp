@@ -18,10 +18,9 @@
 namespace tetrig {
 namespace {
 
-// The gradient pass (volume_gradient.hpp) holds on a closed, consistently oriented mesh only: every
-// edge walked once each way, as often as the other (then the enclosed volume does not depend on the
-// origin either).
-void requireClosedOriented(std::span<const std::int32_t> triangles) {
+// The edges of `triangles` walked forward and backward, each sorted: equal when every edge is walked
+// once each way, as often as the other.
+std::pair<std::vector<std::uint64_t>, std::vector<std::uint64_t>> sortedEdges(std::span<const std::int32_t> triangles) {
   std::vector<std::uint64_t> forward, backward;
   forward.reserve(triangles.size());
   backward.reserve(triangles.size());
@@ -33,6 +32,13 @@ void requireClosedOriented(std::span<const std::int32_t> triangles) {
     }
   std::sort(forward.begin(), forward.end());
   std::sort(backward.begin(), backward.end());
+  return {std::move(forward), std::move(backward)};
+}
+
+// The gradient pass (volume_gradient.hpp) holds on a closed, consistently oriented mesh only (then
+// the enclosed volume does not depend on the origin either).
+void requireClosedOriented(std::span<const std::int32_t> triangles) {
+  const auto [forward, backward] = sortedEdges(triangles);
   const auto [f, b] = std::mismatch(forward.begin(), forward.end(), backward.begin());
   if (f != forward.end()) {
     const std::uint64_t edge = std::min(*f, *b);
@@ -43,6 +49,12 @@ void requireClosedOriented(std::span<const std::int32_t> triangles) {
 }
 
 }  // namespace
+
+bool closedOrientedSurface(std::span<const std::int32_t> triangles) {
+  if (triangles.empty()) return false;
+  const auto [forward, backward] = sortedEdges(triangles);
+  return forward == backward;
+}
 
 FineVolumeConstraint::FineVolumeConstraint(const PoseTransferView<double>& b, std::span<const std::int32_t> triangles,
                                            std::span<const double> rest_fine, std::int32_t gradient_entries)

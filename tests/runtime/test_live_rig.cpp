@@ -895,9 +895,12 @@ TEST(LiveRig, SameFramesGiveBitIdenticalOutputs) {
 // per stepped frame, where the stats say.
 TEST(LiveRig, TheVolumeConstraintCanBeLinearizedAfterPublishing) {
   const Rig rig = makeBarRig();
-  LiveRigOptions options;
-  options.volume_constraint = true;
-  LiveRig inline_rig(rig, options), deferring(rig, options), free_rig(rig, LiveRigOptions{});
+  // The plain settings with and without the volume constraint: what it alone changes.
+  LiveRigOptions options, free_options;
+  free_options.solver = SolverSettings::plain();
+  options.solver = SolverSettings::plain();
+  options.solver.volume_constraint = true;
+  LiveRig inline_rig(rig, options), deferring(rig, options), free_rig(rig, free_options);
   for (LiveRig* live : {&inline_rig, &deferring, &free_rig}) live->bindLabels(labelTable());
   const std::size_t n = static_cast<std::size_t>(inline_rig.fineVertexCount()) * 3;
   std::vector<float> xa(n), xb(n), xc(n);
@@ -942,9 +945,14 @@ TEST(LiveRig, TheVolumeConstraintCanBeLinearizedAfterPublishing) {
 // poses are then those of a rig without it).
 TEST(LiveRig, IterationsAfterPublishingStartEachFrameNearerItsConvergedPose) {
   const Rig rig = makeBarRig();
-  LiveRigOptions after_options;
-  after_options.after_publish_iterations = 2;
-  LiveRig plain(rig), converged(rig), after(rig, after_options), after_inline(rig, after_options), late(rig, after_options);
+  // The plain settings (no prediction, guard or volume constraint) with and without the iterations
+  // after publishing: what they alone change.
+  LiveRigOptions plain_options, after_options;
+  plain_options.solver = SolverSettings::plain();
+  after_options.solver = SolverSettings::plain();
+  after_options.solver.after_publish_iterations = 2;
+  LiveRig plain(rig, plain_options), converged(rig, plain_options), after(rig, after_options), after_inline(rig, after_options),
+      late(rig, after_options);
   for (LiveRig* live : {&plain, &converged, &after, &after_inline, &late}) live->bindLabels(labelTable());
   const std::size_t n = static_cast<std::size_t>(plain.fineVertexCount()) * 3;
   std::vector<float> xp(n), xc(n), xa(n), xi(n), xl(n);
@@ -1035,10 +1043,12 @@ TEST_P(LiveRigAllocations, NonePerFrameAfterWarmUp) {
   LiveRigOptions options;
   options.normals = true;
   const bool coarse = GetParam();
+  // Without the coarse level: the plain settings; with it: the defaults (the prediction, the
+  // implicit guard, the volume constraint) and iterations after publishing.
   if (coarse) {
-    options.rotation_extrapolation = 1.0;
-    options.volume_constraint = true;
-    options.after_publish_iterations = 2;
+    options.solver.after_publish_iterations = 2;
+  } else {
+    options.solver = SolverSettings::plain();
   }
   LiveRig live(rig, options, coarse ? &rig : nullptr);
   std::vector<std::string> labels = labelTable();
@@ -1220,7 +1230,11 @@ TEST(LiveRigMarkerRegion, TheRegionFollowsTheBestRigidFitOfItsMarkers) {
   std::vector<float> x(static_cast<std::size_t>(rig.fine_vertices.rows()) * 3);  // the plain rig has the same fine mesh
   const std::vector<Eigen::Vector3d> targets = movedMarkers(rig, twist, tilt, shift);
   std::vector<bool> valid(kMarkers, true);
-  LiveRig live(rig);
+  // No temporal prediction: the first frame jumps from rest, and the prediction would carry that
+  // jump on into the second (the same motion), which measures the prediction, not the region.
+  LiveRigOptions options;
+  options.solver.rotation_extrapolation = 0.0;
+  LiveRig live(rig, options);
   live.bindLabels(labelTable());
   live.processFrame(makeFrame(rig, targets, valid, 0), StepBudget{3}, x.data(), nullptr);
   EXPECT_LT(far_error(live), 1e-6);
@@ -1305,7 +1319,7 @@ TEST(LiveRigCoarse, RefusesACoarseRigThatDoesNotFit) {
   nested.coarse = std::make_shared<const Rig>(rig);
   EXPECT_THROW(LiveRig(rig, {}, &nested), std::invalid_argument);
   LiveRigOptions bad;
-  bad.coarse_iterations = 0;
+  bad.solver.coarse_iterations = 0;
   EXPECT_THROW(LiveRig(rig, bad, &rig), std::invalid_argument);
   EXPECT_NO_THROW(LiveRig(rig, {}, &rig));
   EXPECT_EQ(LiveRig(rig).coarseLevel(), nullptr);
@@ -1317,6 +1331,7 @@ TEST(LiveRigCoarse, RefusesACoarseRigThatDoesNotFit) {
 TEST(LiveRigCoarse, TheCoarseLevelStartsTheFrameNearerTheConvergedPose) {
   const Rig rig = makeBarRig();
   LiveRigOptions options;
+  options.solver = SolverSettings::plain();  // the coarse level's own effect, against the plain chain
   LiveRig plain(rig, options), guided(rig, options, &rig);
   ASSERT_NE(guided.coarseLevel(), nullptr);
   plain.bindLabels(labelTable());
@@ -1347,6 +1362,88 @@ TEST(LiveRigCoarse, TheCoarseLevelStartsTheFrameNearerTheConvergedPose) {
               "coarse level (bar length 8)\n",
               lag_plain, lag_guided);
   EXPECT_LT(lag_guided, 0.5 * lag_plain);
+}
+
+// A frame split into steps (the volume constraint's cold start: one iteration per step; the
+// re-prediction of an occluded marker: one iteration, then the rest) reports the inversion guard of
+// all its iterations, as an unsplit frame does: guarded_solves summed over the steps.
+TEST(LiveRig, ASplitFrameReportsTheGuardOfAllItsIterations) {
+  const Rig rig = makeBarRig();
+  LiveRigOptions options;
+  options.solver = SolverSettings::plain();
+  options.solver.inversion_guard = 3.0;
+  options.solver.inversion_guard_solves = 1;
+  options.solver.inversion_guard_threshold = 1.0;  // every squashed tet is held
+  LiveRigOptions constrained = options;
+  constrained.solver.volume_constraint = true;
+  LiveRig whole(rig, options), split(rig, constrained);
+  whole.bindLabels(labelTable());
+  split.bindLabels(labelTable());
+  ASSERT_FALSE(split.volumeNotKept());
+  // The bar squashed to 0.6 of its length: its tets are held in every iteration.
+  std::vector<Eigen::Vector3d> squashed;
+  for (const RigMarker& m : rig.markers) squashed.emplace_back(m.rest_position.x(), m.rest_position.y(), 0.6 * m.rest_position.z());
+  std::vector<float> x(static_cast<std::size_t>(whole.fineVertexCount()) * 3);
+  const std::vector<bool> all(kMarkers, true);
+  const MarkerFrame first = makeFrame(rig, squashed, all, 0);
+  // Unsplit, from rest: the first iteration's global step holds nothing yet (the rest pose squashes
+  // no tet), the next two do.
+  LiveRig reference(rig, options);
+  reference.bindLabels(labelTable());
+  const LiveFrameStats unsplit = reference.processFrame(first, StepBudget{3}, x.data(), nullptr);
+  ASSERT_EQ(unsplit.step.iterations, 3);
+  ASSERT_EQ(unsplit.step.guarded_solves, 2);
+  ASSERT_GT(unsplit.step.guarded_tets, 0);
+  // From the squashed pose every iteration holds tets (unsplit).
+  const LiveFrameStats again = reference.processFrame(makeFrame(rig, squashed, all, 1), StepBudget{3}, x.data(), nullptr);
+  ASSERT_EQ(again.step.guarded_solves, 3);
+  // The cold start of the volume constraint: three steps of one iteration, the first holding nothing.
+  const LiveFrameStats cold = split.processFrame(first, StepBudget{3}, x.data(), nullptr);
+  EXPECT_EQ(cold.step.iterations, 3);
+  EXPECT_EQ(cold.step.guarded_solves, 2) << "the guard of the second and third steps";
+  EXPECT_GT(cold.step.guarded_tets, 0);
+  // An occluded marker, from the squashed pose: one iteration, the predictions refreshed, then two more.
+  (void)whole.processFrame(first, StepBudget{3}, x.data(), nullptr);
+  std::vector<bool> valid(kMarkers, true);
+  valid[3] = false;
+  const LiveFrameStats refreshed = whole.processFrame(makeFrame(rig, squashed, valid, 1), StepBudget{3}, x.data(), nullptr);
+  ASSERT_TRUE(refreshed.flags & kLiveMarkersPredicted);
+  EXPECT_EQ(refreshed.step.iterations, 3);
+  EXPECT_EQ(refreshed.step.guarded_solves, 3);
+  EXPECT_GT(refreshed.step.guarded_tets, 0);
+}
+
+// The volume constraint needs a closed fine mesh: on a rig whose fine mesh is open the live rig
+// skips it and says so (volumeNotKept), and runs as without it; on a closed one it keeps it.
+TEST(LiveRig, TheVolumeIsNotKeptOnAnOpenFineMeshAndSaysSo) {
+  const Rig closed = makeBarRig();
+  Rig open = closed;
+  // Drop the last triangle: one hole.
+  open.fine_triangles.conservativeResize(open.fine_triangles.rows() - 1, Eigen::NoChange);
+  LiveRigOptions keep;  // the defaults keep the volume
+  ASSERT_TRUE(keep.solver.volume_constraint);
+  LiveRig kept(closed, keep), skipped(open, keep);
+  EXPECT_FALSE(kept.volumeNotKept());
+  EXPECT_TRUE(skipped.volumeNotKept());
+  EXPECT_FALSE(skipped.deformer().hasLinearConstraint());
+  LiveRigOptions without = keep;
+  without.solver.volume_constraint = false;
+  LiveRig free_rig(open, without);
+  EXPECT_FALSE(free_rig.volumeNotKept()) << "not asked for: nothing to say";
+  for (LiveRig* live : {&kept, &skipped, &free_rig}) live->bindLabels(labelTable());
+  const std::size_t n = static_cast<std::size_t>(kept.fineVertexCount()) * 3;
+  std::vector<float> xs(n), xf(n), xk(n);
+  for (int f = 0; f < 10; ++f) {
+    const MarkerFrame frame = makeFrame(closed, movedMarkers(closed, 0.03 * f, 0.01 * f, Eigen::Vector3d::Zero()),
+                                        std::vector<bool>(kMarkers, true), static_cast<std::uint64_t>(f));
+    skipped.processFrame(frame, StepBudget{3}, xs.data(), nullptr);
+    free_rig.processFrame(frame, StepBudget{3}, xf.data(), nullptr);
+    kept.processFrame(frame, StepBudget{3}, xk.data(), nullptr);
+    ASSERT_EQ(std::memcmp(xs.data(), xf.data(), n * sizeof(float)), 0) << "frame " << f;
+    EXPECT_EQ(skipped.prepareNextFrame(), 0) << "nothing to linearize";
+    EXPECT_GT(kept.prepareNextFrame(), 0);
+  }
+  EXPECT_TRUE(kept.deformer().hasLinearConstraint());
 }
 
 }  // namespace

@@ -61,7 +61,15 @@ const Scene& scene() {
 
 // Reference: a LiveRig fed clip frames [first, end) with `iterations` per frame.
 // `clip_path`: another clip of the same markers instead of the moving one.
-std::vector<std::vector<float>> liveRigFrames(std::size_t first, std::size_t end, int iterations, const LiveRigOptions& live_options = {},
+// The live rig with the plain settings (SolverSettings::plain()): the tests below set the export's
+// solver flags one by one on top of them, so that each one's effect is its own.
+LiveRigOptions plainLive() {
+  LiveRigOptions o;
+  o.solver = SolverSettings::plain();
+  return o;
+}
+
+std::vector<std::vector<float>> liveRigFrames(std::size_t first, std::size_t end, int iterations, const LiveRigOptions& live_options = plainLive(),
                                               const std::filesystem::path& clip_path = {}) {
   const Scene& sc = scene();
   const drivers::C3DClip clip = drivers::C3DClip::load(clip_path.empty() ? sc.clip_path : clip_path);
@@ -194,6 +202,7 @@ tools::ExportOptions options(const std::filesystem::path& out, int iterations = 
   o.out = out;
   o.iterations = iterations;
   o.quiet = true;
+  o.solver = SolverSettings::plain();  // the plain settings: each test adds the flags it checks (as liveRigFrames)
   return o;
 }
 
@@ -332,14 +341,14 @@ TEST(Export, TheCoarseLevelIsUsedWithIterationsAndNotWhenConverging) {
 TEST(Export, KeepVolumeIsTheLiveRigsVolumeConstraint) {
   const TempDir out;
   auto fixed = options(out.path() / "fixed.pc2", 3);
-  fixed.keep_volume = true;
+  fixed.solver.volume_constraint = true;
   auto converge = options(out.path() / "converge.pc2", 0);
-  converge.keep_volume = true;
+  converge.solver.volume_constraint = true;
   (void)tools::exportClip(fixed);
   (void)tools::exportClip(converge);
   (void)tools::exportClip(options(out.path() / "plain_converge.pc2", 0));
-  LiveRigOptions keep;
-  keep.volume_constraint = true;
+  LiveRigOptions keep = plainLive();
+  keep.solver.volume_constraint = true;
   const auto reference = liveRigFrames(0, kFrames, 3, keep);
   const auto got = readPc2(out.path() / "fixed.pc2").frames;
   ASSERT_EQ(got.size(), kFrames);
@@ -363,14 +372,14 @@ TEST(Export, KeepVolumeIsTheLiveRigsVolumeConstraint) {
 }
 
 // The export at `path` is, frame for frame and bit for bit, a LiveRig with `live` fed the same clip
-// frames with `iterations` per frame, and differs from a default LiveRig's (so the options reached it).
+// frames with `iterations` per frame, and differs from a plain LiveRig's (so the options reached it).
 void expectTheLiveRigsFrames(const std::filesystem::path& path, int iterations, const LiveRigOptions& live,
                              const std::filesystem::path& clip = {}) {
   const auto got = readPc2(path).frames;
   const auto reference = liveRigFrames(0, kFrames, iterations, live, clip);
   ASSERT_EQ(got.size(), kFrames) << path;
   for (std::size_t f = 0; f < kFrames; ++f) EXPECT_EQ(got[f], reference[f]) << path << " frame " << f;
-  EXPECT_NE(got, liveRigFrames(0, kFrames, iterations, {}, clip)) << path;
+  EXPECT_NE(got, liveRigFrames(0, kFrames, iterations, plainLive(), clip)) << path;
 }
 
 // --after-publish-iterations N with --iterations 3: the LiveRig's frames with
@@ -379,30 +388,30 @@ void expectTheLiveRigsFrames(const std::filesystem::path& path, int iterations, 
 TEST(Export, AfterPublishIterationsAreTheLiveRigs) {
   const TempDir out;
   auto refined = options(out.path() / "refined.pc2", 3);
-  refined.after_publish_iterations = 2;
+  refined.solver.after_publish_iterations = 2;
   (void)tools::exportClip(refined);
-  LiveRigOptions after;
-  after.after_publish_iterations = 2;
+  LiveRigOptions after = plainLive();
+  after.solver.after_publish_iterations = 2;
   expectTheLiveRigsFrames(out.path() / "refined.pc2", 3, after);
   auto converging = options(out.path() / "converging.pc2", 0);
-  converging.after_publish_iterations = 2;
+  converging.solver.after_publish_iterations = 2;
   EXPECT_THROW_CONTAINS(tools::exportClip(converging), "--after-publish-iterations needs --iterations N");
   EXPECT_FALSE(std::filesystem::exists(out.path() / "converging.pc2"));
 }
 
 // --predict, --relax and --inversion-guard with --iterations 3: the LiveRig's frames with the same
-// LiveRigOptions, bit for bit; --predict without --iterations is refused before anything is written.
+// LiveRigOptions, bit for bit; bad values are refused before anything is written.
 TEST(Export, PredictRelaxAndTheGuardAreTheLiveRigs) {
   const TempDir out;
   auto tuned = options(out.path() / "tuned.pc2", 3);
-  tuned.predict = true;
-  tuned.relax = 1.9;
-  tuned.inversion_guard = 1.0;
+  tuned.solver.rotation_extrapolation = 1.0;
+  tuned.solver.rotation_relaxation = 1.9;
+  tuned.solver.inversion_guard = 1.0;
   (void)tools::exportClip(tuned);
-  LiveRigOptions live;
-  live.rotation_extrapolation = 1.0;
-  live.rotation_relaxation = 1.9;
-  live.inversion_guard = 1.0;
+  LiveRigOptions live = plainLive();
+  live.solver.rotation_extrapolation = 1.0;
+  live.solver.rotation_relaxation = 1.9;
+  live.solver.inversion_guard = 1.0;
   expectTheLiveRigsFrames(out.path() / "tuned.pc2", 3, live);
   // Each option on its own changes the frames (so none of them is dropped on the way); the fourth
   // is the implicit guard (k 3, 2 solves) against the explicit one on the crushed block, the fifth
@@ -410,14 +419,14 @@ TEST(Export, PredictRelaxAndTheGuardAreTheLiveRigs) {
   constexpr int kGuardIterations = 200;
   for (int which = 0; which < 5; ++which) {
     auto one = options(out.path() / ("one" + std::to_string(which) + ".pc2"), 3);
-    LiveRigOptions o;
+    LiveRigOptions o = plainLive();
     std::filesystem::path clip;
     if (which == 0) {
-      one.predict = true;
-      o.rotation_extrapolation = 1.0;
+      one.solver.rotation_extrapolation = 1.0;
+      o.solver.rotation_extrapolation = 1.0;
     } else if (which == 1) {
-      one.relax = 1.0;
-      o.rotation_relaxation = 1.0;
+      one.solver.rotation_relaxation = 1.0;
+      o.solver.rotation_relaxation = 1.0;
     } else {
       // The guard acts only on tets squashed below half their volume: the block crushed from the
       // top and the right, frame after frame (TOP pulled 400 mm down through the block, RIGHT 400 mm
@@ -444,15 +453,15 @@ TEST(Export, PredictRelaxAndTheGuardAreTheLiveRigs) {
       std::ofstream(clip, std::ios::binary).write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
       one.clip_path = clip;
       one.iterations = kGuardIterations;  // enough to squash it
-      one.inversion_guard = which == 2 ? 1.0 : 3.0;
-      o.inversion_guard = one.inversion_guard;
+      one.solver.inversion_guard = which == 2 ? 1.0 : 3.0;
+      o.solver.inversion_guard = one.solver.inversion_guard;
       if (which >= 3) {
-        one.inversion_guard_solves = 2;
-        o.inversion_guard_solves = 2;
+        one.solver.inversion_guard_solves = 2;
+        o.solver.inversion_guard_solves = 2;
       }
       if (which == 4) {
-        one.inversion_guard_threshold = 0.9;
-        o.inversion_guard_threshold = 0.9;
+        one.solver.inversion_guard_threshold = 0.9;
+        o.solver.inversion_guard_threshold = 0.9;
       }
     }
     (void)tools::exportClip(one);
@@ -460,21 +469,17 @@ TEST(Export, PredictRelaxAndTheGuardAreTheLiveRigs) {
   }
   // The threshold on its own changes the frames (the same guard holding from 0.9 against 0.5).
   EXPECT_NE(readPc2(out.path() / "one4.pc2").frames, readPc2(out.path() / "one3.pc2").frames);
-  auto converging = options(out.path() / "converging.pc2", 0);
-  converging.predict = true;
-  EXPECT_THROW_CONTAINS(tools::exportClip(converging), "--predict needs --iterations N");
-  EXPECT_FALSE(std::filesystem::exists(out.path() / "converging.pc2"));
   auto bad = options(out.path() / "bad.pc2", 3);
-  bad.relax = 2.0;
+  bad.solver.rotation_relaxation = 2.0;
   EXPECT_THROW_CONTAINS(tools::exportClip(bad), "--relax must be in [1, 2)");
-  bad.relax = 1.8;
-  bad.inversion_guard = 1.5;
+  bad.solver.rotation_relaxation = 1.8;
+  bad.solver.inversion_guard = 1.5;
   EXPECT_THROW_CONTAINS(tools::exportClip(bad), "--inversion-guard must be in [0, 1] (above 1 only with --inversion-guard-solves");
-  bad.inversion_guard_solves = 2;
-  bad.inversion_guard = 1001.0;
+  bad.solver.inversion_guard_solves = 2;
+  bad.solver.inversion_guard = 1001.0;
   EXPECT_THROW_CONTAINS(tools::exportClip(bad), "--inversion-guard must be in [0, 1000] with --inversion-guard-solves");
-  bad.inversion_guard = 2.0;
-  bad.inversion_guard_threshold = 0.0;
+  bad.solver.inversion_guard = 2.0;
+  bad.solver.inversion_guard_threshold = 0.0;
   EXPECT_THROW_CONTAINS(tools::exportClip(bad), "--inversion-guard-threshold must be in [0.01, 1]");
   EXPECT_FALSE(std::filesystem::exists(out.path() / "bad.pc2"));
 }
@@ -646,7 +651,7 @@ std::vector<std::vector<float>> uvRigFrames(int iterations, std::vector<std::vec
   drivers::C3DPlaybackOptions po;
   po.pacing = drivers::Pacing::kAsFastAsPossible;
   const drivers::C3DPlayback playback(clip, po);
-  LiveRigOptions lo;
+  LiveRigOptions lo = plainLive();  // as uvOptions
   lo.normals = normals != nullptr;
   LiveRig live(uvScene().rig, lo);
   EXPECT_EQ(live.bindLabels(clip.labels()).matched, 5);
@@ -1251,7 +1256,7 @@ TEST(Export, CommandLine) {
   EXPECT_NE(std::get<1>(ok).find("tetrig export: solving 4 frames (3 iterations each)"), std::string::npos) << std::get<1>(ok);
   const Pc2 pc2 = readPc2(out.path() / "a.pc2");
   EXPECT_EQ(pc2.samples, 4);
-  EXPECT_EQ(pc2.frames, liveRigFrames(2, 6, 3));
+  EXPECT_EQ(pc2.frames, liveRigFrames(2, 6, 3, LiveRigOptions{}));  // the command's defaults are the live rig's
   const auto bad = run(io + "--out '" + (out.path() / "a.fbx").string() + "'");
   const std::string& bad_err = std::get<1>(bad);
   EXPECT_EQ(std::get<0>(bad), 1);

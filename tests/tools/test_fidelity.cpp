@@ -41,7 +41,12 @@ using test::TempDir;
 
 using ToolRun = test::CommandRun;
 
-ToolRun fidelity(const std::string& args, const TempDir& dir) { return test::runCommand(TETRIG_FIDELITY_EXE, args, dir.path()); }
+// The tests measure each mechanism against the plain chain: every run starts from
+// SolverSettings::plain() by flags (a later flag overrides these).
+ToolRun fidelity(const std::string& args, const TempDir& dir) {
+  const std::string plain = "--no-predict --no-keep-volume --inversion-guard 0 --inversion-guard-solves 0 --inversion-guard-threshold 0.5 ";
+  return test::runCommand(TETRIG_FIDELITY_EXE, plain + args, dir.path());
+}
 
 class FidelityTool : public ::testing::Test {
  protected:

@@ -74,10 +74,10 @@ struct Harness {
     EXPECT_EQ(tetrig_shm_attach(&reader, publisher->segmentData(), publisher->segmentSize()), TETRIG_SHM_OK);
     loop = std::make_unique<FrameLoop>(*mailbox, live, *publisher, options);
   }
-  // Publishes `frame` (stamped now) and waits until the solver published it (lockstep).
-  bool publishAndWait(MarkerFrame& frame) {
+  // Publishes `frame` (stamped now, or age_ns ago) and waits until the solver published it (lockstep).
+  bool publishAndWait(MarkerFrame& frame, std::int64_t age_ns = 0) {
     const std::uint64_t before = tetrig_shm_latest_frame_id(&reader);
-    frame.receive_timestamp_ns = monotonicNowNs();
+    frame.receive_timestamp_ns = monotonicNowNs() - age_ns;
     mailbox->publish(frame);
     const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(10);
     while (tetrig_shm_latest_frame_id(&reader) == before) {
@@ -105,8 +105,10 @@ TEST_P(FrameLoopBitExact, EveryPublishedFrameEqualsAnOfflineRunBitForBit) {
   options.lock_memory = false;
   LiveRigOptions live_options;
   live_options.normals = true;
-  live_options.volume_constraint = GetParam();
-  live_options.after_publish_iterations = GetParam() ? 2 : 0;
+  // false: the plain settings; true: the defaults (prediction, implicit guard, volume constraint)
+  // and iterations after publishing.
+  if (!GetParam()) live_options.solver = SolverSettings::plain();
+  live_options.solver.after_publish_iterations = GetParam() ? 2 : 0;
   LiveRigOptions split_options = live_options;
   split_options.split_pose_transfer = true;  // the live side on two threads, the offline side on one
   Harness h("bitexact", options, split_options);
@@ -253,6 +255,43 @@ TEST(FrameLoop, StopsAfterMaxFramesAndCountsBudgetMisses) {
   EXPECT_EQ(h.loop->counters().frames, 5u);
   EXPECT_EQ(h.loop->counters().budget_misses, 5u);
   EXPECT_EQ(h.loop->counters().deadline_hits, 5u);
+}
+
+// A budget miss is one predicate (frameBudgetMissed: handed to the segment after receive + budget):
+// the segment's flag, the counter and the frame log say the same of every frame, of the frames that
+// miss (received 250 ms before they were published, against a 200 ms budget) and of those in time.
+TEST(FrameLoop, TheSegmentFlagTheCounterAndTheFrameLogAgreeOnBudgetMisses) {
+  EXPECT_FALSE(frameBudgetMissed(0, 1'000'000)) << "no deadline: never a miss";
+  EXPECT_FALSE(frameBudgetMissed(1000, 1000));
+  EXPECT_TRUE(frameBudgetMissed(1000, 1001));
+  FrameLoopOptions options;
+  options.budget_ns = 200'000'000;
+  options.lock_memory = false;
+  options.frame_log_capacity = 16;
+  Harness h("agree", options);
+  h.loop->start();
+  // A frame stamped 250 ms ago must still count as received after the loop started.
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  const auto source = makeSource(demoRig(), 0.0f);
+  auto frame = std::make_unique<MarkerFrame>();
+  std::vector<bool> flagged;
+  for (std::uint64_t k = 0; k < 9; ++k) {
+    source->fillFrame(k, *frame);
+    const bool late = k % 3 == 1;
+    ASSERT_TRUE(h.publishAndWait(*frame, late ? 250'000'000 : 0));
+    TetrigShmFrameInfo info{};
+    ASSERT_EQ(tetrig_shm_read_latest(&h.reader, nullptr, 0, nullptr, 0, &info), TETRIG_SHM_OK);
+    flagged.push_back((info.flags & TETRIG_SHM_FRAME_BUDGET_MISS) != 0u);
+    EXPECT_EQ(flagged.back(), late) << "frame " << k;
+  }
+  h.loop->requestStop();
+  h.loop->join();
+  EXPECT_EQ(h.loop->counters().frames, 9u);
+  EXPECT_EQ(h.loop->counters().frames_before_start, 0u);
+  EXPECT_EQ(h.loop->counters().budget_misses, static_cast<std::uint64_t>(std::count(flagged.begin(), flagged.end(), true)));
+  const auto log = h.loop->frameLog();
+  ASSERT_EQ(log.size(), flagged.size());
+  for (std::size_t i = 0; i < log.size(); ++i) EXPECT_EQ((log[i].flags & kFrameLogBudgetMiss) != 0u, flagged[i]) << "frame " << i;
 }
 
 // A solved pose the live rig rejects as implausible (docs/live.md) is published as the last good

@@ -260,32 +260,51 @@ TEST(TetrigCli, RunPlaysAClipAndRefusesBadInput) {
     EXPECT_LE(p["p99"].get<double>(), p["max"].get<double>()) << phase;
   }
   EXPECT_FALSE(std::filesystem::exists("/dev/shm/" + name)) << "a clean end unlinks the segment";
-  // Without --keep-volume nothing runs after publishing; with it, the constraint's linearization does
-  // after every solved frame (announced, a row of the table, "prepare_next" in the JSON).
-  EXPECT_EQ(j["latency_us"]["prepare_next"]["count"].get<int>(), 0);
-  EXPECT_EQ(ok.out.find("after publishing"), std::string::npos);
-  EXPECT_EQ(ok.out.find("volume kept"), std::string::npos);
-  const std::string kept_stats = (dir.path() / "kept.json").string();
-  const CliRun kept = run("run --rig '" + rig + "' --keep-volume --source 'c3d:" + clip.string() + "' --publish " + name + " --stats-json '" +
-                              kept_stats + "'",
-                          dir);
-  ASSERT_EQ(kept.status, 0) << kept.err;
-  EXPECT_CONTAINS(kept.out, "fine-mesh volume kept at rest: on");
-  EXPECT_CONTAINS(kept.out, "after publishing");
-  const nlohmann::json jk = nlohmann::json::parse(std::ifstream(kept_stats));
-  EXPECT_EQ(jk["latency_us"]["prepare_next"]["count"].get<int>(),
-            jk["frames"].get<int>() - jk["held_frames"].get<int>() - jk["frames_before_start"].get<int>());
-  EXPECT_GE(jk["latency_us"]["prepare_next"]["count"].get<int>(), 1);
+  // The defaults (SolverSettings{}): the volume kept (its linearization after every solved frame:
+  // announced, a row of the table, "prepare_next" in the JSON), the prediction and the implicit guard.
+  EXPECT_CONTAINS(ok.out, "fine-mesh volume kept at rest: on");
+  EXPECT_CONTAINS(ok.out, "after publishing");
+  EXPECT_CONTAINS(ok.out, "temporal prediction of each frame's start: on");
+  EXPECT_CONTAINS(ok.out, "over-relaxation of the rotation update: omega 1.8");
+  EXPECT_CONTAINS(ok.out,
+                  "inversion guard: body tets squashed below 0.7 of their volume up to 4 times stiffer, implicit (1 conjugate-gradient "
+                  "steps per iteration)");
+  EXPECT_EQ(j["latency_us"]["prepare_next"]["count"].get<int>(),
+            j["frames"].get<int>() - j["held_frames"].get<int>() - j["frames_before_start"].get<int>());
+  EXPECT_GE(j["latency_us"]["prepare_next"]["count"].get<int>(), 1);
   // The stats say which configuration ran.
-  EXPECT_TRUE(jk["solver"]["keep_volume"].get<bool>());
-  EXPECT_FALSE(j["solver"]["keep_volume"].get<bool>());
+  EXPECT_TRUE(j["solver"]["keep_volume"].get<bool>());
+  EXPECT_FALSE(j["solver"]["volume_not_kept"].get<bool>());
+  EXPECT_TRUE(j["solver"]["predict"].get<bool>());
   EXPECT_EQ(j["solver"]["iterations"].get<int>(), 3);
   EXPECT_EQ(j["solver"]["after_publish_iterations"].get<int>(), 0);
   EXPECT_EQ(j["solver"]["pose_threads"].get<int>(), 1);
-  EXPECT_EQ(kept.out.find("iterations after each publish"), std::string::npos);
+  EXPECT_EQ(j["solver"]["relax"].get<double>(), 1.8);
+  EXPECT_EQ(j["solver"]["inversion_guard"].get<double>(), 3.0);
+  EXPECT_EQ(j["solver"]["inversion_guard_solves"].get<int>(), 1);
+  EXPECT_EQ(j["solver"]["inversion_guard_threshold"].get<double>(), 0.7);
+  EXPECT_EQ(ok.out.find("iterations after each publish"), std::string::npos);
+  // The plain settings by flags: nothing runs after publishing, nothing is announced.
+  const std::string plain_stats = (dir.path() / "plain.json").string();
+  const CliRun plain = run("run --rig '" + rig + "' --no-predict --no-keep-volume --inversion-guard 0 --inversion-guard-solves 0 "
+                           "--inversion-guard-threshold 0.5 --source 'c3d:" + clip.string() + "' --publish " + name +
+                               " --stats-json '" + plain_stats + "'",
+                           dir);
+  ASSERT_EQ(plain.status, 0) << plain.err;
+  EXPECT_EQ(plain.out.find("after publishing"), std::string::npos);
+  EXPECT_EQ(plain.out.find("volume kept"), std::string::npos);
+  EXPECT_EQ(plain.out.find("temporal prediction"), std::string::npos);
+  EXPECT_EQ(plain.out.find("inversion guard"), std::string::npos);
+  const nlohmann::json jp = nlohmann::json::parse(std::ifstream(plain_stats));
+  EXPECT_EQ(jp["latency_us"]["prepare_next"]["count"].get<int>(), 0);
+  EXPECT_FALSE(jp["solver"]["keep_volume"].get<bool>());
+  EXPECT_FALSE(jp["solver"]["predict"].get<bool>());
+  EXPECT_EQ(jp["solver"]["inversion_guard"].get<double>(), 0.0);
+  EXPECT_EQ(jp["solver"]["inversion_guard_solves"].get<int>(), 0);
+  EXPECT_EQ(jp["solver"]["inversion_guard_threshold"].get<double>(), 0.5);
   const std::string refined_stats = (dir.path() / "refined.json").string();
-  const CliRun refined = run("run --rig '" + rig + "' --after-publish-iterations 2 --iterations 1 --source 'c3d:" + clip.string() + "' --publish " +
-                                 name + " --stats-json '" + refined_stats + "'",
+  const CliRun refined = run("run --rig '" + rig + "' --no-keep-volume --after-publish-iterations 2 --iterations 1 --source 'c3d:" +
+                                 clip.string() + "' --publish " + name + " --stats-json '" + refined_stats + "'",
                              dir);
   ASSERT_EQ(refined.status, 0) << refined.err;
   EXPECT_CONTAINS(refined.out, "2 iterations after each publish");
@@ -308,27 +327,20 @@ TEST(TetrigCli, RunPlaysAClipAndRefusesBadInput) {
                                 clip.string() + "' --publish " + name + " --stats-json '" + coarse_stats + "'",
                             dir);
   ASSERT_EQ(coarse.status, 0) << coarse.err;
-  // The over-relaxation and the inversion guard: announced when not the defaults, and in the stats.
+  // The over-relaxation and the inversion guard: announced, and in the stats.
   EXPECT_CONTAINS(coarse.out, "over-relaxation of the rotation update: omega 1.9");
   EXPECT_CONTAINS(coarse.out,
                   "inversion guard: body tets squashed below 0.7 of their volume up to 3 times stiffer, implicit (2 conjugate-gradient "
                   "steps per iteration)");
-  EXPECT_EQ(ok.out.find("over-relaxation"), std::string::npos);
-  EXPECT_EQ(ok.out.find("inversion guard"), std::string::npos);
   const nlohmann::json jc = nlohmann::json::parse(std::ifstream(coarse_stats));
   EXPECT_EQ(jc["solver"]["relax"].get<double>(), 1.9);
   EXPECT_EQ(jc["solver"]["inversion_guard"].get<double>(), 2.0);
   EXPECT_TRUE(jc["solver"]["predict"].get<bool>());
   EXPECT_TRUE(jc["solver"]["coarse_level"].get<bool>());
-  EXPECT_EQ(j["solver"]["relax"].get<double>(), 1.8);
-  EXPECT_EQ(j["solver"]["inversion_guard"].get<double>(), 0.0);
-  EXPECT_EQ(j["solver"]["inversion_guard_solves"].get<int>(), 0);
   EXPECT_EQ(jc["solver"]["inversion_guard_solves"].get<int>(), 2);
-  EXPECT_EQ(j["solver"]["inversion_guard_threshold"].get<double>(), 0.5);
   EXPECT_EQ(jc["solver"]["inversion_guard_threshold"].get<double>(), 0.7);
   EXPECT_CONTAINS(coarse.out, "coarse level: ");
   EXPECT_CONTAINS(coarse.out, "temporal prediction of each frame's start: on");
-  EXPECT_EQ(ok.out.find("temporal prediction"), std::string::npos);
   EXPECT_EQ(ok.out.find("coarse level"), std::string::npos);
   EXPECT_CONTAINS(coarse.out, " tets, 5 iterations per frame");
   one_line_error(run("run --rig '" + rig + "' --coarse-rig /nonexistent/c.rig --source synthetic", dir), "/nonexistent/c.rig");

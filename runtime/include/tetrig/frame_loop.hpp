@@ -9,12 +9,13 @@
 // runtime's clock (tetrig/clock.hpp): receive (by the driver) -> taken -> step done -> pose
 // transfer done -> published. The budget of a frame is a deadline at receive + budget_ns; the
 // step's own deadline is that minus the pose transfer's recent cost, so the frame as a whole
-// meets it; a frame published after its deadline is a budget miss. When no frame has come for
+// meets it; a frame handed to the segment (ShmPublisher::commit) after its deadline is a budget
+// miss (frameBudgetMissed: the segment's flag, the counter and the frame log use that one test). When no frame has come for
 // stale_after_ns the segment's state says "stale" (the last pose stays published) until frames
 // come again.
 //
 // Real-time hygiene, applied on the solver thread where the system permits and reported
-// (FrameLoop::hygiene()) where it does not: flush-to-zero and denormals-are-zero, memory locked
+// (FrameLoop::hygiene()) where it does not: flush-to-zero and denormals-are-zero (always), memory locked
 // (mlockall), optional CPU pinning and SCHED_FIFO.
 //
 // The frame log (optional, FrameLoopOptions::frame_log_capacity): one FrameLogEntry per solved
@@ -44,16 +45,24 @@ namespace tetrig {
 class LiveRig;
 class ShmPublisher;
 
+// The solver thread's SCHED_FIFO priority (FrameLoopOptions::realtime_fifo).
+inline constexpr int kFrameLoopFifoPriority = 50;
+
+// A frame's budget miss: it was handed to the segment (publish_ns, the runtime's clock) after its
+// deadline (receive + budget; 0: no deadline). The one definition: the segment's
+// TETRIG_SHM_FRAME_BUDGET_MISS flag, FrameLoopCounters::budget_misses and kFrameLogBudgetMiss.
+constexpr bool frameBudgetMissed(std::int64_t deadline_ns, std::int64_t publish_ns) noexcept {
+  return deadline_ns != 0 && publish_ns > deadline_ns;
+}
+
 struct FrameLoopOptions {
   int max_iterations = 3;                        // per frame (the deadline may stop earlier)
   std::int64_t budget_ns = 4'000'000;            // receive -> published deadline; <= 0: none
   std::int64_t stale_after_ns = 250'000'000;     // no frame for this long: the segment says stale
   std::uint64_t max_frames = 0;                  // stop after this many frames (0: until requestStop)
-  bool flush_denormals = true;                   // FTZ/DAZ on the solver thread
   bool lock_memory = true;                       // mlockall(MCL_CURRENT | MCL_FUTURE)
   int cpu = -1;                                  // pin the solver thread to this CPU (-1: no)
-  bool realtime_fifo = false;                    // SCHED_FIFO for the solver thread
-  int fifo_priority = 50;
+  bool realtime_fifo = false;                    // SCHED_FIFO (priority kFrameLoopFifoPriority) for the solver thread
   std::size_t frame_log_capacity = 0;            // frames the frame log keeps (0: no log); allocated by the constructor
   int frame_log_markers = 0;                     // markers kept per logged frame (0..kMaxMarkers; the first ones of the frame)
 };
@@ -75,7 +84,7 @@ struct FrameLogEntry {
 
 enum FrameLogFlags : std::uint16_t {
   kFrameLogBeforeStart = 1u << 0,   // received before the solver was ready: not in the latency histograms
-  kFrameLogBudgetMiss = 1u << 1,    // published after receive + budget
+  kFrameLogBudgetMiss = 1u << 1,    // a budget miss (frameBudgetMissed)
   kFrameLogPoseHeld = 1u << 2,      // no rig marker measured: the pose was held
 };
 
@@ -102,7 +111,7 @@ struct FrameLoopLatency {
 
 struct FrameLoopCounters {
   std::uint64_t frames = 0;                 // frames processed and published
-  std::uint64_t budget_misses = 0;          // published after receive + budget
+  std::uint64_t budget_misses = 0;          // budget misses (frameBudgetMissed) of frames received after start
   std::uint64_t deadline_hits = 0;          // steps stopped by their deadline before max_iterations
   std::uint64_t held_frames = 0;            // frames with no measured rig marker (pose held)
   std::uint64_t rejected_target_frames = 0; // frames whose marker targets the deformer rejected (kept the last ones)

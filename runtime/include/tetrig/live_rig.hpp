@@ -41,7 +41,7 @@
 // is taken again (blending back from the prediction).
 // Published poses: outside tetrig/pose_bound.hpp's box (kPoseBoundReach rest diagonals around the
 // per-axis median of the markers' targets) the last pose is written again and flagged.
-// Refresh (refresh_predictions, on by default): when some markers are predicted or blending and
+// Refresh: when some markers are predicted or blending and
 // some are fully measured, the step runs one iteration, the predictions are recomputed from the
 // pose that iteration gave, and the remaining iterations run with the new targets (predictions
 // otherwise lag the measured markers by one frame); the iteration count and deadline are those
@@ -62,6 +62,7 @@
 #include "tetrig/pose_transfer_blocked.hpp"
 #include "tetrig/pose_transfer_split.hpp"
 #include "tetrig/rig_file.hpp"
+#include "tetrig/solver_settings.hpp"
 #include "tetrig/volume_constraint.hpp"
 
 #include <Eigen/Core>
@@ -78,7 +79,6 @@ namespace tetrig {
 struct LiveRigOptions {
   double occlusion_blend_s = 0.15;   // blend time when a marker drops out and when it returns (0: no blend)
   bool normals = false;              // also write per-vertex normals of the fine mesh
-  int prediction_rings = 3;          // anchor rings of the occlusion prediction (MarkerPredictionOptions::rings)
   double untimed_frame_period_s = 1.0 / 120.0;  // clock advance of a frame with neither timestamp
   bool fade_dropout_offset = true;   // false: keep the dropout offset (in the anchor's frame) for the whole occlusion
   bool compact_pose_transfer = true;  // stream a copy of B in blocks of 8 nearby fine vertices, float
@@ -93,37 +93,13 @@ struct LiveRigOptions {
   bool predict_all_markers = false;  // false: predict only the markers that need it (not measured, or
                                      // blending); true: every marker every frame (markerPredictions()
                                      // then holds a current prediction for measured markers too; tools, tests)
-  bool refresh_predictions = true;   // with predicted markers and >= 2 iterations: re-predict after the first
-  // Temporal prediction of the warm start (tetrig/rotation_prediction.hpp, docs/fidelity.md): 1 brings
-  // the median body error to the converged pose at 3 iterations per frame on HDM05 from 41 to 5.5 mm,
-  // but raises the error tails at fast reversals and the pops at occlusion edges (docs/fidelity.md):
-  // off by default until those are solved.
-  double rotation_extrapolation = 0.0;          // DeformerOptions::rotation_extrapolation
-  double rotation_extrapolation_max_deg = 5.0;  // DeformerOptions::rotation_extrapolation_max_deg
-  double rotation_relaxation = 1.8;             // DeformerOptions::rotation_relaxation (docs/fidelity.md: 1.8 measured best on HDM05)
-  double volume_weight = 0.0;  // DeformerOptions::volume_weight (the volume term; docs/deformation.md), rig and coarse level
-  double inversion_guard = 0.0;            // DeformerOptions::inversion_guard over the rig's body tets, rig and coarse level
-  double inversion_guard_threshold = 0.5;  // DeformerOptions::inversion_guard_threshold
-  int inversion_guard_solves = 0;          // DeformerOptions::inversion_guard_solves (> 0: the implicit guard)
-  // Keep the fine mesh's enclosed volume at rest (FineVolumeConstraint, a Lagrange multiplier on the
-  // fine rig; linearized at each frame's published pose for the next frame by prepareNextFrame(): one
-  // transposed product of B and one solve per frame; the first frame, and the first after a reset,
-  // set it after their first iteration). Off by default (docs/fidelity.md; `tetrig run --keep-volume`).
-  bool volume_constraint = false;
-  // Frames between two linearizations of the volume's gradient (B^T of it and the solve, the costly
-  // part); the volume itself is measured every frame and the constraint's value follows it.
-  int volume_constraint_refresh_frames = 1;
-  // Entries of each row of B the constraint's gradient B^T dV/dx_fine uses (the largest, rescaled to
-  // the row's sum; FineVolumeConstraint): 0 = all.
+  // The solver's settings (tetrig/solver_settings.hpp): the accurate ones by default. The fine-volume
+  // constraint (solver.volume_constraint) is skipped on a rig whose fine mesh is not closed
+  // (volumeNotKept()).
+  SolverSettings solver;
+  // Entries of each row of B the volume constraint's gradient B^T dV/dx_fine uses (the largest,
+  // rescaled to the row's sum; FineVolumeConstraint): 0 = all.
   int volume_constraint_gradient_entries = 0;
-  // Iterations on each frame's own targets after its pose is published (prepareNextFrame, bounded
-  // by its deadline): the next frame starts nearer this frame's converged pose, which removes most
-  // of the lag that builds up over frames (docs/fidelity.md, "Iterations after publishing"). Each
-  // costs about a sixth of a plain frame, off the receive -> published path. 0: none.
-  int after_publish_iterations = 0;
-  int coarse_iterations = 5;   // with a coarse rig: its iterations per frame (CoarseLevelOptions::iterations)
-  bool use_coarse_level = true;  // use the rig's own coarse level (Rig::coarse, built with build-rig
-                                 // --coarse-tet-vertices) when it has one and no coarse rig is given
   // Plausible samples only (docs/live.md, "Implausible marker samples"): a measured sample farther
   // from its marker's expected position than a human marker can move is treated as occluded for that
   // frame and counted (LiveFrameStats::rejected_marker_samples). D = the fine mesh's rest diagonal,
@@ -191,7 +167,7 @@ class LiveRig {
   // coarse_rig (optional): a coarser rig of the same mesh and markers (tetrig build-rig with fewer
   // --tet-vertices) solved every frame before the fine iterations; its rotation change starts the
   // fine tets (tetrig/coarse_level.hpp). Without one, the rig's own coarse level (Rig::coarse) is
-  // used if it has one and options.use_coarse_level. Its markers are matched to the rig's by label (every one
+  // used if it has one and options.solver.use_coarse_level. Its markers are matched to the rig's by label (every one
   // must be in the rig), its region handles take the rig's region targets (same count required),
   // its other handles stay at rest. Throws std::invalid_argument when it does not fit the rig
   // (coarseLevelMismatch in tetrig/rig_file.hpp: the same checks as a coarse level inside a rig file). The
@@ -211,9 +187,9 @@ class LiveRig {
   // LiveRigOptions::normals). Never writes a non-finite value. No allocation, lock, exception, I/O.
   LiveFrameStats processFrame(const MarkerFrame& frame, const StepBudget& budget, float* positions, float* normals) noexcept;
 
-  // Work a frame leaves for the next one, done now: with LiveRigOptions::volume_constraint, the
+  // Work a frame leaves for the next one, done now: with SolverSettings::volume_constraint, the
   // constraint's linearization at the pose just published (the fine volume's gradient, B^T of it and
-  // one solve: 0.6-0.9x a plain frame's cost); then LiveRigOptions::after_publish_iterations more
+  // one solve: 0.6-0.9x a plain frame's cost); then SolverSettings::after_publish_iterations more
   // iterations on that frame's targets, stopped at `deadline` (the linearization is not). Call it
   // after publishing processFrame's buffers, so that this work stays off the receive -> published
   // path (FrameLoop does, with the frame's deadline); a processFrame that finds it still pending runs
@@ -234,6 +210,10 @@ class LiveRig {
   const Deformer& deformer() const noexcept { return deformer_; }
   const CoarseLevel* coarseLevel() const noexcept { return coarse_.get(); }  // nullptr without a coarse rig
   const LiveRigOptions& options() const noexcept { return options_; }
+  // True when options.solver.volume_constraint asked for the fine mesh's volume to be kept but the
+  // rig's fine mesh is not closed (and consistently oriented), so the constraint was skipped; tools
+  // say so once.
+  bool volumeNotKept() const noexcept { return options_.solver.volume_constraint && volume_constraint_ == nullptr; }
   // Bytes of B each frame's pose transfer streams: the blocked copy's, or the rig's double B's.
   std::int64_t poseTransferBytes() const noexcept {
     return blocked_b_.rows > 0 ? blocked_b_.bytes() : rig_->pose_transfer.bytes();
@@ -288,7 +268,7 @@ class LiveRig {
   MarkerPredictor predictor_;
   BlockedPoseTransfer blocked_b_;             // when options.compact_pose_transfer and the rig fits (else empty)
   std::unique_ptr<PoseTransferSplit> split_;  // when options.split_pose_transfer
-  std::unique_ptr<FineVolumeConstraint> volume_constraint_;  // when options.volume_constraint
+  std::unique_ptr<FineVolumeConstraint> volume_constraint_;  // when options.solver.volume_constraint and the fine mesh is closed
   std::vector<double> constraint_gradient_;                // its g, #tetV*3
   std::vector<float> constraint_scratch_;                  // a first iteration's fine pose (#fine*3), on a cold frame
   int frames_since_linearized_ = 0;

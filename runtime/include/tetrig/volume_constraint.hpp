@@ -28,6 +28,10 @@ namespace tetrig {
 template <typename T>
 double enclosedVolume(std::span<const std::int32_t> triangles, const T* x) noexcept;
 
+// True when every edge of the triangles is walked once each way, as often as the other: a closed
+// (watertight), consistently oriented surface, which FineVolumeConstraint needs. Load time (allocates).
+bool closedOrientedSurface(std::span<const std::int32_t> triangles);
+
 class FineVolumeConstraint {
  public:
   // b: #fine x #tetV; triangles: #F*3 fine-vertex indices, outward; rest_fine: #fine*3 rest positions.
