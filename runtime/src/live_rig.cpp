@@ -637,7 +637,7 @@ bool LiveRig::plausibleSample(std::size_t k, const Eigen::Vector3d& x) const noe
 }
 
 double LiveRig::dropoutWeight(const Track& track) const noexcept {
-  return options_.fade_dropout_offset ? 1.0 - blendWeight(now_ns_ - track.dropout_ns) : 1.0;
+  return 1.0 - blendWeight(now_ns_ - track.dropout_ns);
 }
 
 void LiveRig::refreshPredictions() noexcept {

@@ -512,19 +512,17 @@ TEST(LiveRig, BlendsFollowTheSmoothstepInFrameTime) {
   }
 }
 
-TEST(LiveRig, KeptDropoutOffsetTurnsWithTheBody) {
+TEST(LiveRig, TheDropoutOffsetFadesOutWhileTheBodyMoves) {
   // M0 is measured 0.2 off its rest offset (a slid marker) while the bar stands still, then lost
-  // while the bar turns and shifts rigidly. With the offset kept, M0's target is the rigid motion of
-  // its last measurement; with the offset faded (the default) it is the motion of its rest offset.
+  // while the bar turns and shifts rigidly. Once the offset has faded, M0's target is the rigid
+  // motion of its rest offset, not of its last measurement.
   const Rig rig = makeBarRig();
   const Eigen::Vector3d slide(0.0, 0.0, 0.2);
   const Eigen::Vector3d shift(0.3, 0.2, -0.4);
   const double tilt = 0.5;
   const Eigen::Isometry3d motion = Eigen::Translation3d(shift) * Eigen::AngleAxisd(tilt, Eigen::Vector3d::UnitX());
-  for (const bool fade : {false, true}) {
-    LiveRigOptions options;
-    options.fade_dropout_offset = fade;
-    LiveRig live(rig, options);
+  {
+    LiveRig live(rig);
     live.bindLabels(labelTable());
     std::vector<float> x(static_cast<std::size_t>(live.fineVertexCount()) * 3);
     std::vector<bool> valid(kMarkers, true);
@@ -538,11 +536,7 @@ TEST(LiveRig, KeptDropoutOffsetTurnsWithTheBody) {
     const Eigen::Vector3d last_measured = motion * (rig.markers[0].rest_position + slide);
     const Eigen::Vector3d rest_offset = motion * rig.markers[0].rest_position;
     const Eigen::Vector3d target = live.markerTargets()[0];
-    if (fade) {
-      EXPECT_LT((target - rest_offset).norm(), 2e-3);
-    } else {
-      EXPECT_LT((target - last_measured).norm(), 2e-3);
-    }
+    EXPECT_LT((target - rest_offset).norm(), 2e-3);
     EXPECT_GT((last_measured - rest_offset).norm(), 0.19);
   }
 }

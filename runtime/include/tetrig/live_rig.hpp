@@ -23,8 +23,6 @@
 //                                                        with the body and fades out);
 //   return at t1 (first frame measured again, measurement m(t)):
 //       target(t) = P(t) + s((t - t1) / T) (m(t) - P(t))   (starts at P, ends at m).
-// With fade_dropout_offset = false the (1 - s) factor is 1: the offset is kept for the whole
-// occlusion (measured closer to the unoccluded run on real data, docs/live.md; off by default).
 // Time is the frames' own: device_timestamp_ns when non-zero, else receive_timestamp_ns (never the
 // wall clock, so a live run replays bit for bit offline from the same frames and iteration counts),
 // accumulated as an internal blend clock that never runs backwards (a timestamp earlier than the
@@ -80,7 +78,6 @@ struct LiveRigOptions {
   double occlusion_blend_s = 0.15;   // blend time when a marker drops out and when it returns (0: no blend)
   bool normals = false;              // also write per-vertex normals of the fine mesh
   double untimed_frame_period_s = 1.0 / 120.0;  // clock advance of a frame with neither timestamp
-  bool fade_dropout_offset = true;   // false: keep the dropout offset (in the anchor's frame) for the whole occlusion
   bool compact_pose_transfer = true;  // stream a copy of B in blocks of 8 nearby fine vertices, float
                                      // weights and 16-bit columns (blockPoseTransfer), instead of the rig's
                                      // double B row by row, summed from float tet positions in float:
