@@ -351,7 +351,7 @@ void BM_LiveRigFrameLandingImplicitVolume(benchmark::State& state) { liveRigFram
 BENCHMARK(BM_LiveRigFrameLandingImplicitVolume)->Name("BM_LiveRigFrame/smpl_hdm05_landing_implicit_volume")->DenseRange(1, 2)->Unit(benchmark::kMicrosecond);
 void BM_LiveRigFrameLandingKeptVolume(benchmark::State& state) { liveRigFrame(state, false, true, false, true, true, true); }
 // The same with omega 1.8 and the guard's threshold at 0.7: the configuration recommended with the
-// volume kept (docs/live.md, "Landing near the converged pose").
+// volume kept (docs/live.md, "What the default settings cost").
 BENCHMARK(BM_LiveRigFrameLandingKeptVolume)->Name("BM_LiveRigFrame/smpl_hdm05_landing_kept_volume")->Arg(1)->Unit(benchmark::kMicrosecond);
 // Argument: iterations after publishing (LiveRigOptions::after_publish_iterations).
 BENCHMARK(BM_LiveRigFrameAfterPublish)->Name("BM_LiveRigFrame/smpl_hdm05_after_publish")->Arg(1)->Arg(2)->Unit(benchmark::kMicrosecond);
