@@ -1,10 +1,13 @@
 // `tetrig demo` (tools/demo.hpp): the live path on the project's own data or on real data.
 #include "demo.hpp"
 
+#include "character/character_surface.hpp"
 #include "character/default_character.hpp"
 #include "demo_report.hpp"
 #include "run.hpp"
 #include "tetrig/drivers/c3d_reader.hpp"
+#include "tetrig/drivers/character_performance.hpp"
+#include "tetrig/drivers/synthetic_source.hpp"
 #include "tetrig/rigbuild/demo_bar_rig.hpp"
 #include "tetrig/rigbuild/build_rig.hpp"
 #include "tetrig/rigbuild/progress.hpp"
@@ -12,6 +15,7 @@
 #include "tetrig/tet_mesh_io.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -55,6 +59,32 @@ std::string cacheKey(const std::filesystem::path& mesh, const std::filesystem::p
   char hex[17];
   std::snprintf(hex, sizeof hex, "%016zx", std::hash<std::string>{}(key));
   return std::string(hex);
+}
+
+// The default character's skin as published against its true skin in the same pose
+// (character/character_surface.hpp), over the frames the report's reader copied out of the segment:
+// each copy's source frame gives the performance's time, and so the pose the markers came from.
+nlohmann::json characterSurfaceJson(const Rig& rig, const std::vector<CapturedFrame>& frames, bool quiet) {
+  character::CharacterSurfaceMeasure surface(rig);
+  const double rate_hz = drivers::characterSyntheticOptions().rate_hz;
+  drivers::CharacterPose pose;
+  for (const CapturedFrame& f : frames) {
+    drivers::characterPoseAt(std::fmod(static_cast<double>(f.source_frame) / rate_hz, drivers::characterPerformanceSeconds()), pose);
+    surface.addFrame(f.positions, pose);
+  }
+  const rigbuild::Percentiles all = surface.all(), rest = surface.restSurface();
+  const auto json = [](const rigbuild::Percentiles& p) {
+    return nlohmann::json{{"median", p.median}, {"p90", p.p90}, {"p99", p.p99}, {"max", p.max}, {"count", p.count}};
+  };
+  if (!quiet) {
+    std::printf("tetrig demo: the published skin against the character's true skin in the same pose, %zu frames: "
+                "median %.1f, p99 %.1f, max %.1f mm (the rest mesh's own: p99 %.1f mm)\n",
+                surface.frames(), all.median, all.p99, all.max, rest.p99);
+  }
+  nlohmann::json out = json(all);
+  out["frames"] = surface.frames();
+  out["rest_mesh"] = json(rest);
+  return out;
 }
 
 }  // namespace
@@ -144,6 +174,7 @@ int runDemo(const DemoOptions& options) {
   }
   const std::vector<CapturedFrame> frames = capture.pick();
   if (frames.empty()) throw std::runtime_error("no report written: no frame was read from the segment (" + capture.error() + ")");
+  if (options.mesh.empty() && run.rig) report.demo["skin_vs_true_surface_mm"] = characterSurfaceJson(*run.rig, capture.captured(), options.quiet);
   try {
     (void)writeDemoReport(report, outcome, frames, capture.triangles());
   } catch (const std::exception& e) {

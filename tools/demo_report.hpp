@@ -56,6 +56,8 @@ class SegmentFrameCapture {
   void stop();
   // After stop(): up to `frames` captures evenly spaced over the run, first and last included.
   [[nodiscard]] std::vector<CapturedFrame> pick() const;
+  // After stop(): every copy held (up to 4 * `frames`, spread evenly over the run, in frame order).
+  [[nodiscard]] const std::vector<CapturedFrame>& captured() const { return kept_; }
   // After stop(): the segment's triangles (empty if the segment was never opened), and why not.
   [[nodiscard]] const std::vector<std::int32_t>& triangles() const { return triangles_; }
   [[nodiscard]] const std::string& error() const { return error_; }

@@ -122,6 +122,17 @@ TEST(DemoReport, AShortDemoWritesTheSummaryTheSheetAndThePlot) {
   EXPECT_GE(s["latency_us"]["receive_to_published"]["p50"].get<double>(), s["latency_us"]["step"]["p50"].get<double>() / 2);
   EXPECT_EQ(s["report"]["frame_log"]["frames"].get<int>(), 240) << "the frame log holds every solved frame";
   EXPECT_EQ(s["report"]["frame_log"]["dropped"].get<int>(), 0);
+  // The default character: its published skin against its true skin in each copied frame's pose
+  // (a copy measured against the wrong pose, or the rest pose, is off by centimetres once the
+  // performance moves: test_character).
+  const auto& surface = s["demo"]["skin_vs_true_surface_mm"];
+  ASSERT_TRUE(surface.is_object()) << s["demo"].dump();
+  EXPECT_GE(surface["frames"].get<int>(), 12);
+  EXPECT_EQ(surface["count"].get<std::size_t>(), surface["frames"].get<std::size_t>() * surface["rest_mesh"]["count"].get<std::size_t>());
+  EXPECT_LT(surface["rest_mesh"]["p99"].get<double>(), 3.0);
+  EXPECT_LT(surface["median"].get<double>(), 3.0);
+  EXPECT_LT(surface["p99"].get<double>(), 30.0);
+  EXPECT_LE(surface["p99"].get<double>(), surface["max"].get<double>());
 
   // sheet.png: 12 frames in 4 columns of 320-pixel tiles, spread over the run, in order.
   const auto& sheet_info = s["report"]["sheet"];
