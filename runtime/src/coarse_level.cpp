@@ -1,6 +1,8 @@
 // The coarse level (coarse_level.hpp has the method).
 #include "tetrig/coarse_level.hpp"
 
+#include "tetrig/clock.hpp"
+
 #include <Eigen/Geometry>
 
 #include <limits>
@@ -64,7 +66,8 @@ void CoarseLevel::reset() noexcept {
 }
 
 StepStats CoarseLevel::guide(const HandleTargets& coarse_targets, Deformer& fine) noexcept {
-  const StepStats stats = coarse_.step(coarse_targets, StepBudget{options_.iterations});
+  const std::int64_t t0 = monotonicNowNs();
+  StepStats stats = coarse_.step(coarse_targets, StepBudget{options_.iterations});
   // Q_c = R_c,n R_c,n-1^-1 per coarse tet; R_c,n-1 <- R_c,n.
   for (std::int32_t c = 0; c < coarse_.tetCount(); ++c) {
     float* p = &previous_[4 * static_cast<std::size_t>(c)];
@@ -80,6 +83,7 @@ StepStats CoarseLevel::guide(const HandleTargets& coarse_targets, Deformer& fine
     for (std::size_t k = 0; k < 4; ++k) guide_[4 * f + k] = q[k];
   }
   fine.setFrameGuide(guide_);
+  stats.total_ns = monotonicNowNs() - t0;  // the coarse step and the guide made from it
   return stats;
 }
 

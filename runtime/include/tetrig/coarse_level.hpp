@@ -44,7 +44,8 @@ class CoarseLevel {
               const CoarseLevelOptions& options = {});
 
   // One frame: the coarse step on `coarse_targets` (the coarse setup's handles), then the fine
-  // deformer's frame guide. Returns the coarse step's stats. No allocation.
+  // deformer's frame guide. Returns the coarse step's stats, with total_ns the whole call's time
+  // (the step and the guide). No allocation.
   StepStats guide(const HandleTargets& coarse_targets, Deformer& fine) noexcept;
 
   // Back to rest (rotations I, no change remembered). No allocation.

@@ -126,7 +126,7 @@ enum LiveFrameFlags : std::uint32_t {
 struct LiveFrameStats {
   StepStats step;                    // the deformer's own stats (iterations, energy, flags, phase times); zero when held
   std::int64_t pose_transfer_ns = 0; // x_fine = B x_tet (+ normals), or the copy of the last pose when held
-  std::int64_t coarse_ns = 0;        // the coarse level's step (with a coarse rig), also counted in step.total_ns
+  std::int64_t coarse_ns = 0;        // the coarse level's step and guide (with a coarse rig), also counted in step.total_ns
   std::int64_t prepare_ns = 0;       // prepareNextFrame() work the caller left to this frame (run first; 0 when it
                                      // called prepareNextFrame() after the last frame, or had nothing to prepare)
   std::uint16_t measured_markers = 0;   // rig markers measured in this frame (blending back ones included)
