@@ -321,7 +321,7 @@ extern "C" tetrig_status tetrig_rig_process_frame(tetrig_rig* rig, const float* 
     tetrig::Marker& m = frame.markers[i];
     const float* p = markers_xyz + 3 * i;
     const bool occluded = std::isnan(p[0]) || std::isnan(p[1]) || std::isnan(p[2]);
-    m.valid = occluded ? 0 : 1;
+    m.valid = static_cast<std::uint8_t>(occluded ? 0 : 1);
     for (std::size_t c = 0; c < 3; ++c) m.position_mm[c] = occluded ? 0.0f : p[c];
   }
   tetrig::StepBudget budget;

@@ -39,7 +39,7 @@ def run(cmd, env=None, cwd=None):
 
 def main():
     build_dir, source_dir, cmake, c99_test, rig, version = sys.argv[1:7]
-    frames = sys.argv[7] if len(sys.argv) > 7 else "120"
+    frames = sys.argv[7] if len(sys.argv) > 7 else "240"
     consumer_src = os.path.join(source_dir, "tests", "install", "consumer")
     with tempfile.TemporaryDirectory(prefix="tetrig-install-") as tmp:
         prefix = os.path.join(tmp, "prefix")
