@@ -120,13 +120,16 @@ TEST(CApi, FramesEqualTheLiveRigBitForBit) {
       EXPECT_EQ(stats.measured_markers, static_cast<int32_t>(s.measured_markers));
       EXPECT_EQ(stats.occluded_markers, static_cast<int32_t>(s.occluded_markers));
       predicted = predicted || (stats.flags & TETRIG_FRAME_MARKERS_PREDICTED);
-      if (f > 0) moved = moved || std::memcmp(got.data(), rest.data(), n * sizeof(float)) != 0;
+      for (std::size_t i = 0; i < n; ++i) moved = moved || std::abs(got[i] - rest[i]) > 0.01f;  // 1 cm (the rig is in metres)
       tetrig_frame_stats again{};
       ASSERT_EQ(tetrig_rig_frame_stats(rig.get(), &again), TETRIG_OK);
-      EXPECT_EQ(std::memcmp(&again, &stats, sizeof stats), 0);
+      EXPECT_EQ(again.frames, stats.frames);
+      EXPECT_EQ(again.flags, stats.flags);
+      EXPECT_EQ(again.total_ns, stats.total_ns);
+      EXPECT_EQ(again.energy, stats.energy);
     }
     EXPECT_TRUE(predicted) << "RIGHT is occluded in frames 4..7: it must have been predicted";
-    EXPECT_TRUE(moved) << "the markers move: the mesh must leave its rest pose";
+    EXPECT_TRUE(moved) << "the markers move by up to 33 mm: the mesh must leave its rest pose";
   }
 }
 
