@@ -103,7 +103,8 @@ TEST(CApi, FramesEqualTheLiveRigBitForBit) {
     ASSERT_EQ(tetrig_rig_rest_positions(rig.get(), rest.data(), rest.size()), TETRIG_OK);
     EXPECT_EQ(std::memcmp(rest.data(), live.restPositions().data(), n * sizeof(float)), 0);
     MarkerFrame frame{};
-    bool predicted = false, moved = false;
+    bool predicted = false;
+    float moved = 0.0f;  // the largest coordinate change of any vertex from rest, rig units (metres)
     for (std::size_t f = 0; f < c3d.frameCount(); ++f) {
       playback.fillFrame(f, f, frame);
       const LiveFrameStats s = live.processFrame(frame, StepBudget{3}, expected.data(), nullptr);
@@ -120,7 +121,7 @@ TEST(CApi, FramesEqualTheLiveRigBitForBit) {
       EXPECT_EQ(stats.measured_markers, static_cast<int32_t>(s.measured_markers));
       EXPECT_EQ(stats.occluded_markers, static_cast<int32_t>(s.occluded_markers));
       predicted = predicted || (stats.flags & TETRIG_FRAME_MARKERS_PREDICTED);
-      for (std::size_t i = 0; i < n; ++i) moved = moved || std::abs(got[i] - rest[i]) > 0.01f;  // 1 cm (the rig is in metres)
+      for (std::size_t i = 0; i < n; ++i) moved = std::max(moved, std::abs(got[i] - rest[i]));
       tetrig_frame_stats again{};
       ASSERT_EQ(tetrig_rig_frame_stats(rig.get(), &again), TETRIG_OK);
       EXPECT_EQ(again.frames, stats.frames);
@@ -129,7 +130,7 @@ TEST(CApi, FramesEqualTheLiveRigBitForBit) {
       EXPECT_EQ(again.energy, stats.energy);
     }
     EXPECT_TRUE(predicted) << "RIGHT is occluded in frames 4..7: it must have been predicted";
-    EXPECT_TRUE(moved) << "the markers move by up to 33 mm: the mesh must leave its rest pose";
+    EXPECT_GT(moved, 0.005f) << "the markers move by up to 33 mm: the mesh must leave its rest pose";
   }
 }
 
