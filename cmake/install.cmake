@@ -27,6 +27,9 @@ if(TARGET tetrig_devices)
 else()
   set(TETRIG_PACKAGE_HAS_DEVICES OFF)
 endif()
+# Shared libraries find each other in their own folder (libtetrig.so -> libtetrig_runtime.so with
+# BUILD_SHARED_LIBS=ON), wherever the prefix is.
+set_target_properties(${tetrig_installed_targets} PROPERTIES INSTALL_RPATH "$ORIGIN")
 install(TARGETS ${tetrig_installed_targets} EXPORT tetrigTargets
         ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR}
         LIBRARY DESTINATION ${CMAKE_INSTALL_LIBDIR}
