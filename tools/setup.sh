@@ -29,8 +29,9 @@ packages=(
   gnuplot-nox
   # fuzzing and sanitizers (clang, libFuzzer, LeakSanitizer runtime)
   clang libclang-rt-14-dev
-  # the latency harness's table (bench/latency.sh)
-  python3
+  # the latency harness's table (bench/latency.sh); the C API's ctypes test and the install test
+  # (tests/capi, tests/install: nm from binutils)
+  python3 binutils
 )
 
 missing=()

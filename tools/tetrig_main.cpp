@@ -16,6 +16,7 @@
 #include "tetrig/rigbuild/progress.hpp"
 #include "tetrig/rigbuild/rig_description.hpp"
 #include "tetrig/rigbuild/write_file_atomic.hpp"
+#include "tetrig/version.h"
 
 #include <CLI/CLI.hpp>
 #include <unistd.h>
@@ -271,7 +272,7 @@ int commandLineError(CLI::App& app, const CLI::ParseError& e, int argc, char** a
 int main(int argc, char** argv) {
   CLI::App app{"tetrig: real-time volumetric deformation driven by motion-capture markers (Stoll et al. 2007)"};
   app.require_subcommand(1);
-  app.set_version_flag("--version", "tetrig 0.1.0");
+  app.set_version_flag("--version", "tetrig " TETRIG_VERSION_STRING);  // tetrig/version.h: project(VERSION) in CMakeLists.txt
 
   BuildArgs build;
   CLI::App* build_cmd = app.add_subcommand("build-rig", "Build a rig file from a mesh, a rig description and a marker clip");

@@ -1,4 +1,6 @@
-// Keeps tetrig_drivers a valid library while its source lists are filled in.
+// The drivers library's version: the project's (tetrig/version.h, generated from the top CMakeLists.txt).
+#include "tetrig/version.h"
+
 namespace tetrig::drivers {
-const char* version() { return "0.1.0"; }
+const char* version() { return TETRIG_VERSION_STRING; }
 }  // namespace tetrig::drivers

@@ -4,6 +4,7 @@
 #include "small_rig.hpp"
 #include "t_shape_rig.hpp"
 #include "test_data.hpp"
+#include "tetrig/version.h"
 
 #include <gtest/gtest.h>
 
@@ -79,7 +80,16 @@ TEST(TetrigCli, CommandLineMistakesSayWhatToDo) {
   EXPECT_EQ(missing.status, 2);
   EXPECT_EQ(missing.err, "tetrig export: error: --out is required (tetrig export --help)\n");
   EXPECT_EQ(run("run --help", dir).status, 0);
-  EXPECT_EQ(run("--version", dir).status, 0);
+}
+
+// `tetrig --version` prints the project's version (tetrig/version.h, generated from project(VERSION)
+// in the top CMakeLists.txt; the same string the CMake package and the pkg-config files export).
+TEST(TetrigCli, VersionIsTheProjectVersion) {
+  const TempDir dir;
+  const CliRun r = run("--version", dir);
+  EXPECT_EQ(r.status, 0) << r.err;
+  EXPECT_EQ(r.out, "tetrig " TETRIG_VERSION_STRING "\n");
+  EXPECT_EQ(std::string(TETRIG_VERSION_STRING), TETRIG_PROJECT_VERSION);  // the header is CMake's version
 }
 
 // tetrig run on a clip says where it is: the clip's length, and that it starts with a still pose

@@ -11,6 +11,7 @@
 #include "tetrig/rigbuild/tetrahedralize_surface.hpp"
 #include "tetrig/rigbuild/validate_surface.hpp"
 #include "tetrig/tet_mesh_io.hpp"
+#include "tetrig/version.h"
 
 #include <Eigen/Geometry>
 
@@ -364,7 +365,7 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
   }
 
   Rig rig;
-  rig.builder = "tetrig build-rig 0.1.0";
+  rig.builder = "tetrig build-rig " TETRIG_VERSION_STRING;
   rig.name = desc.name.empty() ? inputs.mesh.filename().string() : desc.name;
   SurfaceMesh fine;
   TetMesh body;

@@ -4,6 +4,7 @@
 #include "tetrig/rigbuild/bind_markers.hpp"
 #include "tetrig/rigbuild/boundary_surface.hpp"
 #include "tetrig/rigbuild/pose_transfer_weights.hpp"
+#include "tetrig/version.h"
 
 #include <stdexcept>
 #include <string>
@@ -15,7 +16,7 @@ Rig makeDemoBarRig(const TetMesh& bar) {
   Rig rig;
   rig.name = "tetrig demo bar (assets/bar_4x4x33)";
   rig.unit = "cm";
-  rig.builder = "tetrig demo 0.1.0";
+  rig.builder = "tetrig demo " TETRIG_VERSION_STRING;
   // Fine mesh: the bar's boundary surface, on its own compact vertex list.
   const Triangles faces = boundaryFaces(bar);
   std::vector<std::int32_t> fine_of(static_cast<std::size_t>(bar.vertexCount()), -1);
