@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The hostile-input checks (issue 37): the runtime's and drivers' tests under ASan + UBSan (the
 # parsers and the frame path), then every libFuzzer target built and run once over its whole seed
-# corpus. tools/test.sh runs this after the release suite with TETRIG_SANITIZERS=1. Longer fuzzing and the whole project under ASan: README.md, "Tests".
+# corpus. tools/test.sh runs this after the release suite with TETRIG_SANITIZERS=1 (as CI does:
+# .ci/run). Longer fuzzing and the whole project under ASan: README.md, "Tests".
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash tools/setup.sh
