@@ -109,11 +109,12 @@ TetgenOutput runTetgenIsolated(tetgenio& in, const std::string& switch_text, std
         result.points.resize(points);
         result.tets.resize(tets);
         result.trifaces.resize(trifaces);
-        std::memcpy(result.points.data(), p, points * sizeof(double));
+        // An empty part has a null data(): memcpy may not be given one, even for 0 bytes.
+        if (points != 0) std::memcpy(result.points.data(), p, points * sizeof(double));
         p += points * sizeof(double);
-        std::memcpy(result.tets.data(), p, tets * sizeof(int));
+        if (tets != 0) std::memcpy(result.tets.data(), p, tets * sizeof(int));
         p += tets * sizeof(int);
-        std::memcpy(result.trifaces.data(), p, trifaces * sizeof(int));
+        if (trifaces != 0) std::memcpy(result.trifaces.data(), p, trifaces * sizeof(int));
       }
     } else if (header[0] == 0) {
       complete = false;
