@@ -14,12 +14,17 @@
 #   bash bench/latency.sh --cap 48        # the SMPL rig with B capped at 48 entries per row (whole
 #                                         # tets, renormalised; accuracy cost in docs/live.md)
 #   bash bench/latency.sh --iterations 1  # iterations per frame (default 3)
+#   bash bench/latency.sh --performers 2  # one performer, then N performers (the same clip read once and
+#                                         # fanned out, one solver thread and segment each, one consumer
+#                                         # per segment) in the same invocation: the table per performer
+#                                         # and the ratio of their p99 to the single performer's
 #   extra arguments after -- go to `tetrig run` (e.g. -- --cpu 1 --fifo, or -- --keep-volume)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 data="${TETRIG_DATA_DIR:-../shared/data}"
 mode=smpl
 cap=0
+performers=1
 iterations=3
 extra=()
 while [ $# -gt 0 ]; do
@@ -28,8 +33,9 @@ while [ $# -gt 0 ]; do
     --armadillo) mode=armadillo ;;
     --cap) shift; cap="${1:?--cap needs a number}" ;;
     --iterations) shift; iterations="${1:?--iterations needs a number}" ;;
+    --performers) shift; performers="${1:?--performers needs a number}" ;;
     --) shift; extra=("$@"); break ;;
-    *) echo "latency.sh: unknown argument $1 (use --synthetic, --armadillo, --cap N, --iterations N, or -- ARGS for tetrig run)" >&2; exit 2 ;;
+    *) echo "latency.sh: unknown argument $1 (use --synthetic, --armadillo, --cap N, --iterations N, --performers N, or -- ARGS for tetrig run)" >&2; exit 2 ;;
   esac
   shift
 done
@@ -109,4 +115,43 @@ hw = h["workload_us"]
 print(f"host probe: a fixed {h['work_us']} us workload at {h['rate_hz']} Hz took p50 / p99 / max {hw['p50']:.0f} / {hw['p99']:.0f} / {hw['max']:.0f} us "
       f"(wake-up lateness p99 {h['wake_lateness_us']['p99']:.0f} us): a p99 far above the p50 is the host, not tetrig")
 print(f"wrote {out}")
+PY
+[ "$performers" -gt 1 ] || exit 0
+
+# N performers: the same source for each (opened once, its frames fanned out), one segment and one
+# consumer per performer.
+run_args=()
+consumers=()
+for k in $(seq 1 "$performers"); do
+  seg="$name-p$k"
+  run_args+=(--performer "rig=$rig,source=$source,publish=$seg,name=p$k")
+  rm -f "$out/latency_consumer_p$k.json"
+  build/release/tetrig-shm-cat "$seg" --quiet --timeout-ms 20000 --json "$out/latency_consumer_p$k.json" &
+  consumers+=($!)
+done
+build/release/tetrig run "${run_args[@]}" --iterations "$iterations" --stats-json "$out/latency_performers_producer.json" \
+  "${frames[@]}" "${extra[@]}"
+for c in "${consumers[@]}"; do wait "$c" || { echo "latency.sh: a consumer failed" >&2; exit 1; }; done
+python3 - "$out" "$performers" <<'PY'
+import json, sys
+out, n = sys.argv[1], int(sys.argv[2])
+single = json.load(open(f"{out}/latency.json"))
+stage = json.load(open(f"{out}/latency_performers_producer.json"))
+for k, p in enumerate(stage["performers"], 1):
+    p["consumer"] = json.load(open(f"{out}/latency_consumer_p{k}.json"))
+stage["single"] = {"latency_us": single["latency_us"], "consumer": single["consumer"], "budget_misses": single["budget_misses"]}
+json.dump(stage, open(f"{out}/latency_performers.json", "w"), indent=2)
+ref = single["latency_us"]["receive_to_published"]
+print(f"\n{n} performers (the same clip fanned out), receive -> published and -> seen by each performer's consumer, us:")
+print("| performer | CPU | published p50 | p99 | max | seen p50 | p99 | max | budget misses | dropped | p99 / one performer's |")
+print("|---|---|---|---|---|---|---|---|---|---|---|")
+s = single["latency_us"]; sc = single["consumer"].get("latency_us", {}).get("receive_to_seen", {})
+print(f"| one performer (above) | - | {ref['p50']:.0f} | {ref['p99']:.0f} | {ref['max']:.0f} | {sc.get('p50', 0):.0f} | {sc.get('p99', 0):.0f} | "
+      f"{sc.get('max', 0):.0f} | {single['budget_misses']} | {single.get('dropped_frames', 0)} | 1.00 |")
+for p in stage["performers"]:
+    r = p["latency_us"]["receive_to_published"]; c = p["consumer"].get("latency_us", {}).get("receive_to_seen", {})
+    print(f"| {p['name']} | {p['cpu']} | {r['p50']:.0f} | {r['p99']:.0f} | {r['max']:.0f} | {c.get('p50', 0):.0f} | {c.get('p99', 0):.0f} | "
+          f"{c.get('max', 0):.0f} | {p['budget_misses']} | {p['dropped_frames']} | {r['p99'] / ref['p99']:.2f} |")
+t = stage["totals"]
+print(f"totals: {t['frames']} frames, {t['budget_misses']} budget misses; wrote {out}/latency_performers.json")
 PY

@@ -21,6 +21,19 @@
 
 namespace tetrig::tools {
 
+// One performer of a stage (`tetrig run --performer ...` or `--stage FILE`; docs/live.md,
+// "Several performers"): a rig driven by a source, or by one subject of a source that carries
+// several ("alice:LFHD"), published into its own segment by its own solver thread.
+struct PerformerSpec {
+  std::string name;             // in messages and stats (default: the subject, else the segment name)
+  std::string rig_path;
+  std::string coarse_rig_path;  // optional coarse level (as RunOptions::coarse_rig_path)
+  std::string source;           // as RunOptions::source; performers naming the same source share it (read once)
+  std::string subject;          // only the source's labels "subject:NAME" (empty: every label)
+  std::string publish;          // the performer's segment name (unique in the stage)
+  int cpu = -1;                 // pin its solver thread here (-1: one CPU per performer when there are enough)
+};
+
 struct RunOptions {
   std::string rig_path;                 // rig file (ignored when `rig` is set)
   std::string coarse_rig_path;          // optional coarse level: the same mesh and markers with fewer tet vertices
@@ -53,19 +66,25 @@ struct RunOptions {
   std::string consumer_command;         // demo: started after the segment exists, with the segment name appended; waited for at the end
   std::size_t frame_log_capacity = 0;   // demo report: the solver's per-frame log (FrameLoopOptions::frame_log_capacity)
   int frame_log_markers = 0;            // demo report: markers kept per logged frame
+  bool frame_log_positions_crc = false; // tests: each logged frame's CRC-32C of its published positions
+  // Several performers: when not empty, these replace rig_path, coarse_rig_path, source, publish and
+  // cpu above (every other option applies to each performer); final_obj and consumer_command take
+  // one performer only.
+  std::vector<PerformerSpec> performers;
 };
 
 // What a run leaves for the caller (tetrig demo's report): the --stats-json object, the frame log
 // (tetrig/frame_loop.hpp) with the markers kept per frame, and the rig's alignment (device mm ->
 // rig units, its up axis).
 struct RunOutcome {
-  nlohmann::json stats;
+  nlohmann::json stats;  // several performers: {"performers": [one object each], "totals": {...}, ...}
   std::vector<tetrig::FrameLogEntry> frame_log;
   std::vector<std::vector<tetrig::FrameLogMarker>> frame_log_markers;  // one list per frame_log entry
   std::uint64_t frame_log_dropped = 0;
   tetrig::RigAlignment alignment;
   std::string rig_name;
   double budget_ms = 0;
+  std::vector<RunOutcome> performers;  // several performers: one outcome each (stats: that performer's object)
 };
 
 // Where a clip run is: its frame count and rate, and how long it starts with a still pose.
@@ -84,6 +103,22 @@ std::size_t stillLeadFrames(const drivers::C3DClip& clip, double threshold_mm = 
 // not load, a source that cannot open, a segment name in use by a live producer, a source whose
 // markers share no label with the rig.
 // With `outcome`, also fills it (after the run, whatever its exit code).
+// Several performers (options.performers): each gets its own live rig, mailbox, solver thread and
+// segment; a source named by several is opened once and its frames fanned out to each
+// (FrameMailbox::forwardTo); the run ends when every performer has ended.
 int runLive(const RunOptions& options, RunOutcome* outcome = nullptr);
+
+// "rig=PATH,source=SPEC,publish=NAME[,subject=S][,name=N][,coarse-rig=PATH][,cpu=K]" (--performer).
+// Throws std::invalid_argument naming the bad key or value.
+PerformerSpec parsePerformerSpec(const std::string& text);
+// A stage file (JSON, docs/live.md "Several performers"): {"performers": [{"rig": ..., "source": ...,
+// "publish": ..., "subject": ..., "name": ..., "coarse_rig": ..., "cpu": ...}, ...]}; relative paths
+// (rig, coarse_rig, and c3d:/replay: sources) are relative to the file's folder. Throws one clear line.
+std::vector<PerformerSpec> loadStageFile(const std::string& path);
+// Refuses a stage that cannot run: no performers, a performer without rig, source or segment,
+// two performers on one segment or with one name. Fills default names. Two performers may share
+// a source and subject (one performer driving two characters); a source carrying several subjects
+// needs each performer's subject (refused at binding otherwise).
+void checkStage(std::vector<PerformerSpec>& performers);
 
 }  // namespace tetrig::tools

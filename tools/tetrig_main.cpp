@@ -382,7 +382,15 @@ int main(int argc, char** argv) {
   tetrig::tools::RunOptions run;
   CLI::App* run_cmd = app.add_subcommand("run", "Run the live path: a marker source -> the rig, frame after frame -> shared memory");
   std::string run_clip;
-  run_cmd->add_option("--rig", run.rig_path, "Rig file (tetrig build-rig)")->required()->group(kEssentials);
+  CLI::Option* run_rig = run_cmd->add_option("--rig", run.rig_path, "Rig file (tetrig build-rig)")->group(kEssentials);
+  std::vector<std::string> run_performers;
+  std::string run_stage;
+  const char* kStage = "Several performers (docs/live.md, \"Several performers\")";
+  run_cmd->add_option("--performer", run_performers,
+                      "One performer: rig=PATH,source=SPEC,publish=NAME[,subject=S][,name=N][,coarse-rig=PATH][,cpu=K]; repeat for each "
+                      "(performers naming one source share it; subject=S takes its S:LABEL markers)")
+      ->group(kStage);
+  run_cmd->add_option("--stage", run_stage, "A stage file (JSON) listing the performers")->group(kStage);
   CLI::Option* run_source = run_cmd->add_option("--source", run.source,
                       "Where the markers come from: c3d:PATH, replay:PATH, synthetic[:N], synthetic:character, hid:VID:PID, "
                       "usb:VID:PID (hex ids), hydra[:SERIAL]")
@@ -581,11 +589,25 @@ int main(int argc, char** argv) {
     if (cmd == "export") return tetrig::tools::runExport(exp);
     if (cmd == "run") {
       run.lock_memory = !no_mlock;
-      if (!run_clip.empty() && run_source->count() > 0)
-        throw std::invalid_argument("give --clip PATH or --source SOURCE, not both (--clip PATH is --source c3d:PATH)");
-      if (!run_clip.empty()) run.source = "c3d:" + run_clip;
-      if (run_clip.empty() && run_source->count() == 0)
-        throw std::invalid_argument("no marker source: give --clip CLIP.c3d or --source SOURCE (c3d:PATH, synthetic, hid:VID:PID, ...)");
+      if (!run_performers.empty() && !run_stage.empty())
+        throw std::invalid_argument("give the performers with --performer or in a --stage file, not both");
+      const bool stage = !run_performers.empty() || !run_stage.empty();
+      if (stage) {
+        if (run_rig->count() > 0 || run_source->count() > 0 || !run_clip.empty() || run_cmd->get_option("--publish")->count() > 0 ||
+            run_cmd->get_option("--coarse-rig")->count() > 0 || run_cmd->get_option("--cpu")->count() > 0)
+          throw std::invalid_argument("with --performer or --stage, each performer names its rig, source, segment, coarse rig and CPU: "
+                                      "not --rig, --source, --clip, --publish, --coarse-rig or --cpu");
+        if (!run_stage.empty()) run.performers = tetrig::tools::loadStageFile(run_stage);
+        for (const std::string& text : run_performers) run.performers.push_back(tetrig::tools::parsePerformerSpec(text));
+        tetrig::tools::checkStage(run.performers);
+      } else {
+        if (run_rig->count() == 0) throw std::invalid_argument("no rig: give --rig RIG (or --performer / --stage for several performers)");
+        if (!run_clip.empty() && run_source->count() > 0)
+          throw std::invalid_argument("give --clip PATH or --source SOURCE, not both (--clip PATH is --source c3d:PATH)");
+        if (!run_clip.empty()) run.source = "c3d:" + run_clip;
+        if (run_clip.empty() && run_source->count() == 0)
+          throw std::invalid_argument("no marker source: give --clip CLIP.c3d or --source SOURCE (c3d:PATH, synthetic, hid:VID:PID, ...)");
+      }
       if (!shm_mode.empty()) {
         // Octal digits only (std::stoul would take spaces and signs, and throw "stoul" on other text).
         if (shm_mode.size() > 4 || shm_mode.find_first_not_of("01234567") != std::string::npos || std::stoul(shm_mode, nullptr, 8) > 0777) {

@@ -124,8 +124,8 @@ struct SourceCounters {
 // The driver thread's side of the mailbox: stamps, commits and counts frames. As a sink
 // (operator()) it copies a playback's frame into the producer slot; slot()/commit() are the
 // zero-copy form for decoders. Driver thread only; no allocation, no exception.
-// In lockstep (Pacing::kLockstep) commit() first waits until the solver has taken the
-// previous frame: no frame is dropped, and the driver thread sleeps instead of spinning a core
+// In lockstep (Pacing::kLockstep) commit() first waits until the solver (every solver of a
+// fan-out chain, FrameMailbox::forwardTo) has taken the previous frame: no frame is dropped, and the driver thread sleeps instead of spinning a core
 // against the solver and the segment's readers.
 class Publisher {
  public:
@@ -142,7 +142,7 @@ class Publisher {
   }
   [[nodiscard]] MarkerFrame& slot() noexcept { return mailbox_.producerSlot(); }
   void commit() noexcept {
-    if (lockstep_) signal_.waitWhile([this] { return mailbox_.hasPending(); });
+    if (lockstep_) signal_.waitWhile([this] { return mailbox_.pendingAlongChain(); });
     MarkerFrame& frame = mailbox_.producerSlot();
     frame.receive_timestamp_ns = monotonicNowNs();
     const std::uint16_t rejected = frame.rejected_count;

@@ -3,6 +3,7 @@
 
 #include "tetrig/clock.hpp"
 #include "tetrig/live_rig.hpp"
+#include "tetrig/rig_file.hpp"
 #include "tetrig/shm_publisher.hpp"
 
 #include <algorithm>
@@ -309,6 +310,11 @@ void FrameLoop::run() noexcept {
         out[m].valid = in.valid;
       }
       e.marker_count = static_cast<std::uint32_t>(kept);
+      e.positions_crc = 0;
+      if (options_.frame_log_positions_crc) {
+        const auto* bytes = reinterpret_cast<const std::uint8_t*>(publisher_.beginPositions());
+        e.positions_crc = rigCrc32c({bytes, static_cast<std::size_t>(publisher_.vertexCount()) * 3 * sizeof(float)});
+      }
       ++frame_log_count_;
     } else {
       ++frame_log_dropped_;

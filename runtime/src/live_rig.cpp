@@ -247,16 +247,39 @@ std::span<const std::int32_t> LiveRig::fineTriangles() const noexcept {
   return {rig_->fine_triangles.data(), static_cast<std::size_t>(rig_->fine_triangles.rows()) * 3};
 }
 
-MarkerBindingReport LiveRig::bindLabels(std::span<const std::string> labels_by_id) {
+std::vector<std::string> labelSubjects(std::span<const std::string> labels_by_id) {
+  std::vector<std::string> subjects;
+  for (const std::string& label : labels_by_id) {
+    const std::size_t colon = label.find(':');
+    if (colon == std::string::npos) continue;
+    std::string subject = label.substr(0, colon);
+    if (std::find(subjects.begin(), subjects.end(), subject) == subjects.end()) subjects.push_back(std::move(subject));
+  }
+  return subjects;
+}
+
+MarkerBindingReport LiveRig::bindLabels(std::span<const std::string> labels_by_id, std::string_view subject) {
   const std::size_t ids = std::min(labels_by_id.size(), kMaxIds);
   const std::vector<RigMarker>& markers = rig_->markers;
+  MarkerBindingReport report;
+  // Another performer's labels (a subject was named and the label's prefix is not it).
+  other_subject_of_id_.assign(ids, 0);
+  if (!subject.empty()) {
+    for (std::size_t id = 0; id < ids; ++id) {
+      const std::string& label = labels_by_id[id];
+      const std::size_t colon = label.find(':');
+      if (label.empty() || (colon != std::string::npos && std::string_view(label).substr(0, colon) == subject)) continue;
+      other_subject_of_id_[id] = 1;
+      ++report.other_subjects;
+    }
+  }
   // Best id per rig marker: exact (rank 2) beats stripped (rank 1), then the lowest id.
   std::vector<std::int32_t> best_id(markers.size(), -1);
   std::vector<int> best_rank(markers.size(), 0);
   std::vector<std::int32_t> candidate(ids, -1);  // the rig marker a label names, if any
   for (std::size_t id = 0; id < ids; ++id) {
     const std::string& label = labels_by_id[id];
-    if (label.empty()) continue;
+    if (label.empty() || other_subject_of_id_[id] != 0) continue;
     int rank = 0;
     std::int32_t marker = -1;
     for (std::size_t k = 0; k < markers.size(); ++k) {
@@ -279,7 +302,6 @@ MarkerBindingReport LiveRig::bindLabels(std::span<const std::string> labels_by_i
       best_id[k] = static_cast<std::int32_t>(id);
     }
   }
-  MarkerBindingReport report;
   marker_of_id_.assign(ids, -1);
   for (std::size_t k = 0; k < markers.size(); ++k) {
     if (best_id[k] < 0) {
@@ -296,7 +318,7 @@ MarkerBindingReport LiveRig::bindLabels(std::span<const std::string> labels_by_i
     std::int32_t found = -1;
     for (std::size_t id = 0; id < ids && found < 0; ++id) {
       const std::string& label = labels_by_id[id];
-      if (!label.empty() && marker_of_id_[id] < 0 && sensor_of_id_[id] < 0 &&
+      if (!label.empty() && other_subject_of_id_[id] == 0 && marker_of_id_[id] < 0 && sensor_of_id_[id] < 0 &&
           (label == want || afterLastColon(label) == afterLastColon(want))) {
         found = static_cast<std::int32_t>(id);
       }
@@ -309,7 +331,7 @@ MarkerBindingReport LiveRig::bindLabels(std::span<const std::string> labels_by_i
     ++report.sensors_matched;
   }
   for (std::size_t id = 0; id < ids; ++id) {
-    if (labels_by_id[id].empty() || marker_of_id_[id] >= 0 || sensor_of_id_[id] >= 0) continue;
+    if (labels_by_id[id].empty() || other_subject_of_id_[id] != 0 || marker_of_id_[id] >= 0 || sensor_of_id_[id] >= 0) continue;
     (candidate[id] >= 0 ? report.duplicates : report.unknown).push_back(labels_by_id[id]);
   }
   return report;
@@ -359,7 +381,7 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
       const std::int32_t s = mk.id < sensor_of_id_.size() ? sensor_of_id_[mk.id] : -1;
       if (s >= 0) {
         sensor_sample_[static_cast<std::size_t>(s)] = &mk;
-      } else {
+      } else if (mk.id >= other_subject_of_id_.size() || other_subject_of_id_[mk.id] == 0) {
         ++unknown;
       }
       continue;

@@ -95,6 +95,47 @@ TEST(FrameMailbox, OneFrameIsTakenOnce) {
   EXPECT_EQ(box->dropped(), 0u);
 }
 
+// Fan-out (several performers on one source): a frame committed into the head of a chain reaches
+// every mailbox of it, whole; each consumer takes it on its own; a lockstep producer sees the
+// chain pending until the last consumer took it.
+TEST(FrameMailbox, AForwardedFrameReachesEveryMailboxOfTheChain) {
+  auto a = std::make_unique<FrameMailbox>();
+  auto b = std::make_unique<FrameMailbox>();
+  auto c = std::make_unique<FrameMailbox>();
+  a->forwardTo(b.get());
+  b->forwardTo(c.get());
+  auto in = std::make_unique<MarkerFrame>();
+  auto out = std::make_unique<MarkerFrame>();
+  stamp(*in, 7);
+  a->publish(*in);
+  EXPECT_TRUE(a->hasPending());
+  EXPECT_TRUE(b->hasPending());
+  EXPECT_TRUE(c->hasPending());
+  ASSERT_TRUE(a->tryTakeLatest(*out));
+  EXPECT_EQ(out->frame_counter, 7u);
+  EXPECT_TRUE(consistent(*out));
+  EXPECT_TRUE(a->pendingAlongChain()) << "b and c still hold the frame";
+  ASSERT_TRUE(c->tryTakeLatest(*out));
+  EXPECT_EQ(out->frame_counter, 7u);
+  EXPECT_TRUE(consistent(*out)) << "the forwarded copy is the whole frame";
+  EXPECT_TRUE(a->pendingAlongChain());
+  EXPECT_FALSE(c->pendingAlongChain()) << "a chain looks downstream only";
+  stamp(*in, 8);
+  a->publish(*in);  // b has not taken 7: it is dropped there, and only there
+  ASSERT_TRUE(b->tryTakeLatest(*out));
+  EXPECT_EQ(out->frame_counter, 8u);
+  EXPECT_TRUE(consistent(*out));
+  EXPECT_EQ(b->dropped(), 1u);
+  EXPECT_EQ(a->dropped(), 0u);
+  EXPECT_EQ(c->dropped(), 0u);
+  ASSERT_TRUE(a->tryTakeLatest(*out));
+  ASSERT_TRUE(c->tryTakeLatest(*out));
+  EXPECT_FALSE(a->pendingAlongChain());
+  EXPECT_EQ(a->published(), 2u);
+  EXPECT_EQ(b->published(), 2u);
+  EXPECT_EQ(c->published(), 2u);
+}
+
 TEST(FrameMailbox, NewestFrameWinsAndOverwrittenFramesAreCountedAsDropped) {
   auto box = std::make_unique<FrameMailbox>();
   auto in = std::make_unique<MarkerFrame>();

@@ -25,6 +25,7 @@
 #include <string>
 #include <thread>
 #include <unistd.h>
+#include <set>
 #include <vector>
 
 namespace tetrig {
@@ -525,6 +526,62 @@ TEST(FrameLoop, NoHeapAllocationPerFrameAfterWarmUp) {
   EXPECT_EQ(h.loop->frameLog().back().frame_id, 220u);
   EXPECT_EQ(h.loop->frameLogMarkers(219).size(), 16u);
   EXPECT_EQ(tetrig_shm_has_marker_positions(&h.reader), 1) << "the marker block was staged on every frame counted";
+}
+
+// Two performers on one source (tetrig run's stage): the source's frames fanned out to both
+// mailboxes (FrameMailbox::forwardTo), two solver threads, two segments. Nothing is allocated on
+// either solver thread per frame, and both publish every frame.
+TEST(FrameLoop, TwoPerformersOnOneFannedOutSourceAllocateNothingPerFrame) {
+  FrameLoopOptions options;
+  options.budget_ns = 0;  // no deadline: the iteration count alone decides (the poses are compared below)
+  options.lock_memory = false;
+  options.frame_log_capacity = 1000;
+  options.frame_log_markers = 16;
+  options.frame_log_positions_crc = true;
+  Harness a("alloc-a", options);
+  Harness b("alloc-b", options);
+  a.mailbox->forwardTo(b.mailbox.get());
+  a.loop->start();
+  b.loop->start();
+  const auto source = makeSource(demoRig());
+  auto frame = std::make_unique<MarkerFrame>();
+  // The producer publishes into the head of the chain only, and waits for both segments.
+  const auto publishAndWaitBoth = [&](std::uint64_t k) {
+    source->fillFrame(k, *frame);
+    const std::uint64_t before_b = tetrig_shm_latest_frame_id(&b.reader);
+    if (!a.publishAndWait(*frame)) return false;
+    const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+    while (tetrig_shm_latest_frame_id(&b.reader) == before_b) {
+      if (std::chrono::steady_clock::now() > end) return false;
+      std::this_thread::yield();
+    }
+    return true;
+  };
+  for (std::uint64_t k = 0; k < 20; ++k) ASSERT_TRUE(publishAndWaitBoth(k));  // warm-up
+  Eigen::internal::set_is_malloc_allowed(false);
+  const std::uint64_t before = test::allocationCount();
+  bool all_published = true;
+  for (std::uint64_t k = 20; k < 220; ++k) all_published = publishAndWaitBoth(k) && all_published;
+  const std::uint64_t after = test::allocationCount();
+  Eigen::internal::set_is_malloc_allowed(true);
+  a.loop->requestStop();
+  b.loop->requestStop();
+  a.loop->join();
+  b.loop->join();
+  EXPECT_TRUE(all_published);
+  EXPECT_EQ(after - before, 0u) << "allocations on the two solver threads (or this one) while 200 frames went through both";
+  ASSERT_EQ(a.loop->counters().frames, 220u);
+  ASSERT_EQ(b.loop->counters().frames, 220u);
+  // The same rig fed the same frames: the same poses, frame for frame (CRC of the published positions).
+  const auto log_a = a.loop->frameLog(), log_b = b.loop->frameLog();
+  ASSERT_EQ(log_a.size(), log_b.size());
+  std::set<std::uint32_t> distinct;
+  for (std::size_t i = 0; i < log_a.size(); ++i) {
+    EXPECT_EQ(log_a[i].source_frame, log_b[i].source_frame) << "frame " << i;
+    EXPECT_EQ(log_a[i].positions_crc, log_b[i].positions_crc) << "frame " << i;
+    distinct.insert(log_a[i].positions_crc);
+  }
+  EXPECT_GT(distinct.size(), 200u) << "the poses change from frame to frame (the CRC sees them)";
 }
 
 }  // namespace

@@ -65,6 +65,9 @@ struct FrameLoopOptions {
   bool realtime_fifo = false;                    // SCHED_FIFO (priority kFrameLoopFifoPriority) for the solver thread
   std::size_t frame_log_capacity = 0;            // frames the frame log keeps (0: no log); allocated by the constructor
   int frame_log_markers = 0;                     // markers kept per logged frame (0..kMaxMarkers; the first ones of the frame)
+  bool frame_log_positions_crc = false;          // the log also keeps each frame's CRC-32C of its published positions
+                                                 // (tests: frames compared across runs; costs a pass over the positions
+                                                 // per frame, after publishing)
 };
 
 // One solved frame of the frame log. Times are the runtime's clock (tetrig/clock.hpp), ns.
@@ -79,7 +82,7 @@ struct FrameLogEntry {
   std::uint16_t occluded_markers = 0;
   std::uint16_t flags = 0;          // FrameLogFlags
   std::uint32_t marker_count = 0;   // markers kept for this frame (<= frame_log_markers)
-  std::uint32_t pad = 0;
+  std::uint32_t positions_crc = 0;  // CRC-32C of the published positions (FrameLoopOptions::frame_log_positions_crc; else 0)
 };                                  // 96 bytes
 
 enum FrameLogFlags : std::uint16_t {

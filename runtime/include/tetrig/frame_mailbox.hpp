@@ -24,6 +24,11 @@
 // consumer polls in 1 ms slices). The consumer reads the wake word, announces itself, re-checks
 // for a fresh frame and sleeps only if the word is still the value it read, so a frame committed
 // between its check and its sleep is never missed (all four accesses are sequentially consistent).
+//
+// Fan-out (several performers read from one source): forwardTo() chains mailboxes. Every frame
+// committed here is also copied into the next mailbox and committed there, by the same producer
+// thread, before this mailbox's own consumer sees it; so one source feeds several solver threads,
+// each through its own triple buffer, with no extra thread and no extra wake-up on the way.
 #pragma once
 
 #include <atomic>
@@ -57,8 +62,16 @@ class FrameMailbox {
   // The reference stays valid and private to the producer until commit(); its previous contents
   // are an older frame (not cleared), so overwrite every field you rely on.
   [[nodiscard]] MarkerFrame& producerSlot() noexcept { return slots_[back_]; }
-  // Publishes the producer slot (see publish()).
+  // Publishes the producer slot (see publish()), and forwards it along the fan-out chain.
   void commit() noexcept;
+
+  // Control thread, before the producer starts: every frame committed here is then also
+  // published to `next` (which may itself forward). `next` must outlive this mailbox's producer
+  // and must have no other producer. nullptr ends the chain here.
+  void forwardTo(FrameMailbox* next) noexcept { next_ = next; }
+  // True when this mailbox or any mailbox it forwards to holds a frame not yet taken (a lockstep
+  // producer waits for this to clear, so that no consumer of the chain drops a frame).
+  [[nodiscard]] bool pendingAlongChain() const noexcept;
 
   // ---- consumer thread only ----
 
@@ -96,6 +109,7 @@ class FrameMailbox {
   alignas(kCacheLine) std::atomic<std::uint32_t> middle_;
   // Producer-owned.
   alignas(kCacheLine) std::uint32_t back_;
+  FrameMailbox* next_ = nullptr;  // fan-out chain (forwardTo); set before the producer starts
   std::atomic<std::uint64_t> published_{0};
   std::atomic<std::uint64_t> dropped_{0};
   // Consumer-owned.

@@ -70,6 +70,7 @@
 #include <memory>
 #include <span>
 #include <string>
+#include <string_view>
 #include <vector>
 
 namespace tetrig {
@@ -146,7 +147,12 @@ struct MarkerBindingReport {
   std::vector<std::string> duplicates;    // source labels naming a rig marker another id already took (ignored)
   std::int32_t sensors_matched = 0;       // rig pose sensors (rig.pose_sensors) bound to a source id
   std::vector<std::string> missing_sensors;  // pose sensors the source never names (their regions stay put)
+  std::int32_t other_subjects = 0;        // with a subject: source labels of other subjects (or none), not bound
 };
+
+// The subjects a label table names, in order of first appearance: the parts before the first ':'
+// ("alice:LFHD" -> "alice"), as Vicon writes one performer's markers. Labels without ':' name none.
+std::vector<std::string> labelSubjects(std::span<const std::string> labels_by_id);
 
 // Per-marker state of the occlusion blend.
 enum class MarkerTrackState : std::uint8_t {
@@ -176,7 +182,10 @@ class LiveRig {
   // when equal, or when the parts after their last ':' are equal ("meinard:LFHD" == "LFHD"); an
   // exact match wins over a stripped one, then the lowest id. Empty labels name nothing. Replaces
   // any earlier binding; marker blend states are kept. Not concurrently with processFrame().
-  MarkerBindingReport bindLabels(std::span<const std::string> labels_by_id);
+  // With a `subject` (one performer of a source carrying several), only labels "subject:NAME" take
+  // part (the subject is the text before the first ':'); every other label is another performer's: not bound, not reported or counted as
+  // unknown (MarkerBindingReport::other_subjects, LiveFrameStats::unknown_markers).
+  MarkerBindingReport bindLabels(std::span<const std::string> labels_by_id, std::string_view subject = {});
 
   // One frame: frame -> handle targets -> Deformer::step(budget) -> pose transfer into the caller's
   // buffers. positions: fineVertexCount()*3 floats (rig units, x0 y0 z0 x1 ...), required;
@@ -284,6 +293,7 @@ class LiveRig {
 
   // Binding: source id -> rig marker (-1: unknown).
   std::vector<std::int32_t> marker_of_id_;
+  std::vector<std::uint8_t> other_subject_of_id_;  // 1: another performer's marker (bindLabels' subject)
   // Pose sensors (rig.pose_sensors): one driver each, the source id that carries it, and this
   // frame's sample (tetrig/pose_sensor.hpp).
   std::vector<PoseSensorDriver> sensors_;
