@@ -20,6 +20,8 @@
 #include "test_data.hpp"
 
 #include "tetrig/drivers/c3d_reader.hpp"
+#include "tetrig/drivers/marker_stream.hpp"
+#include "tetrig/drivers/raw_recording.hpp"
 #include "tetrig/rig_file.hpp"
 #include "tetrig/rigbuild/build_rig.hpp"
 
@@ -31,6 +33,8 @@
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
+#include <memory>
+#include <span>
 #include <set>
 #include <string>
 #include <vector>
@@ -52,7 +56,7 @@ std::string segmentName(const std::string& what) { return "tetrig-stage-" + what
 // The rig and the clips, built once for the binary.
 struct Scene {
   TempDir dir{"tetrig-stage"};
-  std::filesystem::path rig, two_subjects, alice_short;
+  std::filesystem::path rig, two_subjects, alice_short, alice_with_gap;
   bool ok = false;
 };
 
@@ -80,6 +84,42 @@ std::vector<std::uint8_t> subjectsClip(const drv::C3DClip& clip, std::size_t fir
   return test::writeTestC3D(spec);
 }
 
+// A marker-stream device's recording (tetrig's raw format, replayed as `replay:`): the clip's labels,
+// then frames [kFirstFrame, + kGapFrames) at 120 Hz, 600 ms of silence, then as many frames again.
+constexpr std::size_t kGapFrames = 60;
+void writeRecordingWithGap(const drv::C3DClip& clip, const std::filesystem::path& path) {
+  drv::RawRecordingHeader header;
+  header.vendor_id = 0x1209;
+  header.product_id = 0x7e7f;
+  header.description = "test: HDM05 with a 600 ms gap";
+  drv::RawRecorder rec(path, header);
+  std::vector<drv::MarkerLabel> labels;
+  for (int p = 0; p < clip.pointCount(); ++p) labels.push_back({static_cast<std::uint16_t>(p), clip.labels()[static_cast<std::size_t>(p)]});
+  std::vector<std::uint8_t> bytes(drv::kMarkerStreamMaxMessageSize);
+  const std::size_t n = drv::encodeMarkerStreamDescriptor(labels, 1, bytes);
+  ASSERT_GT(n, 0u);
+  rec.write(0, 0, std::span<const std::uint8_t>(bytes.data(), n));
+  auto frame = std::make_unique<MarkerFrame>();
+  const std::int64_t period = 1'000'000'000 / 120;
+  for (std::size_t k = 0; k < 2 * kGapFrames; ++k) {
+    const std::size_t f = kFirstFrame + k;
+    frame->frame_counter = k + 1;
+    frame->device_timestamp_ns = static_cast<std::int64_t>(k) * period;
+    frame->marker_count = static_cast<std::uint16_t>(clip.pointCount());
+    for (int p = 0; p < clip.pointCount(); ++p) {
+      Marker& m = frame->markers[static_cast<std::size_t>(p)];
+      for (int a = 0; a < 3; ++a) m.position_mm[a] = static_cast<float>(clip.positions(f)[p * 3 + a] * clip.unitsToMm());
+      m.id = static_cast<std::uint16_t>(p);
+      m.valid = clip.isValid(f, p) ? 1 : 0;
+    }
+    const std::size_t len = drv::encodeMarkerStreamFrame(*frame, {}, bytes);
+    ASSERT_GT(len, 0u);
+    const std::int64_t at = period * static_cast<std::int64_t>(k + 1) + (k >= kGapFrames ? 600'000'000 : 0);
+    rec.write(0, at, std::span<const std::uint8_t>(bytes.data(), len));
+  }
+  rec.close();
+}
+
 void buildScene(Scene& sc) {
     const std::filesystem::path man = test::dataPath(kMan), clip_path = test::dataPath(kClip);
     if (!std::filesystem::exists(man) || !std::filesystem::exists(clip_path)) return;
@@ -93,6 +133,8 @@ void buildScene(Scene& sc) {
     const drv::C3DClip clip = drv::C3DClip::load(clip_path);
     sc.two_subjects = sc.dir.writeBytes("two.c3d", subjectsClip(clip, kFirstFrame, kFrames, {{"alice", 0.0f}, {"bob", kBobOffsetMm}}));
     sc.alice_short = sc.dir.writeBytes("alice_short.c3d", subjectsClip(clip, kFirstFrame, kFrames / 3, {{"", 0.0f}}));
+    sc.alice_with_gap = sc.dir.path() / "alice_gap.raw";
+    writeRecordingWithGap(clip, sc.alice_with_gap);
     sc.ok = true;
 }
 
@@ -192,6 +234,28 @@ TEST(Stage, OnePerformersSourceEndingDoesNotStopTheOther) {
   EXPECT_EQ(stage.performers[1].stats["end"], "source ended");
   const tools::RunOutcome bob = runAlone(performer("bob-alone", scene().two_subjects, "bob"));
   EXPECT_EQ(crcs(stage.performers[1]), crcs(bob));
+}
+
+// Real-time pacing: alice's device goes silent for 600 ms in the middle (her segment says stale),
+// bob's clip plays on without a stale period and to its end.
+TEST(Stage, OnePerformersSourceGoingStaleDoesNotStopTheOther) {
+  REQUIRE_SCENE();
+  tools::RunOptions o = lockstep();
+  o.as_fast_as_possible = false;
+  o.stale_ms = 250;
+  tools::PerformerSpec alice = performer("alice", scene().alice_with_gap, "");
+  alice.source = "replay:" + scene().alice_with_gap.string();
+  o.performers = {alice, performer("bob", scene().two_subjects, "bob")};
+  tools::RunOutcome stage;
+  ASSERT_EQ(tools::runLive(o, &stage), 0);
+  ASSERT_EQ(stage.performers.size(), 2u);
+  const nlohmann::json& a = stage.performers[0].stats;
+  const nlohmann::json& b = stage.performers[1].stats;
+  EXPECT_EQ(a["stale_periods"].get<std::uint64_t>(), 1u) << a.dump();
+  EXPECT_EQ(a["frames"].get<std::uint64_t>() + a["dropped_frames"].get<std::uint64_t>(), 2 * kGapFrames) << a.dump();
+  EXPECT_EQ(b["stale_periods"].get<std::uint64_t>(), 0u) << b.dump();
+  EXPECT_EQ(b["frames"].get<std::uint64_t>() + b["dropped_frames"].get<std::uint64_t>(), kFrames) << b.dump();
+  EXPECT_EQ(b["end"], "source ended");
 }
 
 TEST(Stage, AClipOfSeveralSubjectsNeedsTheSubjectNamed) {
