@@ -387,11 +387,8 @@ extern "C" tetrig_clip* tetrig_clip_open(const char* path) noexcept {
     handle->playback = std::make_unique<tetrig::drivers::C3DPlayback>(handle->clip, play);
     // Labels as the playback source names its markers (tetrig::drivers::makeC3DSource).
     const auto& points = handle->playback->selectedPoints();
-    const auto& stored = handle->clip.labels();
-    for (std::size_t k = 0; k < handle->playback->markerCount(); ++k) {
-      const auto p = static_cast<std::size_t>(points[k]);
-      handle->labels.push_back(p < stored.size() && !stored[p].empty() ? stored[p] : "point" + std::to_string(p));
-    }
+    for (std::size_t k = 0; k < handle->playback->markerCount(); ++k)
+      handle->labels.push_back(tetrig::drivers::c3dPointLabel(handle->clip, points[k]));
     return handle.release();
   } catch (...) {
     failFromException(kFn);

@@ -790,6 +790,12 @@ C3DClip C3DClip::load(const std::filesystem::path& path, const C3DReadOptions& o
   return parse(bytes, path.string(), options);
 }
 
+std::string c3dPointLabel(const C3DClip& clip, int point) {
+  const auto p = static_cast<std::size_t>(point);
+  const std::vector<std::string>& stored = clip.labels();
+  return p < stored.size() && !stored[p].empty() ? stored[p] : "point" + std::to_string(point);
+}
+
 int C3DClip::findPoint(std::string_view label) const noexcept {
   if (label.empty()) return -1;
   for (std::size_t i = 0; i < labels_.size(); ++i) {

@@ -469,8 +469,7 @@ std::unique_ptr<MarkerSource> makeC3DSource(std::shared_ptr<const C3DClip> clip,
   for (std::size_t k = 0; k < count; ++k) {
     const auto p = static_cast<std::size_t>(points[k]);
     if (labels.size() <= p) labels.resize(p + 1);
-    const std::string* stored = p < clip->labels().size() ? &clip->labels()[p] : nullptr;
-    labels[p] = stored != nullptr && !stored->empty() ? *stored : numbered("point", p);
+    labels[p] = c3dPointLabel(*clip, points[k]);
   }
   const double rate = playback.framePeriodNs() > 0 ? playback.frameRate() : 0.0;
   std::string description = "c3d:" + name + ", " + std::to_string(count) + " markers, " +

@@ -74,10 +74,10 @@ MarkerClip openMarkerClip(const std::filesystem::path& clip_path, const MarkerOp
   if (clip.frameCount() == 0) throw RigBuildError(clip_path.string() + ": the clip has no frames");
   std::vector<std::string> wanted = options.labels;
   for (int p = 0; p < clip.pointCount(); ++p) {
-    std::string label = clip.labels()[static_cast<std::size_t>(p)];
+    std::string label = drivers::c3dPointLabel(clip, p);
     const std::size_t colon = label.rfind(':');
     if (colon != std::string::npos) label = label.substr(colon + 1);
-    if (label.empty()) label = "point" + std::to_string(p);
+    if (label.empty()) label = "point" + std::to_string(p);  // a label "subject:" names the subject only
     if (!options.labels.empty()) {
       const auto it = std::find(wanted.begin(), wanted.end(), label);
       if (it == wanted.end()) continue;

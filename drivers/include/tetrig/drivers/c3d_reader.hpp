@@ -119,6 +119,12 @@ struct C3DHeader {
   float frame_rate = 0.0f;              // words 11-12, Hz
 };
 
+class C3DClip;
+
+// The name every consumer of a clip gives point `point`: its stored label, or "point<N>" when the
+// file names none (playback sources, the C API, the rig builder). Allocates.
+std::string c3dPointLabel(const C3DClip& clip, int point);
+
 class C3DClip {
  public:
   // Reads the whole file into memory and decodes it. Throws C3DError (clear message with the
