@@ -1,5 +1,6 @@
 // `tetrig run` (tools/run.hpp): source -> mailbox -> solver thread -> shared memory.
 #include "run.hpp"
+#include "run_dds.hpp"
 #include "signal_scope.hpp"
 #include "solver_flags.hpp"
 
@@ -211,6 +212,14 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
     source->stop();
     throw;
   }
+  // 3b. DDS (--dds; docs/dds.md): a thread of its own follows the segment and writes each frame to DDS.
+  std::unique_ptr<RunDds> dds;
+  try {
+    dds = std::make_unique<RunDds>(options, *publisher);
+  } catch (...) {
+    source->stop();
+    throw;
+  }
 
   // The banner once the segment exists (a refused segment is one error line, nothing before it).
   if (!options.quiet) {
@@ -284,6 +293,7 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
     std::printf("  publishing to shared memory '%s' (%s); budget %.2f ms, %d iterations per frame, pose transfer on %d thread%s\n",
                 options.publish.c_str(), options.normals ? "positions and normals" : "positions", budget_ms, options.iterations,
                 pose_threads, pose_threads > 1 ? "s" : "");
+  if (!options.quiet) dds->printBanner();
   std::fflush(stdout);
 
   // 5. Wait for the end: source finished and drained, --frames reached, or a signal.
@@ -344,6 +354,7 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
   const FrameLoopCounters c = loop.counters();
   const FrameLoopLatency& l = loop.latency();
   const drivers::MarkerSourceStats source_stats = source->stats();
+  dds->stop();  // before the segment goes: the bridge reads it
   publisher.reset();  // state stopped, name unlinked: consumers see a clean end
   int consumer_status = 0;
   if (consumer > 0) consumer_status = reapConsumer(consumer, std::chrono::seconds(5));
@@ -375,6 +386,7 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
                 static_cast<unsigned long long>(source_stats.frames_published), static_cast<unsigned long long>(source_stats.frames_lost),
                 static_cast<unsigned long long>(source_stats.decode_errors));
     std::printf("  solver thread: %s\n", loop.hygiene().c_str());
+    dds->printSummary();
   }
   if (!options.final_obj.empty()) {
     std::vector<float> last(static_cast<std::size_t>(live.fineVertexCount()) * 3);
@@ -424,6 +436,7 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
     j["rig"] = {{"name", rig.name}, {"tet_vertices", rig.tet_mesh.vertexCount()}, {"tets", rig.tet_mesh.tetCount()},
                 {"fine_vertices", live.fineVertexCount()}, {"markers", rig.markers.size()}, {"markers_bound", binding.matched}};
     j["solver_thread"] = loop.hygiene();
+    dds->addStats(j);
     j["latency_us"] = {{"receive_to_taken", phaseJson(l.receive_to_taken)},
                        {"step", phaseJson(l.step)},
                        {"pose_transfer", phaseJson(l.pose_transfer)},

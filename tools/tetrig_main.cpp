@@ -443,6 +443,7 @@ int main(int argc, char** argv) {
       ->group(kSources);
   const char* kOutput = "Output";
   run_cmd->add_flag("--normals", run.normals, "Also publish per-vertex normals")->group(kOutput);
+  run_cmd->add_flag("--dds", run.dds, "Also publish the frames over DDS: topics tetrig/<publish name>/frame and /static (docs/dds.md)")->group(kOutput);
   run_cmd->add_option("--stats-json", run.stats_json, "Write the run's statistics (keys: docs/live.md)")->group(kOutput);
   std::string shm_mode;
   run_cmd->add_option("--shm-mode", shm_mode, "Segment permissions in octal (default 600: owner only; read bits for group/others, e.g. 640 or 644, but no write bits)")
