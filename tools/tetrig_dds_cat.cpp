@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <deque>
 #include <string>
 #include <vector>
 
@@ -193,6 +194,61 @@ int main(int argc, char** argv) {
   const std::int64_t start = last_activity;
   int exit_code = 0;
   bool done = false;
+  // Frames that came before their instance's static data (the two topics are not ordered with
+  // each other): held, at most kPending, and checked once it comes.
+  constexpr std::size_t kPending = 16;
+  std::deque<tetrig::dds::ReceivedFrame> pending;
+  // Checks, counts, prints and dumps one frame; true when --frames is reached.
+  auto onFrame = [&](const tetrig::dds::ReceivedFrame& f, std::int64_t now) {
+    std::string why;
+    const auto verdict = checker.checkFrame(f, why);
+    if (verdict == tetrig::dds::FrameChecker::Verdict::kWaitingForStatic) {
+      if (pending.size() == kPending) {
+        pending.pop_front();
+        ++before_static;
+      }
+      pending.push_back(f);
+      return false;
+    }
+    if (verdict == tetrig::dds::FrameChecker::Verdict::kRefused) {
+      ++refused;
+      std::fprintf(stderr, "tetrig-dds-cat: %s (%" PRIu64 " refused so far)\n", why.c_str(), refused);
+      return false;
+    }
+    last_activity = now;
+    if (f.instance_id != last_instance) {
+      if (last_instance != 0)
+        std::fprintf(stderr, "tetrig-dds-cat: publisher restarted: instance %016" PRIx64 " -> %016" PRIx64 "\n", last_instance, f.instance_id);
+      ++instances;
+      last_instance = f.instance_id;
+    } else if (f.frame_id > last_id + 1) {
+      missed += f.frame_id - last_id - 1;
+    }
+    last_id = f.frame_id;
+    ++seen;
+    bytes_per_frame = f.payloadBytes();
+    const double rs = f.receive_ns > 0 && f.seen_ns >= f.receive_ns ? static_cast<double>(f.seen_ns - f.receive_ns) * 1e-3 : -1;
+    const double ps = f.publish_ns > 0 && f.seen_ns >= f.publish_ns ? static_cast<double>(f.seen_ns - f.publish_ns) * 1e-3 : -1;
+    const double ws = f.write_ns > 0 && f.seen_ns >= f.write_ns ? static_cast<double>(f.seen_ns - f.write_ns) * 1e-3 : -1;
+    if (rs >= 0) receive_to_seen.push_back(rs);
+    if (ps >= 0) published_to_seen.push_back(ps);
+    if (ws >= 0) written_to_seen.push_back(ws);
+    if (!a.quiet) {
+      char recv[32] = "-";
+      if (rs >= 0) std::snprintf(recv, sizeof recv, "%.1f us", rs);
+      std::printf("frame %" PRIu64 " source %" PRIu64 " iter %d recv->seen %s pub->seen %.1f us bytes %zu flags 0x%x state %s\n", f.frame_id,
+                  f.source_frame, f.iterations, recv, ps, bytes_per_frame, f.flags, stateName(f.producer_state));
+    }
+    if (dump != nullptr) {
+      const std::uint32_t v = static_cast<std::uint32_t>(f.positions.size() / 3), zero = 0;
+      std::fwrite(&f.instance_id, 8, 1, dump);
+      std::fwrite(&f.frame_id, 8, 1, dump);
+      std::fwrite(&v, 4, 1, dump);
+      std::fwrite(&zero, 4, 1, dump);
+      std::fwrite(f.positions.data(), sizeof(float), f.positions.size(), dump);
+    }
+    return a.frames > 0 && seen >= a.frames;
+  };
   while (!done && g_stop == 0) {
     events.clear();
     sub->poll(20'000'000, events);
@@ -221,60 +277,24 @@ int main(int argc, char** argv) {
           std::fprintf(stderr, "tetrig-dds-cat: static data: rig '%s', %u vertices, %zu triangles, %zu markers%s (instance %016" PRIx64 ")\n",
                        printable(rig_name).c_str(), vertex_count, e.static_data.triangles.size() / 3, e.static_data.marker_labels.size(),
                        e.static_data.has_normals ? ", normals" : "", e.static_data.instance_id);
+          // The frames held for this instance, in the order they came.
+          std::deque<tetrig::dds::ReceivedFrame> held;
+          held.swap(pending);
+          for (const auto& f : held) {
+            if (f.instance_id != e.static_data.instance_id) {
+              pending.push_back(f);
+            } else if (!(a.frames > 0 && seen >= a.frames) && onFrame(f, now)) {
+              done = true;
+            }
+          }
         } else {
           ++static_refused;
           std::fprintf(stderr, "tetrig-dds-cat: %s\n", why.c_str());
         }
-      } else {
-        const tetrig::dds::ReceivedFrame& f = e.frame;
-        std::string why;
-        const auto verdict = checker.checkFrame(f, why);
-        if (verdict == tetrig::dds::FrameChecker::Verdict::kWaitingForStatic) {
-          ++before_static;
-          continue;
-        }
-        if (verdict == tetrig::dds::FrameChecker::Verdict::kRefused) {
-          ++refused;
-          std::fprintf(stderr, "tetrig-dds-cat: %s (%" PRIu64 " refused so far)\n", why.c_str(), refused);
-          continue;
-        }
-        last_activity = now;
-        if (f.instance_id != last_instance) {
-          if (last_instance != 0)
-            std::fprintf(stderr, "tetrig-dds-cat: publisher restarted: instance %016" PRIx64 " -> %016" PRIx64 "\n", last_instance, f.instance_id);
-          ++instances;
-          last_instance = f.instance_id;
-        } else if (f.frame_id > last_id + 1) {
-          missed += f.frame_id - last_id - 1;
-        }
-        last_id = f.frame_id;
-        ++seen;
-        bytes_per_frame = f.payloadBytes();
-        const double rs = f.receive_ns > 0 && f.seen_ns >= f.receive_ns ? static_cast<double>(f.seen_ns - f.receive_ns) * 1e-3 : -1;
-        const double ps = f.publish_ns > 0 && f.seen_ns >= f.publish_ns ? static_cast<double>(f.seen_ns - f.publish_ns) * 1e-3 : -1;
-        const double ws = f.write_ns > 0 && f.seen_ns >= f.write_ns ? static_cast<double>(f.seen_ns - f.write_ns) * 1e-3 : -1;
-        if (rs >= 0) receive_to_seen.push_back(rs);
-        if (ps >= 0) published_to_seen.push_back(ps);
-        if (ws >= 0) written_to_seen.push_back(ws);
-        if (!a.quiet) {
-          char recv[32] = "-";
-          if (rs >= 0) std::snprintf(recv, sizeof recv, "%.1f us", rs);
-          std::printf("frame %" PRIu64 " source %" PRIu64 " iter %d recv->seen %s pub->seen %.1f us bytes %zu flags 0x%x state %s\n", f.frame_id,
-                      f.source_frame, f.iterations, recv, ps, bytes_per_frame, f.flags, stateName(f.producer_state));
-        }
-        if (dump != nullptr) {
-          const std::uint32_t v = static_cast<std::uint32_t>(f.positions.size() / 3), zero = 0;
-          std::fwrite(&f.instance_id, 8, 1, dump);
-          std::fwrite(&f.frame_id, 8, 1, dump);
-          std::fwrite(&v, 4, 1, dump);
-          std::fwrite(&zero, 4, 1, dump);
-          std::fwrite(f.positions.data(), sizeof(float), f.positions.size(), dump);
-        }
-        if (a.frames > 0 && seen >= a.frames) {
-          done = true;
-          break;
-        }
+      } else if (!(a.frames > 0 && seen >= a.frames) && onFrame(e.frame, now)) {
+        done = true;  // frames of this batch after a liveliness event still count: the events come first
       }
+      if (a.frames > 0 && seen >= a.frames) break;
     }
     if (!done && now - last_activity > a.timeout_ms * 1'000'000) {
       std::fprintf(stderr, "tetrig-dds-cat: timeout: no frame for %lld ms\n", a.timeout_ms);
@@ -288,6 +308,7 @@ int main(int argc, char** argv) {
     exit_code = 1;
   }
   const double seconds = static_cast<double>(tetrig::dds::monotonicNs() - start) * 1e-9;
+  before_static += pending.size();  // never checked: their static data did not come
   if (!a.quiet || exit_code == 0)
     std::fprintf(stderr,
                  "tetrig-dds-cat: %" PRIu64 " frames (%" PRIu64 " missed, %" PRIu64 " refused, %" PRIu64 " before static data), %zu bytes per frame, "

@@ -178,6 +178,7 @@ TEST(Dds, SubscriberGetsTheSegmentsFramesInOrder) {
   EXPECT_NE(stats.find("\"write_errors\": 0"), std::string::npos) << stats;
   const std::string lat = slurp(dir.path() / "lat.json");
   EXPECT_NE(lat.find("\"frames_refused\": 0"), std::string::npos) << lat;
+  EXPECT_NE(lat.find("\"frames_before_static\": 0"), std::string::npos) << lat;  // held until the static data came
   EXPECT_NE(lat.find("\"receive_to_seen\": {\"count\": " + std::to_string(dds_records.size())), std::string::npos) << lat;
 }
 
