@@ -530,6 +530,7 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::Range(1.0, 600000.0));
   view_cmd->add_flag("-q,--quiet", view.quiet, "No status lines on stderr");
+  view_cmd->add_flag("--dds", view.dds, "Read NAME's frames over DDS (topics tetrig/NAME/frame and /static) instead of its segment (docs/dds.md)");
 
   tetrig::tools::PoseOptions pose;
   CLI::App* pose_cmd = app.add_subcommand("pose", "Pose a rig: rigid transforms (.def files) for its region handles -> the fine mesh as OBJ");

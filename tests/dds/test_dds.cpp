@@ -6,6 +6,7 @@
 #include "shm_dump.hpp"
 #include "../tools/small_rig.hpp"
 #include "temp_dir.hpp"
+#include "test_data.hpp"
 #include "tetrig/dds/frame_publisher.hpp"
 #include "tetrig/rig_file.hpp"
 #include "tetrig_shm.h"
@@ -25,6 +26,7 @@
 #include <fstream>
 #include <limits>
 #include <map>
+#include <optional>
 #include <set>
 #include <sstream>
 #include <string>
@@ -385,6 +387,52 @@ TEST(Dds, BadInputIsOneLine) {
   EXPECT_EQ(bad_frames.err, "tetrig-dds-cat: --frames needs a number >= 1\n");
   EXPECT_EQ(tetrig::dds::topicBaseName("/tetrig-man.v2"), "tetrig_man_v2");
   EXPECT_THROW(tetrig::dds::topicBaseName("/"), tetrig::dds::DdsError);
+}
+
+}  // namespace
+
+namespace {
+
+std::optional<std::filesystem::path> findOnPath(const std::string& exe) {
+  const char* path = std::getenv("PATH");
+  const std::string dirs = path ? path : "/usr/bin:/bin";
+  std::size_t start = 0;
+  while (start <= dirs.size()) {
+    const std::size_t end = std::min(dirs.find(':', start), dirs.size());
+    const std::filesystem::path candidate = std::filesystem::path(dirs.substr(start, end - start)) / exe;
+    if (access(candidate.c_str(), X_OK) == 0) return candidate;
+    start = end + 1;
+  }
+  return std::nullopt;
+}
+
+// `tetrig view --dds NAME` under xvfb-run draws the frames it gets over DDS (the static data
+// builds the mesh) and writes its screenshot. Skipped with a message without xvfb-run/xauth,
+// FAIL under CI=true; one at a time with test_view (RESOURCE_LOCK xvfb_run).
+TEST(DdsView, ViewerDrawsTheFramesItGetsOverDds) {
+  const auto xvfb_run = findOnPath("xvfb-run");
+  if (!xvfb_run || !findOnPath("xauth")) {
+    if (tetrig::test::runningInCi()) FAIL() << "xvfb-run or xauth not found in CI (apt-get install xvfb xauth)";
+    GTEST_SKIP() << "xvfb-run or xauth not found: apt-get install xvfb xauth to run the viewer headless";
+  }
+  const TempDir dir("tetrig-dds");
+  useLoopbackDomain(dir, 169);
+  const std::string rig = smallRig(dir);
+  const std::string name = "tetrig-dds-view-" + std::to_string(getpid());
+  const pid_t producer = spawn(runArgs(rig, name, 1000) + " >" + q(dir.path() / "run.out") + " 2>" + q(dir.path() / "run.err"));
+  ASSERT_GT(producer, 0);
+  const auto shot = dir.path() / "shot.png";
+  const auto view = tetrig::test::runCommand(xvfb_run->string(), "-a -s '-screen 0 640x480x24' " + q(TETRIG_EXE) + " view --dds " + name +
+                                                                   " --screenshot " + q(shot) + " --after-frames 20 --timeout 30 --width 320 --height 240",
+                                             dir.path());
+  kill(producer, SIGINT);
+  EXPECT_EQ(waitExit(producer, std::chrono::seconds(10)), 0) << slurp(dir.path() / "run.err");
+  ASSERT_EQ(view.status, 0) << view.err;
+  EXPECT_NE(view.err.find("tetrig/" + tetrig::dds::topicBaseName(name) + "/frame: rig 'small block', 34 vertices"), std::string::npos) << view.err;
+  EXPECT_NE(view.out.find("(over DDS), 20 frames taken"), std::string::npos) << view.out;
+  const std::string png = slurp(shot);
+  ASSERT_GT(png.size(), 8u);
+  EXPECT_EQ(png.compare(1, 3, "PNG"), 0);
 }
 
 }  // namespace
