@@ -386,6 +386,22 @@ TEST(Dds, BadInputIsOneLine) {
   EXPECT_EQ(bad_frames.status, 1);
   EXPECT_EQ(bad_frames.err, "tetrig-dds-cat: --frames needs a number >= 1\n");
   EXPECT_EQ(tetrig::dds::topicBaseName("/tetrig-man.v2"), "tetrig_man_v2");
+  // tetrig run refuses the name in one line, leaving no segment behind.
+  const std::string rig = smallRig(dir);
+  const std::string segment = "tetrig-dds-bad:" + std::to_string(getpid());
+  const auto run = tetrig::test::runCommand(TETRIG_EXE, "run --rig '" + rig + "' --source synthetic --frames 5 --publish '" + segment + "' --dds --no-mlock -q",
+                                            dir.path());
+  EXPECT_EQ(run.status, 1);
+  EXPECT_EQ(run.err, "tetrig run: error: --dds: DDS topic name: the segment name has a character DDS topic names cannot hold (':'): use letters, "
+                     "digits, '_', '-' or '.'\n");
+  EXPECT_FALSE(std::filesystem::exists("/dev/shm/" + segment));
+  // A configuration Cyclone cannot use: Cyclone's own line, then ours, exit 1.
+  setenv("CYCLONEDDS_URI", "file:///nonexistent/cyclonedds.xml", 1);
+  const auto no_config = tetrig::test::runCommand(TETRIG_DDS_CAT_EXE, "x --timeout-ms 100", dir.path());
+  EXPECT_EQ(no_config.status, 1);
+  EXPECT_NE(no_config.err.find("tetrig-dds-cat: DDS subscriber for 'x': cannot create a DDS participant (Error): check CYCLONEDDS_URI"),
+            std::string::npos)
+      << no_config.err;
   EXPECT_THROW(tetrig::dds::topicBaseName("/"), tetrig::dds::DdsError);
 }
 
@@ -433,6 +449,80 @@ TEST(DdsView, ViewerDrawsTheFramesItGetsOverDds) {
   const std::string png = slurp(shot);
   ASSERT_GT(png.size(), 8u);
   EXPECT_EQ(png.compare(1, 3, "PNG"), 0);
+}
+
+}  // namespace
+
+#include "tetrig/dds/frame_subscriber.hpp"
+#include "tetrig/dds/segment_bridge.hpp"
+#include "tetrig/shm_publisher.hpp"
+
+namespace {
+
+// A SegmentBridge that follows a segment by name (no in-process publisher: it polls) writes each
+// committed frame as committed, with the static data first, and ends by itself, saying so, when the
+// segment's producer stops; a subscriber in the same process gets the frames unchanged.
+TEST(DdsBridge, FollowsASegmentByNameAndEndsWhenItsProducerStops) {
+  const TempDir dir("tetrig-dds");
+  useLoopbackDomain(dir, 170);
+  const std::string name = "/tetrig-dds-bridge-" + std::to_string(getpid());
+  const std::vector<std::int32_t> triangles = {0, 1, 2, 0, 2, 3};
+  const std::vector<float> rest = {0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0};
+  const std::vector<std::string> labels = {"A", "B"};
+  auto shm = std::make_unique<tetrig::ShmPublisher>(tetrig::ShmPublisherOptions{.name = name}, 4,
+                                                    tetrig::ShmStaticData{triangles, rest, "quad", labels});
+  const std::string base = tetrig::dds::topicBaseName(name);
+  tetrig::dds::FrameSubscriber sub(base, tetrig::dds::DdsOptions{});
+  tetrig::dds::SegmentBridge bridge(name, base, nullptr, tetrig::dds::SegmentBridgeOptions{});
+  const auto deadline = Clock::now() + std::chrono::seconds(10);
+  while (bridge.matchedReaders() < 1 && Clock::now() < deadline) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  ASSERT_GE(bridge.matchedReaders(), 1);
+  std::vector<tetrig::dds::SubscriberEvent> events;
+  std::map<std::uint64_t, std::vector<float>> frames;
+  std::optional<tetrig::dds::ReceivedStatic> static_data;
+  for (int k = 1; k <= 5; ++k) {
+    float* p = shm->beginPositions();
+    for (int i = 0; i < 12; ++i) p[i] = rest[static_cast<std::size_t>(i)] + 0.01f * static_cast<float>(k * 100 + i);
+    shm->commit(tetrig::ShmFrameInfo{.source_frame = static_cast<std::uint64_t>(k), .receive_ns = 1});
+    const auto until = Clock::now() + std::chrono::seconds(3);
+    while (frames.count(static_cast<std::uint64_t>(k)) == 0 && Clock::now() < until) {
+      events.clear();
+      sub.poll(10'000'000, events);
+      for (const auto& e : events) {
+        if (e.kind == tetrig::dds::SubscriberEvent::kFrame) frames[e.frame.frame_id] = e.frame.positions;
+        if (e.kind == tetrig::dds::SubscriberEvent::kStatic) static_data = e.static_data;
+      }
+    }
+    ASSERT_EQ(frames.count(static_cast<std::uint64_t>(k)), 1u) << "frame " << k << " did not come";
+    EXPECT_EQ(frames[static_cast<std::uint64_t>(k)], std::vector<float>(p, p + 12)) << "frame " << k;
+  }
+  // The static data is reliable but not ordered with the frames: it may come after them.
+  const auto static_until = Clock::now() + std::chrono::seconds(5);
+  while (!static_data && Clock::now() < static_until) {
+    events.clear();
+    sub.poll(10'000'000, events);
+    for (const auto& e : events)
+      if (e.kind == tetrig::dds::SubscriberEvent::kStatic) static_data = e.static_data;
+  }
+  ASSERT_TRUE(static_data.has_value());
+  EXPECT_EQ(static_data->rig_name, "quad");
+  EXPECT_EQ(static_data->vertex_count, 4u);
+  EXPECT_EQ(static_data->triangles, std::vector<std::uint32_t>(triangles.begin(), triangles.end()));
+  EXPECT_EQ(static_data->rest_positions, rest);
+  EXPECT_EQ(static_data->marker_labels, labels);
+  EXPECT_EQ(static_data->instance_id, shm->instanceId());
+  // The bridge counts a frame once dds_write has returned, which may be after the subscriber got it.
+  const auto count_until = Clock::now() + std::chrono::seconds(5);
+  while (bridge.stats().frames_written < 5 && Clock::now() < count_until) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  EXPECT_EQ(bridge.stats().frames_written, 5u);
+  EXPECT_EQ(bridge.stats().write_errors, 0u);
+  EXPECT_EQ(bridge.end(), "");
+  shm.reset();  // the producer stops: state stopped, name unlinked
+  const auto until = Clock::now() + std::chrono::seconds(5);
+  while (bridge.end().empty() && Clock::now() < until) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  EXPECT_EQ(bridge.end(), "the segment's producer stopped");
+  bridge.stop();
+  EXPECT_EQ(bridge.end(), "the segment's producer stopped");
 }
 
 }  // namespace
