@@ -21,7 +21,7 @@ void onSignal(int) { g_stop = 1; }
 
 const char* kUsage =
     "usage: tetrig-dds-cat NAME [--frames N] [--timeout-ms T] [--latency-json FILE] [--dump FILE] [--follow] [--quiet]\n"
-    "                      [--domain D] [--lease-ms L]\n"
+    "                      [--domain D]\n"
     "  NAME: the --publish name of `tetrig run --dds` (topics tetrig/NAME/frame and tetrig/NAME/static; '-' and '.' read as '_')\n";
 
 struct Args {
@@ -31,7 +31,6 @@ struct Args {
   std::string latency_json, dump;
   bool follow = false, quiet = false;
   int domain = -1;
-  long long lease_ms = 1000;
 };
 
 bool parseNumber(const char* text, long long min, long long max, long long& out) {
@@ -124,9 +123,6 @@ int main(int argc, char** argv) {
     } else if (arg == "--timeout-ms") {
       if (!parseNumber(value("--timeout-ms"), 1, 86'400'000, a.timeout_ms))
         return std::fprintf(stderr, "tetrig-dds-cat: --timeout-ms needs a number of milliseconds >= 1\n"), 1;
-    } else if (arg == "--lease-ms") {
-      if (!parseNumber(value("--lease-ms"), 10, 3'600'000, a.lease_ms))
-        return std::fprintf(stderr, "tetrig-dds-cat: --lease-ms needs a number of milliseconds >= 10\n"), 1;
     } else if (arg == "--domain") {
       if (!parseNumber(value("--domain"), 0, 232, n)) return std::fprintf(stderr, "tetrig-dds-cat: --domain needs a number 0..232\n"), 1;
       a.domain = static_cast<int>(n);
@@ -173,7 +169,7 @@ int main(int argc, char** argv) {
   }
   tetrig::dds::DdsOptions options;
   options.domain_id = a.domain;
-  options.liveliness_lease_ns = a.lease_ms * 1'000'000;
+  const long long lease_ms = options.liveliness_lease_ns / 1'000'000;  // the publishers' lease: a reader must not ask for less
   std::unique_ptr<tetrig::dds::FrameSubscriber> sub;
   try {
     sub = std::make_unique<tetrig::dds::FrameSubscriber>(base, options);
@@ -261,7 +257,7 @@ int main(int argc, char** argv) {
       } else if (e.kind == K::kPublisherLost) {
         ++lost;
         std::fprintf(stderr, "tetrig-dds-cat: publisher lost: no sign of it for the liveliness lease (%lld ms); last frame %.0f ms ago (%d alive)\n",
-                     a.lease_ms, static_cast<double>(now - last_activity) * 1e-6, e.alive_count);
+                     lease_ms, static_cast<double>(now - last_activity) * 1e-6, e.alive_count);
         if (!a.follow && e.alive_count == 0) {
           exit_code = 3;
           done = true;

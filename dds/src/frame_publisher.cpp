@@ -7,6 +7,7 @@
 #include <time.h>
 
 #include <chrono>
+#include <cstdio>
 #include <thread>
 #include <vector>
 

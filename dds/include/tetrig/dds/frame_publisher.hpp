@@ -40,7 +40,8 @@ struct DdsOptions {
   // The DDS domain; -1: the domain of the Cyclone configuration (CYCLONEDDS_URI), else 0.
   int domain_id = -1;
   // Automatic liveliness lease of the writers (offered) and the readers (requested): a dead
-  // publisher is reported within about this time (docs/dds.md, "Liveliness").
+  // publisher is reported within about this time (docs/dds.md, "Liveliness"). A reader that asks
+  // for a shorter lease than a writer offers does not match it (DDS QoS rules): keep both equal.
   std::int64_t liveliness_lease_ns = 1'000'000'000;
 };
 
