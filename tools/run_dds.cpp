@@ -20,7 +20,7 @@ namespace tetrig::tools {
 RunDds::RunDds(const RunOptions& options, const ShmPublisher& publisher) {
   if (!options.dds) return;
   try {
-    const std::string base = dds::topicBaseName(options.publish);
+    const std::string base = dds::topicBaseName(publisher.name());  // per segment: one topic pair per performer
     dds::SegmentBridgeOptions bridge_options;
     bridge_options.normals = options.normals;
     bridge_ = std::make_unique<dds::SegmentBridge>(publisher.name(), base, &publisher, bridge_options);

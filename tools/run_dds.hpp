@@ -18,8 +18,9 @@ namespace tetrig::tools {
 
 class RunDds {
  public:
-  // With options.dds: the topic names from options.publish, the static data written, the bridge
-  // thread started on `publisher`. Throws std::runtime_error (one line) when DDS cannot start.
+  // With options.dds: the topic names from the segment's name (one pair per segment, so one
+  // RunDds per performer's publisher), the static data written, the bridge thread started on
+  // `publisher`. Throws std::runtime_error (one line) when DDS cannot start.
   RunDds(const RunOptions& options, const ShmPublisher& publisher);
   ~RunDds();
   RunDds(const RunDds&) = delete;
