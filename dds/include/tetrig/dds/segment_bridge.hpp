@@ -35,7 +35,7 @@ struct SegmentBridgeOptions {
 
 struct SegmentBridgeStats {
   std::uint64_t frames_written = 0;
-  std::uint64_t frames_skipped = 0;  // committed but superseded before the bridge read them
+  std::uint64_t frames_skipped = 0;  // committed but superseded before the bridge read them (gaps after the first frame written)
   std::uint64_t write_errors = 0;    // dds_write failed
   std::uint64_t read_busy = 0;       // the segment reader was lapped on every attempt (frame retried)
 };
@@ -44,7 +44,9 @@ class SegmentBridge {
  public:
   // Opens the segment (`publisher`'s own mapping when given, else by name), creates the DDS
   // entities for `topic_base` (topicBaseName()), writes the static data and starts the thread.
-  // Throws DdsError (DDS set-up, or a segment that cannot be opened, in one line).
+  // Throws DdsError (DDS set-up, or a segment that cannot be opened, in one line). With
+  // `publisher`, stop() (or the destructor) must come before the publisher is destroyed: the
+  // thread reads its mapping.
   SegmentBridge(std::string segment_name, std::string topic_base, const ShmPublisher* publisher, const SegmentBridgeOptions& options);
   ~SegmentBridge();  // stop()
   SegmentBridge(const SegmentBridge&) = delete;
