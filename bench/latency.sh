@@ -18,6 +18,9 @@
 #                                         # fanned out, one solver thread and segment each, one consumer
 #                                         # per segment) in the same invocation: the table per performer
 #                                         # and the ratio of their p99 to the single performer's
+#   bash bench/latency.sh --dds           # also over Cyclone DDS (tetrig run --dds, tetrig-dds-cat in another
+#                                         # process, loopback only: dds/config/loopback.xml unless CYCLONEDDS_URI
+#                                         # is set); the DDS subscriber's figures beside the segment consumer's
 #   extra arguments after -- go to `tetrig run` (e.g. -- --cpu 1 --fifo, or -- --keep-volume)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -26,6 +29,7 @@ mode=smpl
 cap=0
 performers=1
 iterations=3
+dds=0
 extra=()
 while [ $# -gt 0 ]; do
   case "$1" in
@@ -34,8 +38,9 @@ while [ $# -gt 0 ]; do
     --cap) shift; cap="${1:?--cap needs a number}" ;;
     --iterations) shift; iterations="${1:?--iterations needs a number}" ;;
     --performers) shift; performers="${1:?--performers needs a number}" ;;
+    --dds) dds=1 ;;
     --) shift; extra=("$@"); break ;;
-    *) echo "latency.sh: unknown argument $1 (use --synthetic, --armadillo, --cap N, --iterations N, --performers N, or -- ARGS for tetrig run)" >&2; exit 2 ;;
+    *) echo "latency.sh: unknown argument $1 (use --synthetic, --armadillo, --cap N, --iterations N, --performers N, --dds, or -- ARGS for tetrig run)" >&2; exit 2 ;;
   esac
   shift
 done
@@ -43,9 +48,11 @@ clip="$data/mocap/hdm05/HDM_mm_01-02_03_120.c3d"
 for f in "$clip" "$data/meshes/odedstein-meshes/human_man.obj"; do
   [ -f "$f" ] || { echo "latency.sh: $f not found (place ../shared/data beside the checkout or set TETRIG_DATA_DIR)" >&2; exit 1; }
 done
+targets=(tetrig tetrig-shm-cat tetrig_pose_cap_error tetrig_host_probe)
+[ "$dds" = 1 ] && targets+=(tetrig-dds-cat)
 if [ ! -x build/release/tetrig ] || [ ! -x build/release/tetrig-shm-cat ] || [ ! -x build/release/tetrig_host_probe ] || [ "${LATENCY_REBUILD:-1}" = 1 ]; then
   cmake --preset release >/dev/null
-  cmake --build --preset release --target tetrig tetrig-shm-cat tetrig_pose_cap_error tetrig_host_probe >/dev/null
+  cmake --build --preset release --target "${targets[@]}" >/dev/null
 fi
 out=build/release
 case "$mode" in
@@ -73,23 +80,34 @@ source="c3d:$clip"
 frames=()
 if [ "$mode" = synthetic ]; then source=synthetic; frames=(--frames 1200); fi
 name="tetrig-latency-$$"
-rm -f "$out/latency_producer.json" "$out/latency_consumer.json" "$out/latency_host.json"
+rm -f "$out/latency_producer.json" "$out/latency_consumer.json" "$out/latency_host.json" "$out/latency_dds.json"
 # First what the host itself gives a 120 Hz loop (10 s): the same fixed work at p50 and p99.
 build/release/tetrig_host_probe --frames 1200 --rate 120 --work-us 700 --json "$out/latency_host.json"
 build/release/tetrig-shm-cat "$name" --quiet --timeout-ms 20000 --json "$out/latency_consumer.json" &
 consumer=$!
+dds_flag=()
+if [ "$dds" = 1 ]; then
+  export CYCLONEDDS_URI="${CYCLONEDDS_URI:-file://$PWD/dds/config/loopback.xml}"
+  build/release/tetrig-dds-cat "$name" --quiet --timeout-ms 20000 --latency-json "$out/latency_dds.json" &
+  dds_consumer=$!
+  dds_flag=(--dds)
+  sleep 0.5  # the subscriber's participant is up before the first frame
+fi
 build/release/tetrig run --rig "$rig" --source "$source" --publish "$name" --iterations "$iterations" \
-  --stats-json "$out/latency_producer.json" "${frames[@]}" "${extra[@]}"
+  --stats-json "$out/latency_producer.json" "${dds_flag[@]}" "${frames[@]}" "${extra[@]}"
 wait "$consumer" || { echo "latency.sh: the consumer failed" >&2; exit 1; }
+if [ "$dds" = 1 ]; then wait "$dds_consumer" || { echo "latency.sh: the DDS subscriber failed" >&2; exit 1; }; fi
 if [ "$cap" != 0 ]; then
   echo "accuracy of the capped B against the full one (metres):"
   build/release/tetrig_pose_cap_error "$full" "$rig" "$clip"
 fi
-python3 - "$out/latency_producer.json" "$out/latency_consumer.json" "$out/latency.json" "$mode" "$out/latency_host.json" "$iterations" <<'PY'
-import json, sys
-producer, consumer, out, mode, host, iterations = sys.argv[1:7]
+python3 - "$out/latency_producer.json" "$out/latency_consumer.json" "$out/latency.json" "$mode" "$out/latency_host.json" "$iterations" "$out/latency_dds.json" <<'PY'
+import json, os, sys
+producer, consumer, out, mode, host, iterations, dds_file = sys.argv[1:8]
 p = json.load(open(producer)); c = json.load(open(consumer)); h = json.load(open(host))
+d = json.load(open(dds_file)) if os.path.exists(dds_file) else None
 p["consumer"] = c
+if d: p["dds_subscriber"] = d
 p["host_probe"] = h
 p["harness"] = mode
 json.dump(p, open(out, "w"), indent=2)
@@ -100,6 +118,9 @@ rows = [("receive -> taken by the solver", lat["receive_to_taken"]),
         ("receive -> published", lat["receive_to_published"])]
 seen = c.get("latency_us", {}).get("receive_to_seen")
 if seen: rows.append(("receive -> seen by the consumer", seen))
+if d:
+  rows.append(("receive -> seen by the DDS subscriber", d["latency_us"]["receive_to_seen"]))
+  rows.append(("published -> seen by the DDS subscriber", d["latency_us"]["published_to_seen"]))
 rows += [(f"step ({iterations} iterations)", lat["step"]), ("pose transfer", lat["pose_transfer"]),
          ("overhead (published - step - pose)", lat["overhead"])]
 after = lat.get("prepare_next")
@@ -111,6 +132,15 @@ for name, r in rows: print(f"| {name} | {r['p50']:.1f} | {r['p99']:.1f} | {r['ma
 print(f"\nbudget misses {p['budget_misses']} (budget {p['budget_ms']:.2f} ms), frames dropped {p['dropped_frames']}, "
       f"consumer saw {c.get('frames_seen', '?')} frames, missed {c.get('frames_missed', '?')}")
 print(f"solver thread: {p['solver_thread']}")
+if d:
+  w = p.get("dds", {})
+  fps = d["frames_seen"] / d["seconds"] if d["seconds"] > 0 else 0
+  print(f"DDS: {w.get('frames_written', '?')} frames written ({w.get('frames_skipped', '?')} skipped for a newer one, "
+        f"{w.get('write_errors', '?')} write errors); the subscriber saw {d['frames_seen']}, missed {d['frames_missed']}, refused "
+        f"{d['frames_refused']}; {d['bytes_per_frame']} bytes per frame, {d['bytes_per_frame'] * p['frames'] / max(p['seconds'], 1e-9) / 1e6:.2f} MB/s")
+  s99, d99 = (seen or {}).get("p99"), d["latency_us"]["receive_to_seen"]["p99"]
+  if s99 is not None and d99 is not None:
+    print(f"receive -> seen p99: DDS {d99:.1f} us, segment {s99:.1f} us: DDS {d99 - s99:+.1f} us")
 hw = h["workload_us"]
 print(f"host probe: a fixed {h['work_us']} us workload at {h['rate_hz']} Hz took p50 / p99 / max {hw['p50']:.0f} / {hw['p99']:.0f} / {hw['max']:.0f} us "
       f"(wake-up lateness p99 {h['wake_lateness_us']['p99']:.0f} us): a p99 far above the p50 is the host, not tetrig")

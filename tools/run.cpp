@@ -1,5 +1,6 @@
 // `tetrig run` (tools/run.hpp): source -> mailbox -> solver thread -> shared memory.
 #include "run.hpp"
+#include "run_dds.hpp"
 #include "signal_scope.hpp"
 #include "solver_flags.hpp"
 
@@ -137,6 +138,7 @@ struct Performer {
   std::unique_ptr<FrameMailbox> mailbox;
   ShmPublisherOptions shm_options;
   std::unique_ptr<ShmPublisher> publisher;
+  std::unique_ptr<RunDds> dds;  // --dds: the bridge following the segment (docs/dds.md)
   double budget_ms = 0;
   int cpu = -1;
   std::unique_ptr<FrameLoop> loop;
@@ -274,6 +276,8 @@ void createSegment(const RunOptions& options, Performer& p) {
   static_data.rig_name = p.rig->name;
   static_data.marker_labels = labels;
   p.publisher = std::make_unique<ShmPublisher>(p.shm_options, p.live->fineVertexCount(), static_data);
+  // DDS (--dds; docs/dds.md): a thread of its own follows the segment and writes each frame to DDS.
+  p.dds = std::make_unique<RunDds>(options, *p.publisher);
 }
 
 void printBanner(const RunOptions& options, const Performer& p, const SharedSource& s, bool several) {
@@ -384,6 +388,7 @@ void printSummary(const Performer& p, const SharedSource& s, double seconds, boo
               static_cast<unsigned long long>(source_stats.frames_published), static_cast<unsigned long long>(source_stats.frames_lost),
               static_cast<unsigned long long>(source_stats.decode_errors));
   std::printf("  solver thread: %s\n", loop.hygiene().c_str());
+  p.dds->printSummary();
 }
 
 // The --stats-json object of one performer (docs/live.md, "Statistics").
@@ -429,6 +434,7 @@ nlohmann::json performerJson(const RunOptions& options, const Performer& p, cons
   j["rig"] = {{"name", rig.name}, {"tet_vertices", rig.tet_mesh.vertexCount()}, {"tets", rig.tet_mesh.tetCount()},
               {"fine_vertices", p.live->fineVertexCount()}, {"markers", rig.markers.size()}, {"markers_bound", p.binding.matched}};
   j["solver_thread"] = loop.hygiene();
+  p.dds->addStats(j);
   j["latency_us"] = {{"receive_to_taken", phaseJson(l.receive_to_taken)},
                      {"step", phaseJson(l.step)},
                      {"pose_transfer", phaseJson(l.pose_transfer)},
@@ -627,6 +633,8 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
                   several ? (printableText(p.spec.name, 64) + ": ").c_str() : "", p.spec.publish.c_str(),
                   options.normals ? "positions and normals" : "positions", p.budget_ms, options.iterations, pose_threads, pose_threads > 1 ? "s" : "",
                   several && p.cpu >= 0 ? (", solver on CPU " + std::to_string(p.cpu)).c_str() : "");
+  if (!options.quiet)
+    for (const Performer& p : performers) p.dds->printBanner();
   std::fflush(stdout);
 
   // 5. Wait for the end of every performer: its source finished and drained, --frames reached,
@@ -674,7 +682,10 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
   for (Performer& p : performers) p.loop->join();
   for (SharedSource& s : sources) s.source->stop();
   const double seconds = static_cast<double>(monotonicNowNs() - start_ns) * 1e-9;
-  for (Performer& p : performers) p.publisher.reset();  // state stopped, name unlinked: consumers see a clean end
+  for (Performer& p : performers) {
+    p.dds->stop();        // before the segment goes: the bridge reads it
+    p.publisher.reset();  // state stopped, name unlinked: consumers see a clean end
+  }
   int consumer_status = 0;
   if (consumer > 0) consumer_status = reapConsumer(consumer, std::chrono::seconds(5));
 

@@ -52,6 +52,7 @@ struct RunOptions {
   bool loop = false;
   bool keep_zero_markers = false;       // c3d: samples at x = y = z = 0 with residual 0 stay valid (default: gaps)
   bool normals = false;
+  bool dds = false;                     // also publish over DDS (topics named from `publish`; docs/dds.md)
   int pose_threads = 1;                 // pose transfer threads: 1, or 2 (the solver + one worker; docs/live.md)
   double occlusion_blend_ms = 150;
   double label_timeout_ms = 3000;

@@ -29,6 +29,9 @@ packages=(
   gnuplot-nox
   # fuzzing and sanitizers (clang, libFuzzer, LeakSanitizer runtime)
   clang libclang-rt-14-dev
+  # frames to other machines over Eclipse Cyclone DDS (dds/: the C library and its CMake package; idlc generates
+  # the types from dds/idl/tetrig_frames.idl)
+  cyclonedds-dev cyclonedds-tools
   # the latency harness's table (bench/latency.sh); the C API's ctypes test and the install test
   # (tests/capi, tests/install: nm from binutils)
   python3 binutils

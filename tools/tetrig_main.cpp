@@ -451,6 +451,7 @@ int main(int argc, char** argv) {
       ->group(kSources);
   const char* kOutput = "Output";
   run_cmd->add_flag("--normals", run.normals, "Also publish per-vertex normals")->group(kOutput);
+  run_cmd->add_flag("--dds", run.dds, "Also publish the frames over DDS: topics tetrig/<publish name>/frame and /static (docs/dds.md)")->group(kOutput);
   run_cmd->add_option("--stats-json", run.stats_json, "Write the run's statistics (keys: docs/live.md)")->group(kOutput);
   std::string shm_mode;
   run_cmd->add_option("--shm-mode", shm_mode, "Segment permissions in octal (default 600: owner only; read bits for group/others, e.g. 640 or 644, but no write bits)")
@@ -537,6 +538,7 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::Range(1.0, 600000.0));
   view_cmd->add_flag("-q,--quiet", view.quiet, "No status lines on stderr");
+  view_cmd->add_flag("--dds", view.dds, "Read NAME's frames over DDS (topics tetrig/NAME/frame and /static) instead of its segment (docs/dds.md)");
 
   tetrig::tools::PoseOptions pose;
   CLI::App* pose_cmd = app.add_subcommand("pose", "Pose a rig: rigid transforms (.def files) for its region handles -> the fine mesh as OBJ");

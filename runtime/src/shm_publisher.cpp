@@ -21,6 +21,7 @@
 #include <limits>
 #include <thread>
 
+#include "futex.hpp"
 #include "tetrig/clock.hpp"
 #include "tetrig_shm.h"
 
@@ -405,7 +406,31 @@ std::uint64_t ShmPublisher::commit(const ShmFrameInfo& info) noexcept {
   }
   atomicAt(header_->latest_frame_id).store(frame_id, std::memory_order_release);
   next_frame_id_ = frame_id + 1;
+  // In-process followers: one atomic add; the wake system call only while one sleeps.
+  commit_word_.fetch_add(1, std::memory_order_seq_cst);
+  if (commit_sleepers_.load(std::memory_order_seq_cst) != 0u) detail::futexWakeAll(commit_word_);
   return frame_id;
+}
+
+std::uint64_t ShmPublisher::latestFrameId() const noexcept {
+  return atomicAt(header_->latest_frame_id).load(std::memory_order_acquire);
+}
+
+bool ShmPublisher::waitForCommit(std::uint64_t after_frame_id, std::int64_t timeout_ns) const noexcept {
+  if (latestFrameId() > after_frame_id) return true;
+  if (timeout_ns <= 0) return false;
+  // Read the word, announce the sleep, re-check: a commit after the re-check changes the word, so
+  // the futex wait returns at once instead of sleeping through it.
+  const std::uint32_t word = commit_word_.load(std::memory_order_seq_cst);
+  commit_sleepers_.fetch_add(1, std::memory_order_seq_cst);
+  if (latestFrameId() <= after_frame_id) detail::futexWait(commit_word_, word, timeout_ns);
+  commit_sleepers_.fetch_sub(1, std::memory_order_seq_cst);
+  return latestFrameId() > after_frame_id;
+}
+
+void ShmPublisher::wakeCommitWaiters() const noexcept {
+  commit_word_.fetch_add(1, std::memory_order_seq_cst);
+  detail::futexWakeAll(commit_word_);
 }
 
 void ShmPublisher::heartbeat(ShmState state) noexcept {

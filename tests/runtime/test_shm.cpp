@@ -956,6 +956,56 @@ TEST(Shm, CommitAndHeartbeatDoNotAllocate) {
   EXPECT_EQ(info.frame_id, 1001u);
 }
 
+// waitForCommit (the DDS bridge's wake-up): a sleeping follower wakes on the next commit, not at
+// its timeout; with no commit it sleeps the timeout out; wakeCommitWaiters() ends the sleep early
+// without a frame. Commits with a follower asleep allocate nothing.
+TEST(Shm, WaitForCommitWakesOnTheNextCommit) {
+  const std::string name = uniqueName("waitcommit");
+  NameGuard guard{name};
+  const Mesh mesh(16);
+  ShmPublisher pub(optionsFor(name, 3, false), 16, mesh.data());
+  using Clock = std::chrono::steady_clock;
+  EXPECT_EQ(pub.latestFrameId(), 0u);
+  EXPECT_FALSE(pub.waitForCommit(0, 0));
+  // No commit: the whole timeout passes.
+  auto t0 = Clock::now();
+  EXPECT_FALSE(pub.waitForCommit(0, 30'000'000));
+  EXPECT_GE(Clock::now() - t0, std::chrono::milliseconds(25));
+  // A commit 50 ms into a 10 s wait ends it.
+  std::atomic<bool> woke{false};
+  std::atomic<std::int64_t> waited_ms{-1};
+  std::thread follower([&] {
+    const auto start = Clock::now();
+    woke = pub.waitForCommit(0, 10'000'000'000);
+    waited_ms = std::chrono::duration_cast<std::chrono::milliseconds>(Clock::now() - start).count();
+  });
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  const std::uint64_t before = tetrig::test::allocationCount();
+  pub.commit(infoFor(1));
+  EXPECT_EQ(tetrig::test::allocationCount(), before);
+  follower.join();
+  EXPECT_TRUE(woke);
+  EXPECT_LT(waited_ms.load(), 5000);
+  EXPECT_EQ(pub.latestFrameId(), 1u);
+  EXPECT_TRUE(pub.waitForCommit(0, 0));  // frame 1 is newer than 0: no sleep
+  // wakeCommitWaiters ends a wait with no new frame.
+  std::atomic<bool> done{false};
+  std::thread stopped([&] {
+    const auto start = Clock::now();
+    woke = pub.waitForCommit(1, 10'000'000'000);
+    waited_ms = std::chrono::duration_cast<std::chrono::milliseconds>(Clock::now() - start).count();
+    done = true;
+  });
+  // Woken until it returns (a wake before the follower sleeps is not seen by it).
+  while (!done) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    pub.wakeCommitWaiters();
+  }
+  stopped.join();
+  EXPECT_FALSE(woke);
+  EXPECT_LT(waited_ms.load(), 5000);
+}
+
 // ---------------------------------------------------------------------------------------------
 // An untrusted segment: whoever can write it may rewrite any byte at any time
 

@@ -31,7 +31,10 @@
 #include <unistd.h>
 
 #include <cstdint>
+#include <algorithm>
+#include <cstdlib>
 #include <filesystem>
+#include <iterator>
 #include <fstream>
 #include <memory>
 #include <span>
@@ -257,6 +260,46 @@ TEST(Stage, OnePerformersSourceGoingStaleDoesNotStopTheOther) {
   EXPECT_EQ(b["frames"].get<std::uint64_t>() + b["dropped_frames"].get<std::uint64_t>(), kFrames) << b.dump();
   EXPECT_EQ(b["end"], "source ended");
 }
+
+#if TETRIG_HAVE_DDS
+// --dds with several performers: one DDS bridge per performer, each on the topics named from its
+// own segment, each writing its performer's frames (Cyclone on the loopback interface only, a
+// domain of this test's own: dds/config/loopback.xml with Id 175).
+TEST(Stage, EachPerformerPublishesOnItsOwnDdsTopics) {
+  REQUIRE_SCENE();
+  std::ifstream in(std::filesystem::path(TETRIG_SOURCE_DIR) / "dds/config/loopback.xml");
+  std::string xml((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string any = "Id=\"any\"";
+  ASSERT_NE(xml.find(any), std::string::npos);
+  xml.replace(xml.find(any), any.size(), "Id=\"175\"");
+  const TempDir dir;
+  const std::filesystem::path config = dir.path() / "loopback.xml";
+  std::ofstream(config) << xml;
+  ASSERT_EQ(setenv("CYCLONEDDS_URI", ("file://" + config.string()).c_str(), 1), 0);
+  tools::RunOptions o = lockstep();
+  o.dds = true;
+  o.performers = {performer("alice", scene().two_subjects, "alice"), performer("bob", scene().two_subjects, "bob")};
+  tools::RunOutcome stage;
+  const int status = tools::runLive(o, &stage);
+  unsetenv("CYCLONEDDS_URI");
+  ASSERT_EQ(status, 0);
+  ASSERT_EQ(stage.performers.size(), 2u);
+  std::set<std::string> topics;
+  for (const tools::RunOutcome& p : stage.performers) {
+    const nlohmann::json& j = p.stats;
+    ASSERT_TRUE(j.contains("dds")) << j.dump();
+    const std::string topic = j["dds"]["frame_topic"].get<std::string>();
+    std::string base = j["segment"].get<std::string>();
+    std::replace(base.begin(), base.end(), '-', '_');
+    EXPECT_NE(topic.find(base), std::string::npos) << topic << " is named from the performer's segment " << base;
+    topics.insert(topic);
+    EXPECT_GE(j["dds"]["frames_written"].get<std::uint64_t>(), 1u) << j.dump();
+    EXPECT_EQ(j["dds"]["frames_written"].get<std::uint64_t>() + j["dds"]["frames_skipped"].get<std::uint64_t>(), kFrames) << j.dump();
+    EXPECT_EQ(j["dds"]["write_errors"].get<std::uint64_t>(), 0u);
+  }
+  EXPECT_EQ(topics.size(), 2u);
+}
+#endif
 
 TEST(Stage, AClipOfSeveralSubjectsNeedsTheSubjectNamed) {
   REQUIRE_SCENE();

@@ -4,7 +4,9 @@
 // offscreen target (the renderer's MeshDrawer + the overlay as a textured quad), blit it to
 // the window, and read the same target back for --screenshot. With --markers (M) and a layout 1.1
 // segment, the frame's marker block (tetrig_shm_read_latest_markers: the same frame as the mesh)
-// is drawn as round dots coloured by state (MarkerDots below).
+// is drawn as round dots coloured by state (MarkerDots below). With --dds the frames, the static
+// data and the publisher's liveliness come from the performer's DDS topics instead
+// (tetrig::dds::FrameSubscriber, docs/dds.md), each sample checked by FrameChecker.
 #include "view.hpp"
 
 #include "tetrig/render/camera.hpp"
@@ -14,6 +16,9 @@
 #include "tetrig/render/picture_sheet.hpp"
 #include "tetrig/render/text_raster.hpp"
 #include "tetrig_shm.h"
+#if TETRIG_HAVE_DDS
+#include "tetrig/dds/frame_subscriber.hpp"
+#endif
 
 #include <epoxy/gl.h>
 // GLFW after epoxy: epoxy provides the GL declarations.
@@ -296,6 +301,19 @@ class Viewer {
     }
     show_markers_ = o.markers;
     follow_ = o.follow;
+    if (o.dds) {
+#if TETRIG_HAVE_DDS
+      try {
+        const std::string base = dds::topicBaseName(o.name);
+        name_ = dds::frameTopicName(base);
+        dds_ = std::make_unique<dds::FrameSubscriber>(base, dds::DdsOptions{});
+      } catch (const dds::DdsError& e) {
+        throw std::runtime_error(std::string("--dds: ") + e.what());
+      }
+#else
+      throw std::invalid_argument("--dds: this build has no DDS (install cyclonedds-dev and cyclonedds-tools, configure with -DTETRIG_DDS=ON)");
+#endif
+    }
     const char* display = std::getenv("DISPLAY");
     const char* wayland = std::getenv("WAYLAND_DISPLAY");
     if ((display == nullptr || display[0] == '\0') && (wayland == nullptr || wayland[0] == '\0')) {
@@ -383,6 +401,12 @@ class Viewer {
 
   // Opens the segment when a producer is there; throws when it exists but cannot be used.
   void tryOpen() {
+#if TETRIG_HAVE_DDS
+    if (dds_) {
+      pollDds();  // the static data of a (new) publisher opens it
+      return;
+    }
+#endif
     const int rc = tetrig_shm_open(&reader_, name_.c_str());
     if (rc == TETRIG_SHM_E_NOT_FOUND || rc == TETRIG_SHM_E_NOT_READY) return;
     if (rc != TETRIG_SHM_OK) {
@@ -402,13 +426,23 @@ class Viewer {
     open_ = true;
     const std::uint32_t vertices = tetrig_shm_vertex_count(&reader_);
     const std::uint32_t triangle_count = tetrig_shm_triangle_count(&reader_);
-    triangles_.assign(std::size_t{triangle_count} * 3, 0u);
-    if (tetrig_shm_copy_triangles(&reader_, triangles_.data(), triangles_.size()) != TETRIG_SHM_OK) {  // the copy is checked
+    std::vector<std::uint32_t> triangles(std::size_t{triangle_count} * 3, 0u);
+    if (tetrig_shm_copy_triangles(&reader_, triangles.data(), triangles.size()) != TETRIG_SHM_OK) {  // the copy is checked
       closeReader();
       throw std::runtime_error("cannot use segment " + name_ + ": its triangles were rewritten after it was opened");
     }
+    char rig_name[256];
+    tetrig_shm_copy_rig_name(&reader_, rig_name, sizeof rig_name);
+    adoptRig(vertices, std::move(triangles), tetrig_shm_rest_positions(&reader_), rig_name, reader_.instance_id, reader_.producer_pid,
+             tetrig_shm_marker_count(&reader_), tetrig_shm_has_marker_positions(&reader_) != 0);
+  }
+
+  // A producer's static data (from the segment or DDS): the mesh to draw, the overlay's names.
+  void adoptRig(std::uint32_t vertices, std::vector<std::uint32_t> triangles, const float* rest, const char* rig_name,
+                std::uint64_t instance_id, std::int32_t pid, std::uint32_t marker_count, bool has_marker_positions) {
+    const std::uint32_t triangle_count = static_cast<std::uint32_t>(triangles.size() / 3);
+    triangles_ = std::move(triangles);
     positions_.assign(std::size_t{vertices} * 3, 0.0f);
-    const float* rest = tetrig_shm_rest_positions(&reader_);
     const bool same_rig = drawer_ && drawer_->vertexCount() == static_cast<std::int32_t>(vertices) && triangles_ == drawn_triangles_;
     if (!same_rig) {
       std::vector<std::int32_t> t(triangles_.begin(), triangles_.end());
@@ -421,23 +455,22 @@ class Viewer {
       camera_ = home();
       have_frame_ = false;
     }
-    char rig_name[256];
-    tetrig_shm_copy_rig_name(&reader_, rig_name, sizeof rig_name);
     rig_name_ = printable(rig_name);
     if (instances_ > 0) {
       status(format("producer restarted: instance %016" PRIx64 " (pid %ld) -> %016" PRIx64 " (pid %ld)", instance_id_, static_cast<long>(pid_),
-                    reader_.instance_id, static_cast<long>(reader_.producer_pid)));
+                    instance_id, static_cast<long>(pid)));
     } else {
-      status(format("%s: rig '%s', %u vertices, %u triangles, pid %ld", name_.c_str(), rig_name_.c_str(), vertices, triangle_count,
-                    static_cast<long>(reader_.producer_pid)));
+      status(format("%s: rig '%s', %u vertices, %u triangles, %s", name_.c_str(), rig_name_.c_str(), vertices, triangle_count,
+                    pid > 0 ? format("pid %ld", static_cast<long>(pid)).c_str() : "over DDS"));
     }
+    open_ = true;
     ++instances_;
-    instance_id_ = reader_.instance_id;
-    pid_ = reader_.producer_pid;
+    instance_id_ = instance_id;
+    pid_ = pid;
     last_id_ = 0;
     producer_note_.clear();
-    marker_count_ = tetrig_shm_marker_count(&reader_);
-    has_marker_positions_ = tetrig_shm_has_marker_positions(&reader_) != 0;
+    marker_count_ = marker_count;
+    has_marker_positions_ = has_marker_positions;
     marker_positions_.assign(has_marker_positions_ ? std::size_t{marker_count_} * 3 : 0, 0.0f);
     marker_states_.assign(has_marker_positions_ ? marker_count_ : 0u, std::uint8_t{TETRIG_SHM_MARKER_UNKNOWN});
     std::fill(std::begin(state_counts_), std::end(state_counts_), 0u);
@@ -448,6 +481,9 @@ class Viewer {
 
   // Takes the newest frame if there is one; returns true when a new frame was taken.
   bool takeFrame() {
+#if TETRIG_HAVE_DDS
+    if (dds_) return pollDds();
+#endif
     if (tetrig_shm_latest_frame_id(&reader_) <= last_id_) return false;
     TetrigShmFrameInfo info;
     // With the marker block: the mesh and the markers of one frame, in one read.
@@ -462,7 +498,12 @@ class Viewer {
       for (const std::uint8_t st : marker_states_) ++state_counts_[st < kMarkerStates ? st : 0];
       if (dots_) dots_->set(marker_positions_, marker_states_);
     }
-    const std::int64_t seen = tetrig_shm_now_ns();
+    noteFrame(info, tetrig_shm_now_ns());
+    return true;
+  }
+
+  // A new frame is in positions_ (and the marker arrays): draw it and count its figures.
+  void noteFrame(const TetrigShmFrameInfo& info, std::int64_t seen) {
     last_id_ = info.frame_id;
     info_ = info;
     drawer_->setPositions(positions_);
@@ -496,11 +537,76 @@ class Viewer {
       producer_note_.clear();
       overlay_dirty_ = true;
     }
+  }
+
+#if TETRIG_HAVE_DDS
+  // Takes every pending DDS event: static data of a new publisher (adoptRig), its liveliness (the
+  // overlay's note), frames (checked; the newest accepted one of the current publisher is drawn).
+  // Returns true when a new frame was taken.
+  bool pollDds() {
+    dds_events_.clear();
+    dds_->poll(0, dds_events_);
+    const dds::ReceivedFrame* newest = nullptr;
+    for (const dds::SubscriberEvent& e : dds_events_) {
+      std::string why;
+      if (e.kind == dds::SubscriberEvent::kStatic) {
+        if (!dds_checker_.acceptStatic(e.static_data, why)) {
+          status(why);
+        } else if (instances_ == 0 || e.static_data.instance_id != instance_id_) {
+          std::vector<std::uint32_t> triangles = e.static_data.triangles;
+          adoptRig(e.static_data.vertex_count, std::move(triangles), e.static_data.rest_positions.data(), e.static_data.rig_name.c_str(),
+                   e.static_data.instance_id, 0, static_cast<std::uint32_t>(e.static_data.marker_labels.size()),
+                   !e.static_data.marker_labels.empty());
+          newest = nullptr;  // frames before it belong to the previous publisher
+        }
+      } else if (e.kind == dds::SubscriberEvent::kFrame) {
+        const auto verdict = dds_checker_.checkFrame(e.frame, why);
+        if (verdict == dds::FrameChecker::Verdict::kRefused) {
+          status(why);
+        } else if (verdict == dds::FrameChecker::Verdict::kAccepted && open_ && e.frame.instance_id == instance_id_) {
+          newest = &e.frame;
+        }
+      } else {
+        const std::string note = e.kind == dds::SubscriberEvent::kPublisherAlive ? std::string()
+                                 : e.kind == dds::SubscriberEvent::kPublisherLost
+                                     ? "publisher lost (its liveliness lease passed): last frame kept, waiting for a new one"
+                                     : "publisher stopped: last frame kept, waiting for a new one";
+        if (note != producer_note_) {
+          producer_note_ = note;
+          if (!note.empty()) status(note);
+          overlay_dirty_ = true;
+        }
+      }
+    }
+    if (newest == nullptr) return false;
+    const dds::ReceivedFrame& f = *newest;
+    std::copy(f.positions.begin(), f.positions.end(), positions_.begin());  // the checker matched the sizes
+    const bool markers = has_marker_positions_ && f.marker_positions.size() == marker_positions_.size() &&
+                         f.marker_states.size() == marker_states_.size();
+    if (markers) {
+      std::copy(f.marker_positions.begin(), f.marker_positions.end(), marker_positions_.begin());
+      std::copy(f.marker_states.begin(), f.marker_states.end(), marker_states_.begin());
+      std::fill(std::begin(state_counts_), std::end(state_counts_), 0u);
+      for (const std::uint8_t st : marker_states_) ++state_counts_[st < kMarkerStates ? st : 0];
+      if (dots_) dots_->set(marker_positions_, marker_states_);
+    }
+    TetrigShmFrameInfo info{};
+    info.frame_id = f.frame_id;
+    info.source_frame = f.source_frame;
+    info.iterations = f.iterations;
+    info.flags = f.flags;
+    info.occluded_markers = f.occluded_markers;
+    info.device_ns = f.device_ns;
+    info.receive_ns = f.receive_ns;
+    info.publish_ns = f.publish_ns;
+    noteFrame(info, f.seen_ns);
     return true;
   }
+#endif
 
   // No new frame for a while: what is the producer doing?
   void checkProducer() {
+    if (o_.dds) return;  // DDS: the liveliness events of pollDds
     const int st = tetrig_shm_producer_status(&reader_, static_cast<std::int64_t>(o_.stale_ms * 1e6));
     const long age_ms = static_cast<long>(tetrig_shm_heartbeat_age_ns(&reader_, tetrig_shm_now_ns()) / 1000000);
     std::string note;
@@ -675,9 +781,10 @@ class Viewer {
         target_->readRgba(shot.rgba);
         for (std::size_t i = 3; i < shot.rgba.size(); i += 4) shot.rgba[i] = 255;
         render::writePng(o_.screenshot, shot);
-        std::printf("tetrig view: screenshot %s (%d x %d): frame %" PRIu64 " of producer instance %016" PRIx64 " (pid %ld), %" PRIu64
+        std::printf("tetrig view: screenshot %s (%d x %d): frame %" PRIu64 " of producer instance %016" PRIx64 " (%s), %" PRIu64
                     " frames taken\n",
-                    o_.screenshot.c_str(), fw, fh, info_.frame_id, instance_id_, static_cast<long>(pid_), frames_taken_);
+                    o_.screenshot.c_str(), fw, fh, info_.frame_id, instance_id_,
+                    pid_ > 0 ? format("pid %ld", static_cast<long>(pid_)).c_str() : "over DDS", frames_taken_);
         std::fflush(stdout);
         return 0;
       }
@@ -728,6 +835,11 @@ class Viewer {
   std::unique_ptr<render::TextRasterizer> text_;
   std::unique_ptr<OverlayQuad> overlay_;
   std::unique_ptr<MarkerDots> dots_;
+#if TETRIG_HAVE_DDS
+  std::unique_ptr<dds::FrameSubscriber> dds_;
+  dds::FrameChecker dds_checker_;
+  std::vector<dds::SubscriberEvent> dds_events_;
+#endif
   Image overlay_image_;
   bool overlay_dirty_ = true;
   bool figures_valid_ = false;

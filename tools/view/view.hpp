@@ -27,6 +27,7 @@ struct ViewOptions {
   std::string up = "y";          // the rig's up axis: x, y or z (rigs keep their mesh's axes; y by default)
   double stale_ms = 1000.0;      // heartbeat age that counts as "not responding"
   bool quiet = false;            // no status lines on stderr
+  bool dds = false;              // read NAME's DDS topics (tetrig/NAME/frame, /static) instead of the segment (docs/dds.md)
 };
 
 // The overlay's reading of a frame's flags (tetrig_shm.h TETRIG_SHM_FRAME_*): the names of the

@@ -15,8 +15,14 @@
 // (beginPositions, beginNormals, commit, heartbeat) belongs to ONE producer thread (the solver
 // thread); it does no heap allocation, no lock, no system call (the monotonic clock is a vDSO
 // read) and throws nothing. The accessors may be called from any thread.
+//
+// In-process followers (the DDS bridge, tetrig::dds::SegmentBridge) sleep in waitForCommit()
+// instead of polling: commit() bumps an event count and makes the futex wake call only while a
+// follower has announced that it sleeps (the pattern of FrameMailbox::commit/waitForFrame), so
+// the frame path stays allocation-free and lock-free and pays one atomic add per frame.
 #pragma once
 
+#include <atomic>
 #include <cstddef>
 #include <cstdint>
 #include <span>
@@ -146,6 +152,14 @@ class ShmPublisher {
   // in tests and in-process readers. Valid until destruction.
   [[nodiscard]] const void* segmentData() const noexcept { return base_; }
   [[nodiscard]] std::size_t segmentSize() const noexcept { return size_; }
+  // The newest committed frame id (0 = none yet), read from the segment's header (acquire).
+  [[nodiscard]] std::uint64_t latestFrameId() const noexcept;
+  // Sleeps until a frame newer than `after_frame_id` is committed, wakeCommitWaiters() is called,
+  // or `timeout_ns` passes (no busy wait; spurious returns are possible). Returns whether a newer
+  // frame exists. Any number of threads other than the producer may wait at once.
+  bool waitForCommit(std::uint64_t after_frame_id, std::int64_t timeout_ns) const noexcept;
+  // Wakes every thread sleeping in waitForCommit() (e.g. so that it sees a stop request).
+  void wakeCommitWaiters() const noexcept;
 
  private:
   void writeStatic(const ShmStaticData& data);
@@ -177,6 +191,9 @@ class ShmPublisher {
   AlignedVector<float> staging_normals_;
   AlignedVector<float> staging_marker_positions_;
   AlignedVector<std::uint8_t> staging_marker_states_;
+  // Event count for waitForCommit(): bumped by commit(); commit_sleepers_ counts announced sleepers.
+  mutable std::atomic<std::uint32_t> commit_word_{0};
+  mutable std::atomic<std::uint32_t> commit_sleepers_{0};
 };
 
 }  // namespace tetrig
