@@ -103,7 +103,11 @@ std::string SegmentBridge::end() const {
 
 void SegmentBridge::run() {
   Segment& s = *segment_;
-  std::uint64_t last = 0;  // last frame id written (or skipped)
+  // Last frame id written (or skipped). Frames before the bridge started are not skipped ones: it
+  // starts from the segment's newest (written at once), so written + skipped counts every frame
+  // committed since.
+  const std::uint64_t newest_at_start = tetrig_shm_latest_frame_id(&s.reader);
+  std::uint64_t last = newest_at_start > 0 ? newest_at_start - 1 : 0;
   auto last_check = std::chrono::steady_clock::now();
   while (!stop_.load(std::memory_order_acquire)) {
     bool fresh;
@@ -131,41 +135,49 @@ void SegmentBridge::run() {
       }
     }
     if (!fresh || stop_.load(std::memory_order_acquire)) continue;
-    TetrigShmFrameInfo info{};
-    const int rc = s.has_markers
-                       ? tetrig_shm_read_latest_markers(&s.reader, s.positions.data(), s.positions.size(),
-                                                        s.has_normals ? s.normals.data() : nullptr, s.normals.size(),
-                                                        s.marker_positions.data(), s.marker_positions.size(), s.marker_states.data(),
-                                                        s.marker_states.size(), &info)
-                       : tetrig_shm_read_latest(&s.reader, s.positions.data(), s.positions.size(),
-                                                s.has_normals ? s.normals.data() : nullptr, s.normals.size(), &info);
-    if (rc == TETRIG_SHM_BUSY) {
-      busy_.fetch_add(1, std::memory_order_relaxed);
-      continue;
-    }
-    if (rc != TETRIG_SHM_OK || info.frame_id <= last) continue;
-    if (last != 0 && info.frame_id > last + 1) skipped_.fetch_add(info.frame_id - last - 1, std::memory_order_relaxed);
-    last = info.frame_id;
-    FrameView frame;
-    frame.instance_id = s.reader.instance_id;
-    frame.frame_id = info.frame_id;
-    frame.source_frame = info.source_frame;
-    frame.device_ns = info.device_ns;
-    frame.receive_ns = info.receive_ns;
-    frame.publish_ns = info.publish_ns;
-    frame.flags = info.flags;
-    frame.iterations = info.iterations;
-    frame.occluded_markers = info.occluded_markers;
-    frame.producer_state = static_cast<std::uint8_t>(tetrig_shm_state(&s.reader));
-    frame.positions = s.positions;
-    frame.normals = s.normals;
-    frame.marker_positions = s.marker_positions;
-    frame.marker_states = s.marker_states;
-    if (publisher_->writeFrame(frame) != 0) {
-      errors_.fetch_add(1, std::memory_order_relaxed);
-    } else {
-      written_.fetch_add(1, std::memory_order_relaxed);
-    }
+    writeNewest(last);
+  }
+  // Stopped (the run ends): the newest frame the segment holds goes out too, so that a subscriber's
+  // last frame is the run's last (a read that meets the writer mid-copy is tried again).
+  for (int attempt = 0; attempt < 8 && tetrig_shm_latest_frame_id(&s.reader) > last; ++attempt) writeNewest(last);
+}
+
+void SegmentBridge::writeNewest(std::uint64_t& last) {
+  Segment& s = *segment_;
+  TetrigShmFrameInfo info{};
+  const int rc = s.has_markers
+                     ? tetrig_shm_read_latest_markers(&s.reader, s.positions.data(), s.positions.size(),
+                                                      s.has_normals ? s.normals.data() : nullptr, s.normals.size(),
+                                                      s.marker_positions.data(), s.marker_positions.size(), s.marker_states.data(),
+                                                      s.marker_states.size(), &info)
+                     : tetrig_shm_read_latest(&s.reader, s.positions.data(), s.positions.size(),
+                                              s.has_normals ? s.normals.data() : nullptr, s.normals.size(), &info);
+  if (rc == TETRIG_SHM_BUSY) {
+    busy_.fetch_add(1, std::memory_order_relaxed);
+    return;
+  }
+  if (rc != TETRIG_SHM_OK || info.frame_id <= last) return;
+  if (info.frame_id > last + 1) skipped_.fetch_add(info.frame_id - last - 1, std::memory_order_relaxed);
+  last = info.frame_id;
+  FrameView frame;
+  frame.instance_id = s.reader.instance_id;
+  frame.frame_id = info.frame_id;
+  frame.source_frame = info.source_frame;
+  frame.device_ns = info.device_ns;
+  frame.receive_ns = info.receive_ns;
+  frame.publish_ns = info.publish_ns;
+  frame.flags = info.flags;
+  frame.iterations = info.iterations;
+  frame.occluded_markers = info.occluded_markers;
+  frame.producer_state = static_cast<std::uint8_t>(tetrig_shm_state(&s.reader));
+  frame.positions = s.positions;
+  frame.normals = s.normals;
+  frame.marker_positions = s.marker_positions;
+  frame.marker_states = s.marker_states;
+  if (publisher_->writeFrame(frame) != 0) {
+    errors_.fetch_add(1, std::memory_order_relaxed);
+  } else {
+    written_.fetch_add(1, std::memory_order_relaxed);
   }
 }
 

@@ -64,6 +64,7 @@ class SegmentBridge {
  private:
   struct Segment;
   void run();
+  void writeNewest(std::uint64_t& last);  // the segment's newest frame to DDS, if newer than `last` (bridge thread)
 
   std::string segment_name_;
   const ShmPublisher* shm_;
