@@ -101,6 +101,17 @@ Eigen::Vector3d axisVector(const std::string& axis) {
   return neg ? Eigen::Vector3d(-v) : v;
 }
 
+Eigen::Matrix3d upAxisRotation(const std::string& device_up, const std::string& rig_up) {
+  const Eigen::Vector3d up_device = axisVector(device_up);
+  const Eigen::Vector3d up_rig = axisVector(rig_up);
+  if (up_device.dot(up_rig) < -0.5) {
+    // Opposite: a half turn about an axis perpendicular to both.
+    const Eigen::Vector3d perp = up_device.cross(Eigen::Vector3d::UnitX()).norm() > 0.5 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
+    return Eigen::AngleAxisd(M_PI, perp).toRotationMatrix();
+  }
+  return Eigen::Quaterniond::FromTwoVectors(up_device, up_rig).toRotationMatrix();
+}
+
 AlignmentResult alignMarkers(const std::vector<Eigen::Vector3d>& device_mm, const SurfaceMesh& surface,
                              const AlignmentOptions& options) {
   if (surface.triangleCount() == 0) throw RigBuildError("marker alignment: the surface has no triangles");
@@ -121,17 +132,8 @@ AlignmentResult alignMarkers(const std::vector<Eigen::Vector3d>& device_mm, cons
   out.rig_units_per_mm = options.rig_units_per_mm;
 
   // 1. Axes and unit.
-  const Eigen::Vector3d up_device = axisVector(options.device_up);
   const Eigen::Vector3d up_rig = axisVector(options.rig_up);
-  Eigen::Matrix3d axes;
-  if (up_device.dot(up_rig) < -0.5) {
-    // Opposite: half turn around an axis perpendicular to both.
-    const Eigen::Vector3d perp = up_device.cross(Eigen::Vector3d::UnitX()).norm() > 0.5 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
-    axes = Eigen::AngleAxisd(M_PI, perp).toRotationMatrix();
-  } else {
-    axes = Eigen::Quaterniond::FromTwoVectors(up_device, up_rig).toRotationMatrix();
-  }
-  const Eigen::Matrix3d base = options.rig_units_per_mm * axes;
+  const Eigen::Matrix3d base = options.rig_units_per_mm * upAxisRotation(options.device_up, options.rig_up);
   std::vector<Eigen::Vector3d> p(n);
   for (std::size_t i = 0; i < n; ++i) p[i] = base * device_mm[i];
 

@@ -1,6 +1,7 @@
 // Plausibility of an automatic marker alignment: fit scale, extent coverage, distances (see
 // alignment_checks.hpp).
 #include "tetrig/rigbuild/alignment_checks.hpp"
+#include "tetrig/rigbuild/format_number.hpp"
 
 #include "tetrig/rigbuild/align_markers.hpp"
 
@@ -14,13 +15,7 @@
 namespace tetrig::rigbuild {
 namespace {
 
-std::string fmt(const char* f, double v) {
-  char buf[64];
-  std::snprintf(buf, sizeof buf, f, v);
-  return buf;
-}
-
-std::string percent(double fraction) { return fmt("%.3g %%", 100.0 * fraction); }
+std::string percent(double fraction) { return formatNumber("%.3g %%", 100.0 * fraction); }
 
 // Widest horizontal direction of the surface: principal axis of the face centres, weighted by
 // area, projected onto the plane perpendicular to `up` (the arm span of a T-pose).
@@ -112,8 +107,8 @@ AlignmentCheck checkAlignment(const SurfaceMesh& surface, const std::string& up_
   for (const double d : distances) c.far_markers += d > c.far_distance ? 1 : 0;
 
   if (limits.check_scale && !(fit_scale >= limits.min_fit_scale && fit_scale <= limits.max_fit_scale)) {
-    c.scale_failures.push_back("fit scale " + fmt("%.3g", fit_scale) + " is outside " + fmt("%.3g", limits.min_fit_scale) + ".." +
-                               fmt("%.3g", limits.max_fit_scale));
+    c.scale_failures.push_back("fit scale " + formatNumber("%.3g", fit_scale) + " is outside " + formatNumber("%.3g", limits.min_fit_scale) + ".." +
+                               formatNumber("%.3g", limits.max_fit_scale));
   }
   if (limits.check_pose) {
     const std::string limit = " (limit " + percent(limits.max_extent_gap) + ")";
@@ -135,7 +130,7 @@ AlignmentCheck checkAlignment(const SurfaceMesh& surface, const std::string& up_
     const double far_fraction = static_cast<double>(c.far_markers) / c.markers;
     if (far_fraction > limits.max_far_fraction) {
       c.pose_failures.push_back(std::to_string(c.far_markers) + " of " + std::to_string(c.markers) + " markers (" + percent(far_fraction) +
-                                ") are further than " + fmt("%.3g", c.far_distance) + " (" + percent(limits.far_distance_fraction) +
+                                ") are further than " + formatNumber("%.3g", c.far_distance) + " (" + percent(limits.far_distance_fraction) +
                                 " of the mesh's diagonal) from the surface (limit " + percent(limits.max_far_fraction) + " of the markers)");
     }
   }

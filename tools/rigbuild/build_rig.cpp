@@ -1,5 +1,6 @@
 // The rig-building pipeline behind `tetrig build-rig` (see build_rig.hpp).
 #include "tetrig/rigbuild/build_rig.hpp"
+#include "tetrig/rigbuild/format_number.hpp"
 
 #include "tetrig/drivers/c3d_reader.hpp"
 #include "tetrig/rigbuild/bind_markers.hpp"
@@ -29,12 +30,6 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
-
-std::string fmt(const char* f, double v) {
-  char buf[64];
-  std::snprintf(buf, sizeof buf, f, v);
-  return buf;
-}
 
 std::vector<std::int32_t> readSelFile(const std::filesystem::path& path) {
   std::ifstream in(path);
@@ -322,17 +317,7 @@ RigAlignment poseSensorAlignment(const MarkerOptions& mopt, const std::string& r
     a.fit_scale = std::cbrt(std::abs(a.linear.determinant())) / rig_units_per_mm;
     return a;
   }
-  const Eigen::Vector3d up_device = axisVector(mopt.device_up);
-  const Eigen::Vector3d up_rig = axisVector(rig_up);
-  Eigen::Matrix3d axes;
-  if (up_device.dot(up_rig) < -0.5) {
-    // Opposite: a half turn about an axis perpendicular to both.
-    const Eigen::Vector3d perp = up_device.cross(Eigen::Vector3d::UnitX()).norm() > 0.5 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
-    axes = Eigen::AngleAxisd(M_PI, perp).toRotationMatrix();
-  } else {
-    axes = Eigen::Quaterniond::FromTwoVectors(up_device, up_rig).toRotationMatrix();
-  }
-  a.linear = rig_units_per_mm * axes;
+  a.linear = rig_units_per_mm * upAxisRotation(mopt.device_up, rig_up);
   a.fit_scale = 1.0;
   return a;
 }
@@ -514,11 +499,11 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
           unit = candidate;
         }
       }
-      report.notes.push_back("mesh unit taken as " + unit + ": the mesh is " + fmt("%.4g", height) + " units tall, the performer's markers " +
-                             fmt("%.0f", performer_mm) + " mm (--mesh-unit to say otherwise)");
+      report.notes.push_back("mesh unit taken as " + unit + ": the mesh is " + formatNumber("%.4g", height) + " units tall, the performer's markers " +
+                             formatNumber("%.0f", performer_mm) + " mm (--mesh-unit to say otherwise)");
     } else {
       unit = height > 100 ? "mm" : height > 10 ? "cm" : "m";
-      report.notes.push_back("mesh unit taken as " + unit + " from its height " + fmt("%.4g", height) + " (--mesh-unit to say otherwise)");
+      report.notes.push_back("mesh unit taken as " + unit + " from its height " + formatNumber("%.4g", height) + " (--mesh-unit to say otherwise)");
     }
   }
   rig.unit = unit;
@@ -555,7 +540,7 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
     if (inputs.min_fit_scale) all_checks.min_fit_scale = *inputs.min_fit_scale;
     if (inputs.max_fit_scale) all_checks.max_fit_scale = *inputs.max_fit_scale;
     if (!(all_checks.min_fit_scale > 0 && all_checks.min_fit_scale <= all_checks.max_fit_scale)) {
-      throw RigBuildError("the fit scale range " + fmt("%.4g", all_checks.min_fit_scale) + ".." + fmt("%.4g", all_checks.max_fit_scale) +
+      throw RigBuildError("the fit scale range " + formatNumber("%.4g", all_checks.min_fit_scale) + ".." + formatNumber("%.4g", all_checks.max_fit_scale) +
                           " is empty: --min-fit-scale must be positive and at most --max-fit-scale");
     }
     all_checks.check_scale = automatic;
@@ -583,12 +568,12 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
       frame = found.frame;
       frame_text = "frame " + std::to_string(frame) + " (chosen by --frame auto)";
       const double rate = source->clip.frameRate();
-      const std::string when = rate > 0 ? " (" + fmt("%.3f", static_cast<double>(frame) / rate) + " s)" : std::string();
+      const std::string when = rate > 0 ? " (" + formatNumber("%.3f", static_cast<double>(frame) / rate) + " s)" : std::string();
       const std::string line = "--frame auto chose frame " + std::to_string(frame) + when + " of " + std::to_string(found.clip_frames) +
-                               ": fit scale " + fmt("%.4g", found.chosen.fit_scale) + ", median marker distance about " +
-                               fmt("%.3g", found.chosen.median_distance) + " " + unit + " (searched " + std::to_string(found.searched) +
+                               ": fit scale " + formatNumber("%.4g", found.chosen.fit_scale) + ", median marker distance about " +
+                               formatNumber("%.3g", found.chosen.median_distance) + " " + unit + " (searched " + std::to_string(found.searched) +
                                " frames, " + std::to_string(found.plausible) + " plausible)";
-      prog.end("frame " + std::to_string(frame) + when + ", fit scale " + fmt("%.4g", found.chosen.fit_scale) + " (" +
+      prog.end("frame " + std::to_string(frame) + when + ", fit scale " + formatNumber("%.4g", found.chosen.fit_scale) + " (" +
                std::to_string(found.plausible) + " of " + std::to_string(found.searched) + " frames searched fit)");
       report.notes.push_back(line);
       report.frame_search = found;
@@ -607,8 +592,8 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
     marker_rig = aligned.rig_positions;
     marker_distance = aligned.distances;
     report.align_seconds = since(t0);
-    prog.end(std::to_string(markers.labels.size()) + " markers, distance to surface median " + fmt("%.4g", aligned.median_distance) +
-             " max " + fmt("%.4g", aligned.max_distance) + " " + unit + ", scale " + fmt("%.4f", aligned.alignment.fit_scale));
+    prog.end(std::to_string(markers.labels.size()) + " markers, distance to surface median " + formatNumber("%.4g", aligned.median_distance) +
+             " max " + formatNumber("%.4g", aligned.max_distance) + " " + unit + ", scale " + formatNumber("%.4f", aligned.alignment.fit_scale));
     report.alignment = aligned;
 
     // Plausibility: every check measured; those not overridden decide.
@@ -633,8 +618,8 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
           lo = std::min(lo, m.dot(device_up));
           hi = std::max(hi, m.dot(device_up));
         }
-        todo += "check the mesh's unit (taken as " + unit + ": the mesh is " + fmt("%.4g", height) + " " + unit + " tall, the markers span " +
-                fmt("%.4g", hi - lo) + " mm; --mesh-unit) and that the markers belong to a body like this mesh (--min-fit-scale / "
+        todo += "check the mesh's unit (taken as " + unit + ": the mesh is " + formatNumber("%.4g", height) + " " + unit + " tall, the markers span " +
+                formatNumber("%.4g", hi - lo) + " mm; --mesh-unit) and that the markers belong to a body like this mesh (--min-fit-scale / "
                 "--max-fit-scale widen the range)";
       }
       if (!decided.pose_failures.empty()) {
@@ -658,17 +643,17 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
     const double diagonal = (fine.vertices.colwise().maxCoeff() - fine.vertices.colwise().minCoeff()).norm();
     const std::optional<double> absolute = inputs.max_marker_distance ? inputs.max_marker_distance : mopt.max_distance;
     const double limit = absolute ? *absolute : mopt.max_distance_fraction * diagonal;
-    const std::string limit_text = fmt("%.4g", limit) + " " + unit +
-                                   (absolute ? std::string() : " (" + fmt("%.3g", 100.0 * mopt.max_distance_fraction) + " % of the mesh's diagonal)");
+    const std::string limit_text = formatNumber("%.4g", limit) + " " + unit +
+                                   (absolute ? std::string() : " (" + formatNumber("%.3g", 100.0 * mopt.max_distance_fraction) + " % of the mesh's diagonal)");
     report.marker_distance_limit = limit;
     std::string far;
     std::size_t worst = 0;
     for (std::size_t i = 0; i < marker_distance.size(); ++i) {
       if (marker_distance[i] > marker_distance[worst]) worst = i;
-      if (marker_distance[i] > limit) far += (far.empty() ? "" : ", ") + markers.labels[i] + " (" + fmt("%.4g", marker_distance[i]) + ")";
+      if (marker_distance[i] > limit) far += (far.empty() ? "" : ", ") + markers.labels[i] + " (" + formatNumber("%.4g", marker_distance[i]) + ")";
     }
     if (!far.empty()) {
-      throw RigBuildError("marker " + markers.labels[worst] + " is " + fmt("%.4g", marker_distance[worst]) + " " + unit +
+      throw RigBuildError("marker " + markers.labels[worst] + " is " + formatNumber("%.4g", marker_distance[worst]) + " " + unit +
                           " from the surface after alignment, beyond the limit " + limit_text + " (too far: " + far +
                           "); check the clip's rest frame and axes, exclude the marker, or raise --max-marker-distance");
     }
@@ -691,7 +676,7 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
         std::string names;
         for (const std::int32_t m : g.markers) names += (names.empty() ? "" : ", ") + markers.labels[static_cast<std::size_t>(m)];
         report.notes.push_back(std::to_string(g.markers.size()) + " markers (" + names + ") keep their distances over the clip but span " +
-                               fmt("%.0f", g.extent_mm) + " mm, too much of the body for one part: the clip does not move the joints between "
+                               formatNumber("%.0f", g.extent_mm) + " mm, too much of the body for one part: the clip does not move the joints between "
                                "them, so no rigid groups are taken from it there (build the rig from a clip in which the performer moves)");
       }
     }
@@ -713,7 +698,7 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
     for (const std::string& line : coarse.failed_attempts) report.notes.push_back("retried: " + line);
     if (coarse.repair.moved_vertices > 0) {
       report.notes.push_back("self-intersection repair moved " + std::to_string(coarse.repair.moved_vertices) + " coarse vertices (max " +
-                             fmt("%.4g", coarse.repair.max_displacement) + ")");
+                             formatNumber("%.4g", coarse.repair.max_displacement) + ")");
     }
     report.tetrahedralize_seconds = since(t0);
     prog.end(std::to_string(body.vertexCount()) + " vertices (" + std::to_string(body.vertexCount() - coarse.tets.interior_vertices) +
@@ -725,7 +710,7 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
     popt.max_nonzeros_per_row = desc.pose_max_nonzeros;
     b = poseTransferWeights(fine.vertices, body, popt, &report.pose);
     report.pose_seconds = since(t0);
-    prog.end(std::to_string(report.pose.nonzeros) + " non-zeros, " + fmt("%.1f", report.pose.mean_nonzeros_per_row) + " per row");
+    prog.end(std::to_string(report.pose.nonzeros) + " non-zeros, " + formatNumber("%.1f", report.pose.mean_nonzeros_per_row) + " per row");
   }
   ctx.body = &body;
   ctx.fine = &fine.vertices;
@@ -739,7 +724,7 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
     report.notes.push_back(mopt.alignment == "matrix"
                                ? std::string("pose sensors: no marker clip, device mm -> rig units from markers.matrix")
                                : "pose sensors: no marker clip, device mm -> rig units by axes and unit only (device up " +
-                                     mopt.device_up + " -> rig up " + desc.mesh_up + ", " + fmt("%.4g", rig.alignment.rig_units_per_mm) +
+                                     mopt.device_up + " -> rig up " + desc.mesh_up + ", " + formatNumber("%.4g", rig.alignment.rig_units_per_mm) +
                                      " " + unit + " per mm)");
   }
   ctx.marker_labels = &markers.labels;
@@ -844,12 +829,12 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
     corners.erase(std::unique(corners.begin(), corners.end()), corners.end());
     report.rigid_groups.push_back({name, g.spread_mm, static_cast<std::int32_t>(corners.size())});
     if (!region.tets.empty() && !inputs.coarse_level) {
-      report.notes.push_back("markers " + name + " move as one rigid body over the clip (their distances within " + fmt("%.1f", g.spread_mm) +
+      report.notes.push_back("markers " + name + " move as one rigid body over the clip (their distances within " + formatNumber("%.1f", g.spread_mm) +
                              " mm): they drive the skin around them, " + std::to_string(corners.size()) + " tet vertices, as region '" + who +
                              "' (a description's region_handles, or \"markers\": {\"rigid_regions\": false}, turn this off)");
     }
     if (region.tets.empty()) {
-      report.notes.push_back("markers " + name + " move rigidly together (distances within " + fmt("%.1f", g.spread_mm) +
+      report.notes.push_back("markers " + name + " move rigidly together (distances within " + formatNumber("%.1f", g.spread_mm) +
                              " mm) but no tet lies wholly in the skin around them: they drive no region");
       group_regions.emplace_back();
       continue;
@@ -1011,7 +996,7 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
       throw RigBuildError(std::string("the rig does not load: ") + e.what());
     }
     report.check_seconds = since(t0);
-    prog.end("factorized in " + fmt("%.3f", report.factorize_seconds) + " s");
+    prog.end("factorized in " + formatNumber("%.3f", report.factorize_seconds) + " s");
   }
   if (inputs.coarse_tet_vertices) {
     // The coarse level: the same inputs and rest frame (so the same alignment: one rig space) with a

@@ -1,5 +1,6 @@
 // `--frame auto`: the clip frame that best matches the mesh's rest pose (see rest_frame_search.hpp).
 #include "tetrig/rigbuild/rest_frame_search.hpp"
+#include "tetrig/rigbuild/format_number.hpp"
 #include "xyz_kd_tree.hpp"
 
 #include <Eigen/Geometry>
@@ -12,12 +13,6 @@
 
 namespace tetrig::rigbuild {
 namespace {
-
-std::string fmt(const char* f, double v) {
-  char buf[64];
-  std::snprintf(buf, sizeof buf, f, v);
-  return buf;
-}
 
 constexpr int kMaxGridSteps = 64;             // per face edge
 constexpr std::size_t kMaxSamples = 4'000'000;  // about 130 MB with the tree
@@ -77,7 +72,7 @@ SurfaceSamples::SurfaceSamples(const SurfaceMesh& surface, double spacing) {
       }
     }
     if (normals_.size() > kMaxSamples) {
-      throw RigBuildError("surface samples: more than " + std::to_string(kMaxSamples) + " samples at spacing " + fmt("%.3g", spacing));
+      throw RigBuildError("surface samples: more than " + std::to_string(kMaxSamples) + " samples at spacing " + formatNumber("%.3g", spacing));
     }
   }
   tree_ = std::make_unique<Tree>(&xyz_);
@@ -175,7 +170,7 @@ RestFrameSearch searchRestFrame(std::int64_t frame_count,
     throw RigBuildError("no frame fits the mesh's rest pose: searched " + std::to_string(search.searched) + " of " +
                         std::to_string(frame_count) + " frames (one in " + std::to_string(search.stride) +
                         " of those with every marker valid); the nearest miss, frame " + std::to_string(c.frame) + " (fit scale " +
-                        fmt("%.3g", c.fit_scale) + ", median distance " + fmt("%.3g", c.median_distance) + "), fails: " + c.failure +
+                        formatNumber("%.3g", c.fit_scale) + ", median distance " + formatNumber("%.3g", c.median_distance) + "), fails: " + c.failure +
                         ". To fix: " + todo);
   }
   // Refinement around the best screening result, at a finer step.

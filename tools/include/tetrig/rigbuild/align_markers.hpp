@@ -56,6 +56,11 @@ struct AlignmentResult {
 // Unit vector of an axis name; throws RigBuildError for anything else.
 Eigen::Vector3d axisVector(const std::string& axis);
 
+// The rotation that turns the device's up axis onto the rig's ("z", "-y", ...): the shortest
+// rotation between them, or a half turn about x (or y) when they are opposite. Throws on an
+// unknown axis name.
+Eigen::Matrix3d upAxisRotation(const std::string& device_up, const std::string& rig_up);
+
 AlignmentResult alignMarkers(const std::vector<Eigen::Vector3d>& device_mm, const SurfaceMesh& surface,
                              const AlignmentOptions& options);
 
