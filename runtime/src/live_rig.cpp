@@ -349,13 +349,38 @@ double LiveRig::blendWeight(std::int64_t since_ns) const noexcept {
   return u * u * (3.0 - 2.0 * u);
 }
 
+// The frame path in named steps: the clock, the measurements, the tracks and targets, the solve,
+// the pose transfer and its bound. processFrame() runs them in order.
+
 LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget& budget, float* positions, float* normals) noexcept {
   LiveFrameStats stats;
   stats.prepare_ns = prepareNextFrame();
-  const Rig& rig = *rig_;
-  const std::size_t markers = rig.markers.size();
+  const std::size_t markers = rig_->markers.size();
+  const std::int64_t dt_ns = advanceClock(frame);
+  const std::uint32_t measured = takeMeasurements(frame, stats);
+  // The blend clock runs only on frames that step: while the pose is held nothing is shown, so
+  // no blend may progress unseen and land in one step when the markers return.
+  if (measured > 0 || markers == 0 || regions_changed_) now_ns_ += dt_ns;
+  const std::uint32_t blending = updateTracksAndTargets(stats);
 
-  // 1. Time since the previous frame, from the frames' own timestamps (never negative).
+  // Hold the pose when nothing was measured (a rig without markers, or with region targets set
+  // for this frame, steps anyway).
+  const bool regions_changed = regions_changed_;
+  regions_changed_ = false;
+  if (measured == 0 && markers > 0 && !regions_changed) {
+    stats.flags |= kLivePoseHeld;
+    const std::int64_t t0 = monotonicNowNs();
+    writeLastPose(positions, normals);
+    stats.pose_transfer_ns = monotonicNowNs() - t0;
+    return stats;
+  }
+  solve(budget, blending, stats);
+  transferAndBound(measured, positions, normals, stats);
+  return stats;
+}
+
+// 1. Time since the previous frame, from the frames' own timestamps (never negative).
+std::int64_t LiveRig::advanceClock(const MarkerFrame& frame) noexcept {
   const std::int64_t source_ns = frame.device_timestamp_ns != 0 ? frame.device_timestamp_ns : frame.receive_timestamp_ns;
   std::int64_t dt_ns = 0;
   if (!have_time_) {
@@ -367,8 +392,14 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
   }
   if (source_ns != 0) last_source_ns_ = source_ns;
   sample_ns_ = dt_ns > std::numeric_limits<std::int64_t>::max() - sample_ns_ ? std::numeric_limits<std::int64_t>::max() : sample_ns_ + dt_ns;
+  return dt_ns;
+}
 
-  // 2. Measurements: bound ids, valid, finite, sane after alignment, plausible (plausibleSample).
+// 2. Measurements: bound ids, valid, finite, sane after alignment, plausible (plausibleSample);
+// the pose sensors' samples move their regions. Returns the markers measured.
+std::uint32_t LiveRig::takeMeasurements(const MarkerFrame& frame, LiveFrameStats& stats) noexcept {
+  const Rig& rig = *rig_;
+  const std::size_t markers = rig.markers.size();
   std::fill(measured_.begin(), measured_.end(), std::uint8_t{0});
   std::fill(rejected_.begin(), rejected_.end(), std::uint8_t{0});
   const int count = std::min<int>(frame.marker_count, kMaxMarkers);
@@ -421,15 +452,15 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
   stats.unknown_markers = static_cast<std::uint16_t>(std::min<std::uint32_t>(unknown, 0xFFFF));
   stats.measured_markers = static_cast<std::uint16_t>(std::min<std::size_t>(measured, 0xFFFF));
   stats.occluded_markers = static_cast<std::uint16_t>(std::min<std::size_t>(markers - measured, 0xFFFF));
-  // The blend clock runs only on frames that step: while the pose is held nothing is shown, so
-  // no blend may progress unseen and land in one step when the markers return.
-  if (measured > 0 || markers == 0 || regions_changed_) now_ns_ += dt_ns;
+  return measured;
+}
 
-  // 3. Predictions from the deformer's current pose.
+// 3. Predictions from the deformer's current pose, each marker's blend state, then the targets.
+// Returns the markers blending.
+std::uint32_t LiveRig::updateTracksAndTargets(LiveFrameStats& stats) noexcept {
+  const std::size_t markers = rig_->markers.size();
   previous_prediction_.swap(prediction_);
   refreshPredictions();
-
-  // 4. Blend states, then the targets.
   for (std::size_t k = 0; k < markers; ++k) {
     Track& track = tracks_[k];
     if (measured_[k]) {
@@ -458,28 +489,39 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
   stats.blending_markers = static_cast<std::uint16_t>(std::min<std::uint32_t>(blending, 0xFFFF));
   if (stats.occluded_markers > 0) stats.flags |= kLiveMarkersPredicted;
   if (blending > 0) stats.flags |= kLiveMarkersBlending;
+  return blending;
+}
 
-  // 5. Hold the pose when nothing was measured (a rig without markers, or with region targets
-  // set for this frame, steps anyway).
-  const bool regions_changed = regions_changed_;
-  regions_changed_ = false;
-  if (measured == 0 && markers > 0 && !regions_changed) {
-    stats.flags |= kLivePoseHeld;
-    const std::int64_t t0 = monotonicNowNs();
-    writeLastPose(positions, normals);
-    stats.pose_transfer_ns = monotonicNowNs() - t0;
-    return stats;
-  }
+namespace {
 
-  // 6. The step.
+// A further step of the same frame added to the frame's step statistics.
+void addStep(StepStats& frame, const StepStats& more) noexcept {
+  frame.iterations += more.iterations;
+  frame.flags |= more.flags;
+  frame.energy = more.energy;
+  frame.exact_rotations += more.exact_rotations;
+  frame.guarded_solves += more.guarded_solves;  // the guard of every iteration of the frame
+  frame.guarded_tets = more.guarded_tets;        // held after the frame's last iteration
+  frame.solve_ns += more.solve_ns;
+  frame.rotation_ns += more.rotation_ns;
+  frame.interpolation_ns += more.interpolation_ns;
+  frame.rigid_ns += more.rigid_ns;
+  frame.total_ns += more.total_ns;
+}
+
+}  // namespace
+
+// 4. The solve: the coarse level's guide, then the fine step (split when the predictions are
+// refreshed after the first iteration or the volume constraint is linearized per iteration).
+void LiveRig::solve(const StepBudget& budget, std::uint32_t blending, LiveFrameStats& stats) noexcept {
+  const std::size_t markers = rig_->markers.size();
   const HandleTargets targets = frameTargets();
   // Refresh only when some marker is fully measured: that is what moves the body in the first
   // iteration. With every marker predicted or blending (e.g. all returning after a held pose) the
   // predictions would only chase the body they drive.
   std::uint32_t anchored = 0;
   for (std::size_t k = 0; k < markers; ++k) anchored += tracks_[k].state == MarkerTrackState::kMeasured ? 1u : 0u;
-  const bool refresh = budget.max_iterations >= 2 && anchored > 0 &&
-                       (stats.occluded_markers > 0 || blending > 0);
+  const bool refresh = budget.max_iterations >= 2 && anchored > 0 && (stats.occluded_markers > 0 || blending > 0);
   if (coarse_) {
     // The coarse level on the same frame's marker targets: it sets the fine frame's start.
     for (const auto& [handle, marker] : coarse_marker_handles_)
@@ -492,19 +534,17 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
     const StepStats cs = coarse_->guide(coarse_targets, deformer_);
     stats.coarse_ns = cs.total_ns;
   }
-  // A frame without the volume constraint yet (the first, or the first after a reset) runs its first
-  // iteration free and linearizes the constraint before each further one, at the pose reached: set
-  // only after the frame, it left that frame unconstrained (CMU 85_02's cold start lost 8 % of the
-  // fine volume), and linearized at rest it is far off for a first pose far from rest (HDM05 frame
-  // 1600: +6 %; docs/fidelity.md).
+  // A frame without the volume constraint yet (the first, or the first after a reset) runs its
+  // first iteration free and linearizes the constraint before each further one, at the pose
+  // reached (docs/fidelity.md: set only after the frame, or at rest, it is far off for a first
+  // pose far from rest).
   const bool cold_constraint = volume_constraint_ && !deformer_.hasLinearConstraint() && budget.max_iterations >= 2;
   if (!refresh && !cold_constraint) {
     stats.step = deformer_.step(targets, budget);
   } else {
     // One iteration with the predictions from the last pose, then the rest with predictions from
     // the pose that iteration gave (the measured markers have moved the body by then). On a cold
-    // frame the volume constraint is linearized again before each further iteration: once, after
-    // the first, still left HDM05 frame 1600 from rest at +2.6 %.
+    // frame the volume constraint is linearized again before each further iteration.
     StepBudget first = budget;
     first.max_iterations = 1;
     stats.step = deformer_.step(targets, first);
@@ -523,17 +563,7 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
       rest.max_iterations = cold_constraint ? 1 : left;
       rest.continues_frame = true;
       const StepStats more = deformer_.step(targets, rest);
-      stats.step.iterations += more.iterations;
-      stats.step.flags |= more.flags;
-      stats.step.energy = more.energy;
-      stats.step.exact_rotations += more.exact_rotations;
-      stats.step.guarded_solves += more.guarded_solves;  // the guard of every iteration of the frame
-      stats.step.guarded_tets = more.guarded_tets;        // held after the frame's last iteration
-      stats.step.solve_ns += more.solve_ns;
-      stats.step.rotation_ns += more.rotation_ns;
-      stats.step.interpolation_ns += more.interpolation_ns;
-      stats.step.rigid_ns += more.rigid_ns;
-      stats.step.total_ns += more.total_ns;
+      addStep(stats.step, more);
       if (!cold_constraint || more.iterations <= 0) break;  // one step for the rest, as asked
       left -= more.iterations;
       if (left > 0 && std::chrono::steady_clock::now() >= budget.deadline) stats.step.flags |= kStepDeadlineHit;
@@ -543,13 +573,16 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
   stepped_ = true;
   if (stats.step.flags & kStepDeadlineHit) stats.flags |= kLiveDeadlineHit;
   if (stats.step.flags & (kStepTargetsRejected | kStepTargetsWrongSize)) stats.flags |= kLiveTargetsRejected;
+}
 
-  // 7. Pose transfer into the caller's buffer.
+// 5. Pose transfer into the caller's buffer, and its bound: never publish a non-finite or
+// implausible value (the pose must lie near where most of this frame's markers are; without
+// markers, its handles' targets). A rejected pose writes the last one again and restarts the solver.
+void LiveRig::transferAndBound(std::uint32_t measured, float* positions, float* normals, LiveFrameStats& stats) noexcept {
+  const std::size_t markers = rig_->markers.size();
   const std::int64_t t0 = monotonicNowNs();
   const std::size_t n = rest_positions_.size();
   transferPose(positions);
-  // Never publish a non-finite or implausible value: the pose must lie near where most of this
-  // frame's markers are (without markers: its handles' targets).
   pose_bound_.beginTargets();
   if (markers > 0) {
     for (const Eigen::Vector3d& p : marker_target_) pose_bound_.addTarget(p);
@@ -583,7 +616,6 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
     body_valid_ = false;  // the predictions start again from rest: they judge no sample until a pose is accepted
   }
   stats.pose_transfer_ns = monotonicNowNs() - t0;
-  return stats;
 }
 
 std::int64_t LiveRig::prepareNextFrame(std::chrono::steady_clock::time_point deadline) noexcept {

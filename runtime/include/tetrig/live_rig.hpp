@@ -260,6 +260,12 @@ class LiveRig {
 
   void buildCoarseLevel(const Rig& coarse);                  // load time
   double blendWeight(std::int64_t since_ns) const noexcept;  // s((now - event) / T)
+  // processFrame's steps, in order (live_rig.cpp).
+  std::int64_t advanceClock(const MarkerFrame& frame) noexcept;                    // dt since the last frame
+  std::uint32_t takeMeasurements(const MarkerFrame& frame, LiveFrameStats& stats) noexcept;  // returns the markers measured
+  std::uint32_t updateTracksAndTargets(LiveFrameStats& stats) noexcept;           // returns the markers blending
+  void solve(const StepBudget& budget, std::uint32_t blending, LiveFrameStats& stats) noexcept;
+  void transferAndBound(std::uint32_t measured, float* positions, float* normals, LiveFrameStats& stats) noexcept;
   double dropoutWeight(const Track& track) const noexcept;   // 1 - s((now - t0) / T)
   void refreshPredictions() noexcept;                         // prediction_ from the deformer's pose
   void transferPose(float* positions) const noexcept;         // B x_tet of the deformer's pose
