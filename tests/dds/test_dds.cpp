@@ -2,6 +2,7 @@
 // --dds` publishes, tetrig-dds-cat subscribes, tetrig-shm-cat reads the same run's segment. Every
 // test writes its own Cyclone configuration (dds/config/loopback.xml with its own domain id: the
 // lo interface, no multicast, the peer 127.0.0.1) into CYCLONEDDS_URI, which the children inherit.
+#include "find_on_path.hpp"
 #include "run_command.hpp"
 #include "shm_dump.hpp"
 #include "../tools/small_rig.hpp"
@@ -409,18 +410,7 @@ TEST(Dds, BadInputIsOneLine) {
 
 namespace {
 
-std::optional<std::filesystem::path> findOnPath(const std::string& exe) {
-  const char* path = std::getenv("PATH");
-  const std::string dirs = path ? path : "/usr/bin:/bin";
-  std::size_t start = 0;
-  while (start <= dirs.size()) {
-    const std::size_t end = std::min(dirs.find(':', start), dirs.size());
-    const std::filesystem::path candidate = std::filesystem::path(dirs.substr(start, end - start)) / exe;
-    if (access(candidate.c_str(), X_OK) == 0) return candidate;
-    start = end + 1;
-  }
-  return std::nullopt;
-}
+using tetrig::test::findOnPath;
 
 // `tetrig view --dds NAME` under xvfb-run draws the frames it gets over DDS (the static data
 // builds the mesh) and writes its screenshot. Skipped with a message without xvfb-run/xauth,

@@ -17,6 +17,7 @@
 //    that is not a tetrig segment: one line, non-zero exit, no screenshot file.
 // xvfb-run missing: the Xvfb tests are skipped with a message, and FAIL under CI=true (CI installs
 // xvfb and xauth). Labels "tools;view". TETRIG_KEEP_TEMP=1 keeps the screenshots.
+#include "find_on_path.hpp"
 #include "small_rig.hpp"
 #include "tetrig/clock.hpp"
 #include "tetrig/render/picture_sheet.hpp"
@@ -53,18 +54,7 @@ namespace {
 using render::Image;
 using test::TempDir;
 
-std::optional<std::filesystem::path> findOnPath(const std::string& exe) {
-  const char* path = std::getenv("PATH");
-  const std::string dirs = path ? path : "/usr/bin:/bin";
-  std::size_t start = 0;
-  while (start <= dirs.size()) {
-    const std::size_t end = std::min(dirs.find(':', start), dirs.size());
-    const std::filesystem::path candidate = std::filesystem::path(dirs.substr(start, end - start)) / exe;
-    if (access(candidate.c_str(), X_OK) == 0) return candidate;
-    start = end + 1;
-  }
-  return std::nullopt;
-}
+using test::findOnPath;
 
 #define TETRIG_REQUIRE_XVFB(var)                                                                               \
   const std::optional<std::filesystem::path> var = findOnPath("xvfb-run");                                    \
