@@ -7,13 +7,12 @@
 // vectorises the same source. Displacements stay double: corner displacements are gathered and
 // their edge differences taken in double (two halves of 8 lanes), then converted. The per-corner
 // results are added into a float delta (x, y, z, pad per vertex: one 16-byte read-modify-write
-// per corner; measured 0.86-0.89x the pass with a double delta, whose conversions and 8-lane
-// transposes cost more shuffles). Scalar code remains only for the rare exact fallback, which
+// per corner; cheaper than a double delta, whose conversions and 8-lane transposes cost more
+// shuffles). Scalar code remains only for the rare exact fallback, which
 // runs after the pass.
 //
 // Why float: the pass streams 72 bytes per tet instead of 128, and each vector instruction
-// serves 16 tets instead of 8 (measured 0.64-0.72x the double pass on bar_8x8x85,
-// docs/deformation.md). Why displacement form: rounding then scales with the deformation, so the
+// serves 16 tets instead of 8 (the figures: docs/deformation.md). Why displacement form: rounding then scales with the deformation, so the
 // rest state stays an exact fixed point.
 #include "tetrig/rotation_kernel.hpp"
 
@@ -576,8 +575,7 @@ TETRIG_INLINE void passAll(TetBlock* blocks, std::int32_t block_count, const dou
   auto guards = [&](std::int32_t block) { return guard != nullptr ? guard + static_cast<std::size_t>(block) * W : nullptr; };
   auto dets = [&](std::int32_t block) { return det_out != nullptr ? det_out + static_cast<std::size_t>(block) * W : nullptr; };
   // Blocks beyond the L2 cache stream from memory: there, ask for the block after next now, so
-  // its lines arrive while this one computes (measured 8-15 % on 27k tets with the double
-  // layout; on meshes that fit in L2 the prefetches only cost, ~3 % on 2.6k tets).
+  // its lines arrive while this one computes (on meshes that fit in L2 the prefetches only cost).
   if (static_cast<std::size_t>(block_count) * sizeof(TetBlock) > (512u << 10)) {
     for (; b + 4 <= block_count; b += 2) {
       const char* next = reinterpret_cast<const char*>(blocks + b + 2);

@@ -78,7 +78,7 @@ struct DeformerOptions {
   bool padded_float_positions = false;  // also write paddedFloatPositions() every step (the input of the
                                         // compact pose transfer's float kernel)
   double rotation_extrapolation = 0.0;  // alpha in [0, 1]: a frame starts from every tet's rotation carried
-                                        // on by alpha times its last frame's rotation (rotation_extrapolation.hpp);
+                                        // on by alpha times its last frame's rotation (rotation_prediction.hpp);
                                         // 0: the plain warm start
   double rotation_relaxation = 1.0;  // omega in [1, 2): each iteration's rotation update is carried on by
                                      // omega times itself (rotation_kernel.hpp, over-relaxation); 1: plain

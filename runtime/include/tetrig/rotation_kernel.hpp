@@ -66,9 +66,8 @@ RotationPassStats rotationPass(TetBlock* blocks, std::int32_t block_count, const
 
 // The inversion guard's largest push alpha ||R - F|| (Frobenius): a tet far from any rotation (a
 // frame's first iteration after a jump) is not kicked; beyond it the guard's energy grows linearly
-// (rotation_kernel.cpp, inversionGuard). 1: measured to leave the steady guard whole (the pushed
-// bar face) and to remove the kick at a cold start on CMU 85_02 (62 inverted tets at frame 0 without
-// a cap, 0 with it; 0.25 and 0.5 weakened the steady guard).
+// (rotation_kernel.cpp, inversionGuard). 1 leaves the steady guard whole and removes the kick at a
+// cold start; smaller caps weaken the steady guard.
 inline constexpr float kInversionGuardPushCap = 1.0f;
 
 // The inversion guard of one tet in double (the scalar form of the kernel's inversionGuard, for
