@@ -76,8 +76,12 @@ SegmentBridge::~SegmentBridge() { stop(); }
 
 void SegmentBridge::stop() {
   stop_.store(true, std::memory_order_seq_cst);
-  if (shm_ != nullptr) shm_->wakeCommitWaiters();
-  if (thread_.joinable()) thread_.join();
+  // Once joined, the publisher it followed may be gone (tetrig run stops the bridge, then destroys
+  // the segment, then the bridge): a second stop() touches nothing.
+  if (thread_.joinable()) {
+    if (shm_ != nullptr) shm_->wakeCommitWaiters();
+    thread_.join();
+  }
   int expected = 0;
   end_.compare_exchange_strong(expected, 1);
 }
