@@ -429,7 +429,7 @@ int main(int argc, char** argv) {
   bool no_mlock = false;
   run_cmd->add_flag("--no-mlock", no_mlock, "Do not lock the process's memory")->group(kLatency);
   const char* kSources = "Sources";
-  run_cmd->add_flag("--as-fast-as-possible", run.as_fast_as_possible, "Playback: no pacing (offline runs)")->group(kSources);
+  run_cmd->add_flag("--as-fast-as-possible", run.as_fast_as_possible, "Playback: as fast as the solver takes frames (each frame waits until the last was taken: none dropped; offline runs)")->group(kSources);
   run_cmd->add_option("--speed", run.speed, "Playback speed factor (the budget follows it)")
       ->capture_default_str()
       ->check(CLI::Range(0.01, 100.0))
