@@ -103,6 +103,23 @@ class Writer {
     u32(static_cast<std::uint32_t>(s.size()));
     bytes_.insert(bytes_.end(), s.begin(), s.end());
   }
+  // Every coefficient of a matrix, row after row.
+  template <class Matrix>
+  void f64Rows(const Matrix& m) {
+    for (Eigen::Index i = 0; i < m.rows(); ++i)
+      for (Eigen::Index k = 0; k < m.cols(); ++k) f64(static_cast<double>(m(i, k)));
+  }
+  template <class Matrix>
+  void i32Rows(const Matrix& m) {
+    for (Eigen::Index i = 0; i < m.rows(); ++i)
+      for (Eigen::Index k = 0; k < m.cols(); ++k) i32(static_cast<std::int32_t>(m(i, k)));
+  }
+  void f64s(const std::vector<double>& v) {
+    for (const double x : v) f64(x);
+  }
+  void i32s(const std::vector<std::int32_t>& v) {
+    for (const std::int32_t x : v) i32(x);
+  }
   void pad8() {
     while (bytes_.size() % 8 != 0) bytes_.push_back(0);
   }
@@ -523,77 +540,60 @@ std::vector<std::uint8_t> serializeRig(const Rig& rig) {
   // The sections, at offsets from their own start: the header and the table (32 + 24 n bytes, a
   // multiple of 8, so every section stays 8-aligned) go in front once n is known.
   Writer out;
-  {
+  // One section: its body written by `fill` into a writer of its own, then appended and listed.
+  const auto section = [&out, &table](std::uint32_t tag, auto&& fill) {
     Writer w;
+    fill(w);
+    writeSection(out, table, tag, w.bytes());
+  };
+  section(kTagMeta, [&](Writer& w) {
     w.str(rig.name);
     w.str(rig.unit);
     w.str(rig.builder);
-    writeSection(out, table, kTagMeta, w.bytes());
-  }
-  {
-    Writer w;
+  });
+  section(kTagTetVertices, [&](Writer& w) {
     w.count(static_cast<std::size_t>(rig.tet_mesh.vertexCount()), "tet vertices");
     w.u32(static_cast<std::uint32_t>(rig.body_vertex_count));
-    for (Eigen::Index i = 0; i < rig.tet_mesh.vertices.rows(); ++i) {
-      for (int k = 0; k < 3; ++k) w.f64(rig.tet_mesh.vertices(i, k));
-    }
-    writeSection(out, table, kTagTetVertices, w.bytes());
-  }
-  {
-    Writer w;
+    w.f64Rows(rig.tet_mesh.vertices);
+  });
+  section(kTagTets, [&](Writer& w) {
     w.count(static_cast<std::size_t>(rig.tet_mesh.tetCount()), "tets");
     w.u32(static_cast<std::uint32_t>(rig.body_tet_count));
-    for (Eigen::Index i = 0; i < rig.tet_mesh.tets.rows(); ++i) {
-      for (int k = 0; k < 4; ++k) w.i32(rig.tet_mesh.tets(i, k));
-    }
-    writeSection(out, table, kTagTets, w.bytes());
-  }
-  {
-    Writer w;
+    w.i32Rows(rig.tet_mesh.tets);
+  });
+  section(kTagFine, [&](Writer& w) {
     w.count(static_cast<std::size_t>(rig.fine_vertices.rows()), "fine vertices");
     w.count(static_cast<std::size_t>(rig.fine_triangles.rows()), "fine triangles");
-    for (Eigen::Index i = 0; i < rig.fine_vertices.rows(); ++i) {
-      for (int k = 0; k < 3; ++k) w.f64(rig.fine_vertices(i, k));
-    }
-    for (Eigen::Index i = 0; i < rig.fine_triangles.rows(); ++i) {
-      for (int k = 0; k < 3; ++k) w.i32(rig.fine_triangles(i, k));
-    }
-    writeSection(out, table, kTagFine, w.bytes());
-  }
-  {
-    Writer w;
+    w.f64Rows(rig.fine_vertices);
+    w.i32Rows(rig.fine_triangles);
+  });
+  section(kTagPoseTransfer, [&](Writer& w) {
     const PoseTransferCsr<double>& b = rig.pose_transfer;
     w.u32(static_cast<std::uint32_t>(b.rows));
     w.u32(static_cast<std::uint32_t>(b.cols));
     w.count(b.columns.size(), "pose-transfer weights");
-    for (const std::int32_t o : b.row_offsets) w.i32(o);
-    for (const std::int32_t c : b.columns) w.i32(c);
-    for (const double x : b.weights) w.f64(x);
-    writeSection(out, table, kTagPoseTransfer, w.bytes());
-  }
-  {
-    Writer w;
+    w.i32s(b.row_offsets);
+    w.i32s(b.columns);
+    w.f64s(b.weights);
+  });
+  section(kTagVertexHandles, [&](Writer& w) {
     w.count(rig.setup.vertex_handles.size(), "vertex handles");
     for (std::size_t h = 0; h < rig.setup.vertex_handles.size(); ++h) {
       w.i32(rig.setup.vertex_handles[h]);
       w.str(rig.vertex_handle_names[h]);
     }
-    writeSection(out, table, kTagVertexHandles, w.bytes());
-  }
-  {
-    Writer w;
+  });
+  section(kTagRegionHandles, [&](Writer& w) {
     w.count(rig.setup.region_handles.size(), "region handles");
     for (std::size_t r = 0; r < rig.setup.region_handles.size(); ++r) {
       const RegionHandle& region = rig.setup.region_handles[r];
       w.u8(region.oriented ? 1 : 0);
       w.str(rig.region_handle_names[r]);
       w.count(region.tets.size(), "region tets");
-      for (const std::int32_t t : region.tets) w.i32(t);
+      w.i32s(region.tets);
     }
-    writeSection(out, table, kTagRegionHandles, w.bytes());
-  }
-  {
-    Writer w;
+  });
+  section(kTagPointHandles, [&](Writer& w) {
     w.count(rig.setup.point_handles.size(), "point handles");
     for (std::size_t p = 0; p < rig.setup.point_handles.size(); ++p) {
       const PointHandle& ph = rig.setup.point_handles[p];
@@ -601,26 +601,20 @@ std::vector<std::uint8_t> serializeRig(const Rig& rig) {
       for (int k = 0; k < 4; ++k) w.f64(ph.barycentric[k]);
       w.str(rig.point_handle_names[p]);
     }
-    writeSection(out, table, kTagPointHandles, w.bytes());
-  }
-  {
-    Writer w;
+  });
+  section(kTagRigidGroups, [&](Writer& w) {
     w.count(rig.setup.rigid_groups.size(), "rigid groups");
     for (std::size_t g = 0; g < rig.setup.rigid_groups.size(); ++g) {
       w.str(rig.rigid_group_names[g]);
       w.count(rig.setup.rigid_groups[g].tets.size(), "rigid group tets");
-      for (const std::int32_t t : rig.setup.rigid_groups[g].tets) w.i32(t);
+      w.i32s(rig.setup.rigid_groups[g].tets);
     }
-    writeSection(out, table, kTagRigidGroups, w.bytes());
-  }
-  {
-    Writer w;
+  });
+  section(kTagStiffness, [&](Writer& w) {
     w.count(rig.setup.stiffness.size(), "stiffness values");
-    for (const double x : rig.setup.stiffness) w.f64(x);
-    writeSection(out, table, kTagStiffness, w.bytes());
-  }
-  {
-    Writer w;
+    w.f64s(rig.setup.stiffness);
+  });
+  section(kTagMarkers, [&](Writer& w) {
     w.count(rig.markers.size(), "markers");
     for (const RigMarker& m : rig.markers) {
       w.str(m.label);
@@ -630,82 +624,73 @@ std::vector<std::uint8_t> serializeRig(const Rig& rig) {
       w.i32(m.bound_faces);
       w.f64(m.surface_distance);
     }
-    writeSection(out, table, kTagMarkers, w.bytes());
-  }
-  {
-    Writer w;
+  });
+  section(kTagAlignment, [&](Writer& w) {
     const RigAlignment& a = rig.alignment;
-    for (int r = 0; r < 3; ++r) {
-      for (int c = 0; c < 3; ++c) w.f64(a.linear(r, c));
-    }
+    w.f64Rows(a.linear);
     for (int k = 0; k < 3; ++k) w.f64(a.translation[k]);
     w.f64(a.fit_scale);
     w.f64(a.rig_units_per_mm);
     w.str(a.device_up);
     w.str(a.rig_up);
-    writeSection(out, table, kTagAlignment, w.bytes());
-  }
-  {
-    Writer w;
+  });
+  section(kTagOptions, [&](Writer& w) {
     const DeformerOptions& o = rig.setup.options;
     w.u8(o.update_rotations ? 1 : 0);
     w.u8(o.interpolate_rotations ? 1 : 0);
     w.i32(o.rotation_steps);
     w.f64(o.point_handle_weight);
     w.f64(o.max_abs_coordinate);
-    writeSection(out, table, kTagOptions, w.bytes());
-  }
+  });
+  // The optional sections, written only when they hold something.
   if (!rig.pose_sensors.empty()) {
-    Writer w;
-    w.count(rig.pose_sensors.size(), "pose sensors");
-    for (const RigPoseSensor& ps : rig.pose_sensors) {
-      w.str(ps.sensor_label);
-      w.i32(ps.region_handle);
-      w.u8(static_cast<std::uint8_t>(ps.mode));
-      w.u8(ps.clutch_buttons);
-      w.f64(ps.translation_scale);
-    }
-    writeSection(out, table, kTagPoseSensors, w.bytes());
+    section(kTagPoseSensors, [&](Writer& w) {
+      w.count(rig.pose_sensors.size(), "pose sensors");
+      for (const RigPoseSensor& ps : rig.pose_sensors) {
+        w.str(ps.sensor_label);
+        w.i32(ps.region_handle);
+        w.u8(static_cast<std::uint8_t>(ps.mode));
+        w.u8(ps.clutch_buttons);
+        w.f64(ps.translation_scale);
+      }
+    });
   }
   if (!rig.marker_regions.empty()) {
-    Writer w;
-    w.count(rig.marker_regions.size(), "marker regions");
-    for (const RigMarkerRegion& mr : rig.marker_regions) {
-      w.i32(mr.region_handle);
-      w.count(mr.markers.size(), "markers of a marker region");
-      for (const std::int32_t m : mr.markers) w.i32(m);
-    }
-    writeSection(out, table, kTagMarkerRegions, w.bytes());
+    section(kTagMarkerRegions, [&](Writer& w) {
+      w.count(rig.marker_regions.size(), "marker regions");
+      for (const RigMarkerRegion& mr : rig.marker_regions) {
+        w.i32(mr.region_handle);
+        w.count(mr.markers.size(), "markers of a marker region");
+        w.i32s(mr.markers);
+      }
+    });
   }
   if (!rig.setup.volume_weights.empty()) {
-    Writer w;
-    w.count(rig.setup.volume_weights.size(), "volume weights");
-    for (const double x : rig.setup.volume_weights) w.f64(x);
-    writeSection(out, table, kTagVolumeWeights, w.bytes());
+    section(kTagVolumeWeights, [&](Writer& w) {
+      w.count(rig.setup.volume_weights.size(), "volume weights");
+      w.f64s(rig.setup.volume_weights);
+    });
   }
   if (!rig.surface.empty()) {
-    Writer w;
-    const RigSurfaceAttributes& a = rig.surface;
-    w.str(a.asset);
-    w.count(a.material_libraries.size(), "material libraries");
-    for (const std::string& l : a.material_libraries) w.str(l);
-    w.count(a.materials.size(), "materials");
-    for (const RigMaterial& m : a.materials) {
-      w.str(m.name);
-      w.str(m.diffuse_texture);
-      for (int k = 0; k < 3; ++k) w.f64(m.diffuse_color[k]);
-    }
-    w.count(static_cast<std::size_t>(a.uvs.rows()), "texture coordinates");
-    for (Eigen::Index i = 0; i < a.uvs.rows(); ++i) {
-      w.f64(a.uvs(i, 0));
-      w.f64(a.uvs(i, 1));
-    }
-    w.count(static_cast<std::size_t>(a.corner_uvs.rows()), "textured triangles");
-    for (Eigen::Index f = 0; f < a.corner_uvs.rows(); ++f) {
-      for (int k = 0; k < 3; ++k) w.i32(a.corner_uvs(f, k));
-      w.i32(a.triangle_materials[static_cast<std::size_t>(f)]);
-    }
-    writeSection(out, table, kTagSurface, w.bytes());
+    section(kTagSurface, [&](Writer& w) {
+      const RigSurfaceAttributes& a = rig.surface;
+      w.str(a.asset);
+      w.count(a.material_libraries.size(), "material libraries");
+      for (const std::string& l : a.material_libraries) w.str(l);
+      w.count(a.materials.size(), "materials");
+      for (const RigMaterial& m : a.materials) {
+        w.str(m.name);
+        w.str(m.diffuse_texture);
+        for (int k = 0; k < 3; ++k) w.f64(m.diffuse_color[k]);
+      }
+      w.count(static_cast<std::size_t>(a.uvs.rows()), "texture coordinates");
+      w.f64Rows(a.uvs);
+      w.count(static_cast<std::size_t>(a.corner_uvs.rows()), "textured triangles");
+      for (Eigen::Index f = 0; f < a.corner_uvs.rows(); ++f) {
+        for (int k = 0; k < 3; ++k) w.i32(a.corner_uvs(f, k));
+        w.i32(a.triangle_materials[static_cast<std::size_t>(f)]);
+      }
+    });
   }
   if (rig.coarse) writeSection(out, table, kTagCoarse, serializeRig(*rig.coarse));
   // No padding after the last section: the file ends where it does.
