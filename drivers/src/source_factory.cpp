@@ -136,6 +136,19 @@ std::unique_ptr<drivers::MarkerSource> openSynthetic(std::string_view spec, std:
   return drivers::makeSyntheticSource(std::move(synthetic), options.synthetic_labels);
 }
 
+// A marker-stream device (hid:VID:PID, usb:VID:PID): the ids into its transport's options, the rate
+// it is asked for. The two kinds differ only in the transport member.
+template <class Config, class Transport>
+Config markerStreamConfig(std::string_view spec, std::string_view kind, std::string_view rest, const SourceOpenOptions& options,
+                          Transport Config::*transport) {
+  const VidPid id = parseVidPid(spec, kind, rest);
+  Config config;
+  (config.*transport).vendor_id = id.vendor_id;
+  (config.*transport).product_id = id.product_id;
+  config.rate_hz = options.rate_hz;
+  return config;
+}
+
 }  // namespace
 
 std::string_view markerSourceSpecForms() noexcept { return kSpecForms; }
@@ -148,22 +161,10 @@ std::unique_ptr<drivers::MarkerSource> openMarkerSource(std::string_view spec, c
   if (kind == "c3d") return openC3D(spec, rest, options);
   if (kind == "replay") return openReplay(spec, rest, options);
   if (kind == "synthetic") return openSynthetic(spec, rest, has_rest, options);
-  if (kind == "hid") {
-    const VidPid id = parseVidPid(spec, kind, rest);
-    HidMarkerStreamSourceConfig config;
-    config.hid.vendor_id = id.vendor_id;
-    config.hid.product_id = id.product_id;
-    config.rate_hz = options.rate_hz;
-    return makeHidMarkerStreamSource(std::move(config));
-  }
-  if (kind == "usb") {
-    const VidPid id = parseVidPid(spec, kind, rest);
-    UsbMarkerStreamSourceConfig config;
-    config.usb.vendor_id = id.vendor_id;
-    config.usb.product_id = id.product_id;
-    config.rate_hz = options.rate_hz;
-    return makeUsbMarkerStreamSource(std::move(config));
-  }
+  if (kind == "hid")
+    return makeHidMarkerStreamSource(markerStreamConfig(spec, kind, rest, options, &HidMarkerStreamSourceConfig::hid));
+  if (kind == "usb")
+    return makeUsbMarkerStreamSource(markerStreamConfig(spec, kind, rest, options, &UsbMarkerStreamSourceConfig::usb));
   if (kind == "hydra") {
     if (has_rest && rest.empty()) badSpec(spec, "hydra:SERIAL needs a serial after the colon");
     HydraSourceConfig config;
