@@ -44,19 +44,7 @@ using RigHandle = std::unique_ptr<tetrig_rig, RigCloser>;
 using ClipHandle = std::unique_ptr<tetrig_clip, ClipCloser>;
 
 // The small rig and the moving clip (12 frames; RIGHT occluded in frames 4..7), once per binary.
-struct SmallScene {
-  SmallScene() : rig(test::buildSmallRig(dir)) {
-    rig_path = dir.writeBytes("small.rig", serializeRig(rig));
-    clip_path = dir.writeBytes("moving.c3d", test::movingClip());
-  }
-  TempDir dir;
-  Rig rig;
-  std::filesystem::path rig_path, clip_path;
-};
-const SmallScene& small() {
-  static const SmallScene s;
-  return s;
-}
+const test::MovingScene& small() { return test::movingScene(); }
 
 // The clip's labels through the C API, as C strings for tetrig_rig_bind_labels.
 std::vector<const char*> clipLabels(const tetrig_clip* clip) {
@@ -71,7 +59,7 @@ TEST(CApi, VersionIsTheHeaders) { EXPECT_STREQ(tetrig_version(), TETRIG_VERSION_
 // fillFrame with counter = frame, labels as the playback source names them), bit for bit, with the
 // default (accurate) settings and with the fast ones; the occluded frames are predicted.
 TEST(CApi, FramesEqualTheLiveRigBitForBit) {
-  const SmallScene& sc = small();
+  const test::MovingScene& sc = small();
   for (const int fast : {0, 1}) {
     SCOPED_TRACE(fast ? "fast settings" : "accurate settings");
     tetrig_rig_options options;
@@ -136,7 +124,7 @@ TEST(CApi, FramesEqualTheLiveRigBitForBit) {
 
 // The triangles are the live rig's; the normals come when the rig was opened with them.
 TEST(CApi, TrianglesAndNormals) {
-  const SmallScene& sc = small();
+  const test::MovingScene& sc = small();
   tetrig_rig_options options;
   tetrig_rig_options_init(&options);
   options.normals = 1;
@@ -162,7 +150,7 @@ TEST(CApi, TrianglesAndNormals) {
 
 // Bad input is a status and one line of text, never a crash; a failed frame changes nothing.
 TEST(CApi, BadInputIsAnErrorNeverACrash) {
-  const SmallScene& sc = small();
+  const test::MovingScene& sc = small();
   const TempDir dir;
   // Files: missing, a directory, not a rig, a truncated rig.
   EXPECT_EQ(tetrig_rig_open((dir.path() / "missing.rig").c_str(), nullptr), nullptr);

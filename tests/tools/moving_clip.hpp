@@ -36,4 +36,20 @@ inline std::vector<std::uint8_t> movingClip(std::size_t frames = 12, bool all_in
   return writeTestC3D(spec);
 }
 
+// The small rig and the moving clip written once into a private directory (removed at exit): the
+// scene of the export and C API tests. `movingScene()` builds it on first use.
+struct MovingScene {
+  MovingScene() : rig(buildSmallRig(dir)) {
+    rig_path = dir.writeBytes("small.rig", serializeRig(rig));
+    clip_path = dir.writeBytes("moving.c3d", movingClip());
+  }
+  TempDir dir;
+  Rig rig;
+  std::filesystem::path rig_path, clip_path;
+};
+inline const MovingScene& movingScene() {
+  static const MovingScene s;
+  return s;
+}
+
 }  // namespace tetrig::test

@@ -45,19 +45,7 @@ constexpr std::size_t kFrames = 12;
 constexpr float kRate = test::kMovingClipRate;
 
 // The rig and clip, built once per binary (the directory is removed at exit).
-struct Scene {
-  Scene() : rig(test::buildSmallRig(dir)) {
-    rig_path = dir.writeBytes("small.rig", serializeRig(rig));
-    clip_path = dir.writeBytes("moving.c3d", test::movingClip());
-  }
-  TempDir dir;
-  Rig rig;
-  std::filesystem::path rig_path, clip_path;
-};
-const Scene& scene() {
-  static const Scene s;
-  return s;
-}
+const test::MovingScene& scene() { return test::movingScene(); }
 
 // Reference: a LiveRig fed clip frames [first, end) with `iterations` per frame.
 // `clip_path`: another clip of the same markers instead of the moving one.
@@ -71,7 +59,7 @@ LiveRigOptions plainLive() {
 
 std::vector<std::vector<float>> liveRigFrames(std::size_t first, std::size_t end, int iterations, const LiveRigOptions& live_options = plainLive(),
                                               const std::filesystem::path& clip_path = {}) {
-  const Scene& sc = scene();
+  const test::MovingScene& sc = scene();
   const drivers::C3DClip clip = drivers::C3DClip::load(clip_path.empty() ? sc.clip_path : clip_path);
   drivers::C3DPlaybackOptions po;
   po.pacing = drivers::Pacing::kAsFastAsPossible;
