@@ -19,16 +19,15 @@ using detail::futexWakeAll;
 
 namespace {
 
-// The frame's header and its first `count` markers (the rest of a slot is never read: consumers
-// read markers[0 .. marker_count)).
-void copyFrame(const MarkerFrame& from, MarkerFrame& to, std::uint16_t count) noexcept {
+// The frame's header and its markers[0 .. marker_count) (the rest of a slot is never read).
+void copyFrame(const MarkerFrame& from, MarkerFrame& to) noexcept {
   to.frame_counter = from.frame_counter;
   to.device_timestamp_ns = from.device_timestamp_ns;
   to.receive_timestamp_ns = from.receive_timestamp_ns;
   to.flags = from.flags;
   to.marker_count = from.marker_count;
   to.rejected_count = from.rejected_count;
-  const std::size_t n = std::min<std::size_t>(count, from.markers.size());
+  const std::size_t n = std::min<std::size_t>(from.marker_count, from.markers.size());
   std::copy_n(from.markers.begin(), n, to.markers.begin());
 }
 
@@ -39,8 +38,7 @@ FrameMailbox::FrameMailbox() noexcept : middle_(1u), back_(0u), front_(2u) {}
 void FrameMailbox::commit() noexcept {
   // The next mailbox of the chain gets its copy first (a plain copy into a slot only this
   // producer thread touches); it is handed over after this mailbox's own consumer got the frame.
-  const std::uint16_t count = slots_[back_].marker_count;
-  if (next_ != nullptr) copyFrame(slots_[back_], next_->producerSlot(), count);
+  if (next_ != nullptr) copyFrame(slots_[back_], next_->producerSlot());
   // Count before the hand-off so that no observer can see a take or a drop of this frame first.
   published_.fetch_add(1, std::memory_order_acq_rel);
   const std::uint32_t previous = middle_.exchange(back_ | kFreshBit, std::memory_order_acq_rel);
