@@ -705,9 +705,8 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
     }
     if (!options.stats_json.empty()) writeJson(options.stats_json, j);
     if (outcome != nullptr) {
-      fillOutcome(performers[0], several ? each[0] : j, *outcome);
+      fillOutcome(performers[0], j, *outcome);  // several performers: the first one's, with the whole stats
       if (several) {
-        outcome->stats = j;
         outcome->performers.resize(performers.size());
         for (std::size_t i = 0; i < performers.size(); ++i) fillOutcome(performers[i], each[i], outcome->performers[i]);
       }
