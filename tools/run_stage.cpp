@@ -49,6 +49,20 @@ std::string resolvePath(const std::string& path, const std::filesystem::path& ba
   return (p.is_absolute() ? p : base / p).string();
 }
 
+// One text key of a performer, the same in both forms but for the coarse rig's spelling
+// (`coarse_key`); paths relative to `base` (empty: as given). False for a key it does not know.
+bool setTextKey(PerformerSpec& spec, const std::string& key, const std::string& value, const std::filesystem::path& base,
+                const char* coarse_key) {
+  if (key == "rig") spec.rig_path = resolvePath(value, base);
+  else if (key == coarse_key) spec.coarse_rig_path = resolvePath(value, base);
+  else if (key == "source") spec.source = resolveSource(value, base);
+  else if (key == "publish") spec.publish = value;
+  else if (key == "subject") spec.subject = value;
+  else if (key == "name") spec.name = value;
+  else return false;
+  return true;
+}
+
 }  // namespace
 
 PerformerSpec parsePerformerSpec(const std::string& text) {
@@ -65,14 +79,8 @@ PerformerSpec parsePerformerSpec(const std::string& text) {
       throw std::invalid_argument(where + ": '" + printableText(item, 64) + "' is not KEY=VALUE (keys: rig, source, publish, subject, name, coarse-rig, cpu)");
     const std::string key = item.substr(0, eq), value = item.substr(eq + 1);
     if (!seen.insert(key).second) throw std::invalid_argument(where + ": " + printableText(key, 32) + " given twice");
-    if (key == "rig") spec.rig_path = value;
-    else if (key == "source") spec.source = value;
-    else if (key == "publish") spec.publish = value;
-    else if (key == "subject") spec.subject = value;
-    else if (key == "name") spec.name = value;
-    else if (key == "coarse-rig") spec.coarse_rig_path = value;
-    else if (key == "cpu") spec.cpu = parseCpu(value, where);
-    else throw std::invalid_argument(where + ": unknown key '" + printableText(key, 32) + "' (keys: rig, source, publish, subject, name, coarse-rig, cpu)");
+    if (key == "cpu") spec.cpu = parseCpu(value, where);
+    else if (!setTextKey(spec, key, value, {}, "coarse-rig")) throw std::invalid_argument(where + ": unknown key '" + printableText(key, 32) + "' (keys: rig, source, publish, subject, name, coarse-rig, cpu)");
   }
   return spec;
 }
@@ -104,14 +112,8 @@ std::vector<PerformerSpec> loadStageFile(const std::string& path) {
         continue;
       }
       if (!value.is_string()) throw std::runtime_error(where + ": " + printableText(key, 64) + " must be a string");
-      const std::string v = value.get<std::string>();
-      if (key == "rig") spec.rig_path = resolvePath(v, base);
-      else if (key == "coarse_rig") spec.coarse_rig_path = resolvePath(v, base);
-      else if (key == "source") spec.source = resolveSource(v, base);
-      else if (key == "publish") spec.publish = v;
-      else if (key == "subject") spec.subject = v;
-      else if (key == "name") spec.name = v;
-      else throw std::runtime_error(where + ": unknown key '" + printableText(key, 64) + "' (keys: rig, source, publish, subject, name, coarse_rig, cpu)");
+      if (!setTextKey(spec, key, value.get<std::string>(), base, "coarse_rig"))
+        throw std::runtime_error(where + ": unknown key '" + printableText(key, 64) + "' (keys: rig, source, publish, subject, name, coarse_rig, cpu)");
     }
     out.push_back(std::move(spec));
   }
