@@ -4,6 +4,7 @@
 #include "signal_scope.hpp"
 #include "solver_flags.hpp"
 
+#include "tetrig/coarse_level.hpp"
 #include "tetrig/clock.hpp"
 #include "tetrig/drivers/c3d_reader.hpp"
 #include "tetrig/drivers/source_factory.hpp"

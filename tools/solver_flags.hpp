@@ -58,10 +58,13 @@ inline void addSolverFlags(CLI::App& cmd, SolverSettings& s, const std::string& 
   CLI::Option* no_predict = grouped(cmd.add_flag_callback(
       "--no-predict", [&s] { s.rotation_extrapolation = 0.0; }, "Start each frame from the last pose (no temporal prediction)"));
   predict->excludes(no_predict);
-  grouped(cmd.add_flag("--keep-volume,!--no-keep-volume", s.volume_constraint,
-                       "Keep the body's volume constant (default on; --no-keep-volume: off): bent joints do not lose volume; "
-                       "about a quarter more work per frame, done after each publish; skipped with a note when the rig's "
-                       "fine mesh is not closed"));
+  CLI::Option* keep_volume = grouped(cmd.add_flag_callback(
+      "--keep-volume", [&s] { s.volume_constraint = true; },
+      "Keep the body's volume constant (default on): bent joints do not lose volume; about a quarter more work per frame, "
+      "done after each publish; skipped with a note when the rig's fine mesh is not closed"));
+  CLI::Option* no_keep_volume = grouped(cmd.add_flag_callback(
+      "--no-keep-volume", [&s] { s.volume_constraint = false; }, "Let bent joints lose volume (no volume constraint)"));
+  keep_volume->excludes(no_keep_volume);
   grouped(cmd.add_flag_callback(
       "--no-coarse", [&s] { s.use_coarse_level = false; }, "Do not use the rig's own coarse level (built with --coarse-tet-vertices)"));
   grouped(cmd.add_option("--relax", s.rotation_relaxation,

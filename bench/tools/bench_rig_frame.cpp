@@ -64,6 +64,7 @@
 #include "tetrig/live_rig.hpp"
 #include "tetrig/drivers/c3d_reader.hpp"
 #include "tetrig/pose_transfer.hpp"
+#include "tetrig/pose_transfer_padded.hpp"
 #include "tetrig/pose_transfer_blocked.hpp"
 #include "tetrig/rig_file.hpp"
 #include "tetrig/rigbuild/build_rig.hpp"

@@ -1,5 +1,5 @@
 // The deformation core's load step and frame step: Stoll et al. 2007, sections 2.3.1-2.3.2.
-#include "tetrig/deformer.hpp"
+#include "tetrig/deformer_impl.hpp"
 #include "tetrig/rotation_prediction.hpp"
 
 #include "tetrig/laplacian.hpp"
@@ -12,6 +12,7 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <memory>
 #include <numeric>
 #include <stdexcept>
 #include <string>
@@ -55,10 +56,44 @@ std::vector<double> tetVolumeWeights(const DeformerSetup& setup, std::int32_t te
   return w;
 }
 
-Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(setup.options) {
+// Load time, in named steps: the options and the mesh checked, the handles' slots, the reduced
+// Laplacian factored, the solver order and buffers, the handle coupling, the point handles, the tet
+// blocks, the harmonic weights of rotation interpolation, the rigid groups and per-tet coefficients.
+DeformerImpl::DeformerImpl(const TetMesh& mesh, const DeformerSetup& setup) : options_(setup.options) {
   vertex_count_ = mesh.vertexCount();
   tet_count_ = mesh.tetCount();
   if (tet_count_ == 0) fail("the mesh has no tets");
+  checkOptions();
+  checkMeshUsable(mesh);
+  const std::vector<std::int32_t> handle_of_vertex = assignHandleSlots(mesh, setup);
+
+  const TetRestFrames frames = computeRestFrames(mesh);
+  const std::vector<double> weights = tetWeights(frames, setup.stiffness);
+  const Eigen::SparseMatrix<double> laplacian = assembleLaplacian(mesh, frames, weights);
+  std::vector<std::int32_t> free_index(static_cast<size_t>(vertex_count_), -1);
+  for (std::int32_t v = 0, next = 0; v < vertex_count_; ++v) {
+    if (handle_of_vertex[static_cast<size_t>(v)] < 0) free_index[static_cast<size_t>(v)] = next++;
+  }
+  factorReducedSystem(mesh, setup, laplacian, free_index);
+  buildSolverOrder(mesh, handle_of_vertex, free_index);
+  buildHandleCoupling(laplacian, handle_of_vertex, free_index);
+  buildPointHandles(mesh, setup);
+  buildTetBlocks(mesh, frames, weights);
+  buildHarmonicWeights(mesh, setup, handle_of_vertex);
+  buildRigidGroupsAndCoefficients(setup);
+
+  if (options_.linear_constraint) {
+    constraint_g_.assign(static_cast<size_t>(vertex_count_) * kVectorStride, 0.0);
+    constraint_z_.assign(static_cast<size_t>(vertex_count_) * kVectorStride, 0.0);
+  }
+  vertex_targets_.resize(static_cast<size_t>(vertex_handle_count_));
+  region_targets_.resize(setup.region_handles.size());
+  point_targets_.resize(setup.point_handles.size());
+  reset();
+}
+
+// Every option in its range (messages name the option and the range).
+void DeformerImpl::checkOptions() {
   if (options_.rotation_steps < 0 || options_.rotation_steps > 64) fail("rotation_steps must be in [0, 64]");
   if (!(options_.rotation_extrapolation >= 0.0 && options_.rotation_extrapolation <= 1.0)) {
     fail("rotation_extrapolation must be in [0, 1]");
@@ -82,13 +117,20 @@ Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(s
     fail("rotation_extrapolation_max_deg must be in (0, 180]");
   }
   extrapolation_max_sin_half_ = static_cast<float>(std::sin(0.5 * options_.rotation_extrapolation_max_deg * M_PI / 180.0));
+}
+
+// No out-of-range index, repeated corner, degenerate tet or non-finite vertex.
+void DeformerImpl::checkMeshUsable(const TetMesh& mesh) {
   const TetMeshReport report = checkTetMesh(mesh);
   if (report.out_of_range_indices > 0 || report.repeated_corner_tets > 0 || report.degenerate_tets > 0 ||
       report.non_finite_vertices > 0) {
     fail("the tet mesh is not usable: " + report.summary());
   }
+}
 
-  // --- Handles: slots for vertex handles, then region vertices. ---
+// Handle slots: the vertex handles first, then every corner of each region handle's tets (shared
+// corners once per region). Returns each mesh vertex's slot, -1 for a free vertex.
+std::vector<std::int32_t> DeformerImpl::assignHandleSlots(const TetMesh& mesh, const DeformerSetup& setup) {
   std::vector<std::int32_t> handle_of_vertex(static_cast<size_t>(vertex_count_), -1);
   auto add_handle = [&](std::int32_t v, std::int32_t region, const std::string& where) {
     if (v < 0 || v >= vertex_count_) {
@@ -122,18 +164,14 @@ Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(s
   if (handle_count_ == 0 && setup.point_handles.empty()) {
     fail("no handles: give at least one vertex, region or point handle (a mesh with nothing fixed can float anywhere)");
   }
+  return handle_of_vertex;
+}
 
-  // --- Laplacian, reduced system, factorization. ---
-  const TetRestFrames frames = computeRestFrames(mesh);
-  const std::vector<double> weights = tetWeights(frames, setup.stiffness);
-  const Eigen::SparseMatrix<double> laplacian = assembleLaplacian(mesh, frames, weights);
-
-  std::vector<std::int32_t> free_index(static_cast<size_t>(vertex_count_), -1);
-  for (std::int32_t v = 0, next = 0; v < vertex_count_; ++v) {
-    if (handle_of_vertex[static_cast<size_t>(v)] < 0) free_index[static_cast<size_t>(v)] = next++;
-  }
-
-  double mean_diagonal = laplacian.diagonal().mean();
+// The Laplacian restricted to the free vertices, plus the point handles' soft terms
+// lambda b_a b_b, factored (split LDL^T).
+void DeformerImpl::factorReducedSystem(const TetMesh& mesh, const DeformerSetup& setup, const Eigen::SparseMatrix<double>& laplacian,
+                                       const std::vector<std::int32_t>& free_index) {
+  const double mean_diagonal = laplacian.diagonal().mean();
   point_lambda_ = options_.point_handle_weight * mean_diagonal;
   std::vector<Eigen::Triplet<double>> reduced;
   reduced.reserve(static_cast<size_t>(laplacian.nonZeros()));
@@ -168,7 +206,12 @@ Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(s
   }
   factorize_seconds_ = std::chrono::duration<double>(Clock::now() - factor_start).count();
 
-  // --- Solver order: free vertices at their factor positions, then handle slots. ---
+}
+
+// Solver order (free vertices at their factor positions, then handle slots) and the per-frame
+// buffers laid out in it.
+void DeformerImpl::buildSolverOrder(const TetMesh& mesh, const std::vector<std::int32_t>& handle_of_vertex,
+                                    const std::vector<std::int32_t>& free_index) {
   solver_index_.resize(static_cast<size_t>(vertex_count_));
   mesh_vertex_.resize(static_cast<size_t>(vertex_count_));
   for (std::int32_t v = 0; v < vertex_count_; ++v) {
@@ -191,31 +234,35 @@ Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(s
   if (options_.padded_positions) padded_positions_.assign(n4, 0.0);
   if (options_.padded_float_positions) padded_float_positions_.assign(n4, 0.0f);
 
-  // --- Coupling -L_fh as CSR over free rows in solver order. ---
-  {
-    std::vector<std::vector<std::pair<std::int32_t, double>>> rows(static_cast<size_t>(free_count_));
-    for (Eigen::Index col = 0; col < laplacian.outerSize(); ++col) {
-      const std::int32_t h = handle_of_vertex[static_cast<size_t>(col)];
-      if (h < 0) continue;
-      for (Eigen::SparseMatrix<double>::InnerIterator it(laplacian, col); it; ++it) {
-        const std::int32_t fr = free_index[static_cast<size_t>(it.row())];
-        if (fr >= 0) rows[static_cast<size_t>(factor_.position(fr))].emplace_back(h, -it.value());
-      }
-    }
-    // Only rows next to a handle: the others' -L_fh x_h is 0 and never changes.
-    coupling_start_.push_back(0);
-    for (std::int32_t i = 0; i < free_count_; ++i) {
-      if (rows[static_cast<size_t>(i)].empty()) continue;
-      coupling_row_.push_back(i);
-      for (auto [h, value] : rows[static_cast<size_t>(i)]) {
-        coupling_handle_.push_back(h);
-        coupling_value_.push_back(value);
-      }
-      coupling_start_.push_back(static_cast<std::int32_t>(coupling_handle_.size()));
+}
+
+// The coupling -L_fh as CSR over the free rows (solver order) next to a handle.
+void DeformerImpl::buildHandleCoupling(const Eigen::SparseMatrix<double>& laplacian, const std::vector<std::int32_t>& handle_of_vertex,
+                                       const std::vector<std::int32_t>& free_index) {
+  std::vector<std::vector<std::pair<std::int32_t, double>>> rows(static_cast<size_t>(free_count_));
+  for (Eigen::Index col = 0; col < laplacian.outerSize(); ++col) {
+    const std::int32_t h = handle_of_vertex[static_cast<size_t>(col)];
+    if (h < 0) continue;
+    for (Eigen::SparseMatrix<double>::InnerIterator it(laplacian, col); it; ++it) {
+      const std::int32_t fr = free_index[static_cast<size_t>(it.row())];
+      if (fr >= 0) rows[static_cast<size_t>(factor_.position(fr))].emplace_back(h, -it.value());
     }
   }
+  // Only rows next to a handle: the others' -L_fh x_h is 0 and never changes.
+  coupling_start_.push_back(0);
+  for (std::int32_t i = 0; i < free_count_; ++i) {
+    if (rows[static_cast<size_t>(i)].empty()) continue;
+    coupling_row_.push_back(i);
+    for (auto [h, value] : rows[static_cast<size_t>(i)]) {
+      coupling_handle_.push_back(h);
+      coupling_value_.push_back(value);
+    }
+    coupling_start_.push_back(static_cast<std::int32_t>(coupling_handle_.size()));
+  }
+}
 
-  // --- Point handles; their rest positions p_rest = sum_c b_c x_rest_c. ---
+// Point handles: corners in solver order, weights, rest positions p_rest = sum_c b_c x_rest_c.
+void DeformerImpl::buildPointHandles(const TetMesh& mesh, const DeformerSetup& setup) {
   for (const auto& point : setup.point_handles) {
     Eigen::Vector3d rest = Eigen::Vector3d::Zero();
     for (int c = 0; c < 4; ++c) {
@@ -226,7 +273,12 @@ Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(s
     point_rest_.push_back(rest);
   }
 
-  // --- Tet blocks, ordered by their lowest solver index for locality of gathers and scatters. ---
+}
+
+// Tets in blocks of kTetBlockWidth lanes, ordered by their lowest solver index (locality of the
+// gathers and scatters): corners, rest frames and weights in float, identity rotations; padding
+// lanes weigh 0.
+void DeformerImpl::buildTetBlocks(const TetMesh& mesh, const TetRestFrames& frames, const std::vector<double>& weights) {
   std::vector<std::int32_t> order(static_cast<size_t>(tet_count_));
   std::iota(order.begin(), order.end(), 0);
   auto key = [&](std::int32_t t) {
@@ -280,7 +332,12 @@ Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(s
     }
   }
 
-  // --- Rotation interpolation: harmonic weights per oriented region handle. ---
+}
+
+// Rotation interpolation: harmonic weights per oriented region handle, 0 on tets touching another
+// handle (slot order).
+void DeformerImpl::buildHarmonicWeights(const TetMesh& mesh, const DeformerSetup& setup, const std::vector<std::int32_t>& handle_of_vertex) {
+  const auto block_count = static_cast<std::int32_t>(blocks_.size());
   std::vector<std::vector<std::int32_t>> oriented_tets;
   for (size_t r = 0; r < setup.region_handles.size(); ++r) {
     if (setup.region_handles[r].oriented) {
@@ -312,7 +369,12 @@ Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(s
     rotation_increment_.assign(oriented_regions_.size(), Eigen::Quaterniond::Identity());
   }
 
-  // --- Rigid groups. ---
+}
+
+// Rigid groups (CSR over slots), then the rotation pass's per-slot coefficients: volume-term weights
+// and the inversion guard's k (0 in rigid groups), with the implicit guard's buffers.
+void DeformerImpl::buildRigidGroupsAndCoefficients(const DeformerSetup& setup) {
+  const auto block_count = static_cast<std::int32_t>(blocks_.size());
   std::vector<char> grouped(static_cast<size_t>(tet_count_), 0);
   group_start_.push_back(0);
   for (size_t g = 0; g < setup.rigid_groups.size(); ++g) {
@@ -348,18 +410,9 @@ Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : options_(s
     }
   }
 
-  if (options_.linear_constraint) {
-    constraint_g_.assign(static_cast<size_t>(vertex_count_) * kVectorStride, 0.0);
-    constraint_z_.assign(static_cast<size_t>(vertex_count_) * kVectorStride, 0.0);
-  }
-
-  vertex_targets_.resize(static_cast<size_t>(vertex_handle_count_));
-  region_targets_.resize(setup.region_handles.size());
-  point_targets_.resize(setup.point_handles.size());
-  reset();
 }
 
-void Deformer::reset() {
+void DeformerImpl::reset() {
   for (auto& block : blocks_) {
     for (int l = 0; l < kTetBlockWidth; ++l) {
       block.rotation[0][l] = 1.0f;
@@ -384,7 +437,7 @@ void Deformer::reset() {
 }
 
 
-void Deformer::rememberRotations() {
+void DeformerImpl::rememberRotations() {
   if (previous_rotation_.empty()) return;
   for (size_t b = 0; b < blocks_.size(); ++b) {
     for (int c = 0; c < 4; ++c) {
@@ -393,7 +446,7 @@ void Deformer::rememberRotations() {
   }
 }
 
-bool Deformer::acceptTargets(const HandleTargets& targets, std::uint32_t& flags) {
+bool DeformerImpl::acceptTargets(const HandleTargets& targets, std::uint32_t& flags) {
   if (targets.vertex_positions.size() != static_cast<size_t>(vertex_handle_count_) ||
       targets.region_transforms.size() != region_targets_.size() ||
       targets.point_positions.size() != point_targets_.size()) {
@@ -431,7 +484,7 @@ bool Deformer::acceptTargets(const HandleTargets& targets, std::uint32_t& flags)
   return true;
 }
 
-void Deformer::updateConstantRhs() {
+void DeformerImpl::updateConstantRhs() {
   // Handle displacements (target - rest) into the handle slots of u.
   for (std::int32_t h = 0; h < handle_count_; ++h) {
     double* out = &u_[kVectorStride * static_cast<size_t>(free_count_ + h)];
@@ -488,7 +541,7 @@ void Deformer::updateConstantRhs() {
   }
 }
 
-void Deformer::interpolateRotations() {
+void DeformerImpl::interpolateRotations() {
   if (harmonic_weights_.empty()) return;
   bool any = false;
   for (size_t k = 0; k < oriented_regions_.size(); ++k) {
@@ -506,13 +559,13 @@ void Deformer::interpolateRotations() {
   rebuildDelta();
 }
 
-void Deformer::rebuildDelta() {
+void DeformerImpl::rebuildDelta() {
   std::fill(delta_.begin(), delta_.end(), 0.0f);
   differentialPass(blocks_.data(), static_cast<std::int32_t>(blocks_.size()), delta_.data(), u_.data(), volumeWeights(),
                    guard(), static_cast<float>(options_.inversion_guard_threshold));
 }
 
-void Deformer::writePositions() {
+void DeformerImpl::writePositions() {
   // Solver order: u and x_rest are read sequentially (the prefetchers follow; in mesh order the
   // reads were random and, after the rotation pass has streamed its blocks through the caches,
   // missed: measured ~8 % of a bar_8x8x85 step), the writes scatter.
@@ -535,7 +588,7 @@ void Deformer::writePositions() {
   mirror(padded_float_positions_);
 }
 
-bool Deformer::setLinearConstraint(std::span<const double> g, double c) noexcept {
+bool DeformerImpl::setLinearConstraint(std::span<const double> g, double c) noexcept {
   constraint_active_ = false;
   if (constraint_g_.empty() || g.size() != 3 * static_cast<size_t>(vertex_count_) || !std::isfinite(c)) return false;
   for (std::int32_t s = 0; s < vertex_count_; ++s) {
@@ -557,13 +610,13 @@ bool Deformer::setLinearConstraint(std::span<const double> g, double c) noexcept
   return true;
 }
 
-bool Deformer::setLinearConstraintValue(double c) noexcept {
+bool DeformerImpl::setLinearConstraintValue(double c) noexcept {
   if (!constraint_active_ || !std::isfinite(c)) return false;
   constraint_rhs_ = c - constraint_rest_dot_;
   return true;
 }
 
-void Deformer::applyLinearConstraint() {
+void DeformerImpl::applyLinearConstraint() {
   // g . x = g . x_rest + g . u: the displacement part over every slot (free and handles).
   const double gu = dot(constraint_g_.data(), u_.data(), u_.size());
   const double mu = (constraint_rhs_ - gu) / constraint_gz_;
@@ -571,7 +624,7 @@ void Deformer::applyLinearConstraint() {
   for (size_t i = 0; i < free4; ++i) u_[i] += mu * constraint_z_[i];
 }
 
-StepStats Deformer::step(const HandleTargets& targets, const StepBudget& budget) {
+StepStats DeformerImpl::step(const HandleTargets& targets, const StepBudget& budget) {
   StepStats stats;
   const auto start = Clock::now();
   acceptTargets(targets, stats.flags);
@@ -645,19 +698,19 @@ StepStats Deformer::step(const HandleTargets& targets, const StepBudget& budget)
   return stats;
 }
 
-Eigen::Vector3d Deformer::position(std::int32_t v) const {
+Eigen::Vector3d DeformerImpl::position(std::int32_t v) const {
   const double* p = &positions_[3 * static_cast<size_t>(v)];
   return {p[0], p[1], p[2]};
 }
 
-Eigen::Quaterniond Deformer::rotation(std::int32_t t) const {
+Eigen::Quaterniond DeformerImpl::rotation(std::int32_t t) const {
   const std::int32_t s = slotOfTet(t);
   const TetBlock& block = blocks_[static_cast<size_t>(s / kTetBlockWidth)];
   const int l = s % kTetBlockWidth;
   return {block.rotation[0][l], block.rotation[1][l], block.rotation[2][l], block.rotation[3][l]};
 }
 
-bool Deformer::setFrameGuide(std::span<const float> wxyz_per_tet) noexcept {
+bool DeformerImpl::setFrameGuide(std::span<const float> wxyz_per_tet) noexcept {
   if (guide_.empty() || wxyz_per_tet.size() != 4 * static_cast<size_t>(tet_count_)) return false;
   for (std::int32_t t = 0; t < tet_count_; ++t) {
     const std::int32_t s = slotOfTet(t);
@@ -668,7 +721,7 @@ bool Deformer::setFrameGuide(std::span<const float> wxyz_per_tet) noexcept {
   return true;
 }
 
-void Deformer::setRotations(std::span<const Eigen::Quaterniond> rotations) {
+void DeformerImpl::setRotations(std::span<const Eigen::Quaterniond> rotations) {
   if (rotations.size() != static_cast<size_t>(tet_count_)) return;
   for (std::int32_t t = 0; t < tet_count_; ++t) {
     const std::int32_t s = slotOfTet(t);
@@ -683,5 +736,29 @@ void Deformer::setRotations(std::span<const Eigen::Quaterniond> rotations) {
   rememberRotations();
   rebuildDelta();
 }
+
+// Deformer: the public face, each member forwarding to its DeformerImpl (one call, no other work).
+Deformer::Deformer(const TetMesh& mesh, const DeformerSetup& setup) : impl_(std::make_unique<DeformerImpl>(mesh, setup)) {}
+Deformer::~Deformer() = default;
+Deformer::Deformer(Deformer&&) noexcept = default;
+Deformer& Deformer::operator=(Deformer&&) noexcept = default;
+StepStats Deformer::step(const HandleTargets& targets, const StepBudget& budget) { return impl_->step(targets, budget); }
+std::span<const double> Deformer::positions() const noexcept { return impl_->positions(); }
+std::span<const double> Deformer::paddedPositions() const noexcept { return impl_->paddedPositions(); }
+std::span<const float> Deformer::paddedFloatPositions() const noexcept { return impl_->paddedFloatPositions(); }
+Eigen::Vector3d Deformer::position(std::int32_t v) const { return impl_->position(v); }
+Eigen::Quaterniond Deformer::rotation(std::int32_t t) const { return impl_->rotation(t); }
+void Deformer::setRotations(std::span<const Eigen::Quaterniond> rotations) { impl_->setRotations(rotations); }
+bool Deformer::setFrameGuide(std::span<const float> wxyz_per_tet) noexcept { return impl_->setFrameGuide(wxyz_per_tet); }
+bool Deformer::setLinearConstraint(std::span<const double> g, double c) noexcept { return impl_->setLinearConstraint(g, c); }
+bool Deformer::setLinearConstraintValue(double c) noexcept { return impl_->setLinearConstraintValue(c); }
+void Deformer::clearLinearConstraint() noexcept { impl_->clearLinearConstraint(); }
+bool Deformer::hasLinearConstraint() const noexcept { return impl_->hasLinearConstraint(); }
+void Deformer::reset() { impl_->reset(); }
+std::int32_t Deformer::vertexCount() const noexcept { return impl_->vertexCount(); }
+std::int32_t Deformer::tetCount() const noexcept { return impl_->tetCount(); }
+std::int32_t Deformer::freeVertexCount() const noexcept { return impl_->freeVertexCount(); }
+std::int64_t Deformer::factorNonZeros() const noexcept { return impl_->factorNonZeros(); }
+double Deformer::factorizeSeconds() const noexcept { return impl_->factorizeSeconds(); }
 
 }  // namespace tetrig

@@ -21,7 +21,7 @@
 // each coordinate takes its own step lengths) plus the guarded tets' product. No bound on k: the
 // splitting of the explicit guard is not used, so nothing limits it to k <= 1 and no push cap is
 // needed. Handles do not move: their components of r, z, p are kept 0.
-#include "tetrig/deformer.hpp"
+#include "tetrig/deformer_impl.hpp"
 #include "tetrig/rotation_kernel.hpp"
 #include "padded_dot.hpp"
 
@@ -72,7 +72,7 @@ void scatterGradient(const GuardedTet& t, const Eigen::Matrix3d& x, double* out)
 
 }  // namespace
 
-void Deformer::collectGuardedTets() {
+void DeformerImpl::collectGuardedTets() {
   // det F of every slot from the rotation pass (float, as the explicit guard's); most tets are
   // above tau, so this is a scan of two float arrays. alpha as the explicit guard's scalar form
   // (inversionGuardTerm), without its push cap.
@@ -88,7 +88,7 @@ void Deformer::collectGuardedTets() {
   guarded_count_ = n;
 }
 
-void Deformer::implicitGuardSolve() {
+void DeformerImpl::implicitGuardSolve() {
   const size_t free4 = static_cast<size_t>(free_count_) * kVectorStride;
   const auto tetOf = [this](std::int32_t s) { return guardedTet(blocks_[static_cast<size_t>(s / kTetBlockWidth)], s % kTetBlockWidth); };
   // r_0 = sum_j alpha_j a_j G_j^T (R_j - I - H_j(u_0)), free components only.

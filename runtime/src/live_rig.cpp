@@ -1,11 +1,12 @@
 // The live rig (DESIGN.md 6a): marker binding by label, occlusion prediction blended in and out
 // without pops, Deformer::step (Stoll et al. 2007 section 2.3) and pose transfer x_fine = B x_tet
 // (eq. 2.12) with area-weighted vertex normals. Equations in tetrig/live_rig.hpp and docs/live.md.
-#include "tetrig/live_rig.hpp"
+#include "tetrig/live_rig_impl.hpp"
 
 #include "tetrig/clock.hpp"
 #include "tetrig/polar.hpp"
 #include "tetrig/pose_transfer.hpp"
+#include "tetrig/pose_transfer_padded.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -116,7 +117,7 @@ void vertexNormals(const float* x, std::span<const std::int32_t> triangles, std:
 
 }  // namespace
 
-LiveRig::LiveRig(const Rig& rig, const LiveRigOptions& options, const Rig* coarse_rig)
+LiveRigImpl::LiveRigImpl(const Rig& rig, const LiveRigOptions& options, const Rig* coarse_rig)
     : rig_(&validated(rig)),
       options_(options),
       deformer_(rig.tet_mesh, liveSetup(rig, options, coarseRigOf(rig, options, coarse_rig) != nullptr)),
@@ -215,7 +216,7 @@ LiveRig::LiveRig(const Rig& rig, const LiveRigOptions& options, const Rig* coars
   }
 }
 
-void LiveRig::buildCoarseLevel(const Rig& coarse) {
+void LiveRigImpl::buildCoarseLevel(const Rig& coarse) {
   if (std::string e = coarseLevelMismatch(*rig_, coarse); !e.empty()) {
     throw std::invalid_argument("live rig: " + e + " (build both from the same mesh, rig description and marker clip)");
   }
@@ -243,7 +244,7 @@ void LiveRig::buildCoarseLevel(const Rig& coarse) {
   coarse_ = std::make_unique<CoarseLevel>(rig_->tet_mesh, coarse.tet_mesh, setup, co);
 }
 
-std::span<const std::int32_t> LiveRig::fineTriangles() const noexcept {
+std::span<const std::int32_t> LiveRigImpl::fineTriangles() const noexcept {
   return {rig_->fine_triangles.data(), static_cast<std::size_t>(rig_->fine_triangles.rows()) * 3};
 }
 
@@ -258,7 +259,7 @@ std::vector<std::string> labelSubjects(std::span<const std::string> labels_by_id
   return subjects;
 }
 
-MarkerBindingReport LiveRig::bindLabels(std::span<const std::string> labels_by_id, std::string_view subject) {
+MarkerBindingReport LiveRigImpl::bindLabels(std::span<const std::string> labels_by_id, std::string_view subject) {
   const std::size_t ids = std::min(labels_by_id.size(), kMaxIds);
   const std::vector<RigMarker>& markers = rig_->markers;
   MarkerBindingReport report;
@@ -337,13 +338,13 @@ MarkerBindingReport LiveRig::bindLabels(std::span<const std::string> labels_by_i
   return report;
 }
 
-void LiveRig::setRegionTarget(std::int32_t region, const RigidTransform& target) noexcept {
+void LiveRigImpl::setRegionTarget(std::int32_t region, const RigidTransform& target) noexcept {
   if (region < 0 || static_cast<std::size_t>(region) >= region_targets_.size()) return;
   region_targets_[static_cast<std::size_t>(region)] = target;
   regions_changed_ = true;
 }
 
-double LiveRig::blendWeight(std::int64_t since_ns) const noexcept {
+double LiveRigImpl::blendWeight(std::int64_t since_ns) const noexcept {
   if (blend_ns_ <= 0) return 1.0;
   const double u = std::clamp(static_cast<double>(since_ns) / static_cast<double>(blend_ns_), 0.0, 1.0);
   return u * u * (3.0 - 2.0 * u);
@@ -352,7 +353,7 @@ double LiveRig::blendWeight(std::int64_t since_ns) const noexcept {
 // The frame path in named steps: the clock, the measurements, the tracks and targets, the solve,
 // the pose transfer and its bound. processFrame() runs them in order.
 
-LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget& budget, float* positions, float* normals) noexcept {
+LiveFrameStats LiveRigImpl::processFrame(const MarkerFrame& frame, const StepBudget& budget, float* positions, float* normals) noexcept {
   LiveFrameStats stats;
   stats.prepare_ns = prepareNextFrame();
   const std::size_t markers = rig_->markers.size();
@@ -380,7 +381,7 @@ LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget&
 }
 
 // 1. Time since the previous frame, from the frames' own timestamps (never negative).
-std::int64_t LiveRig::advanceClock(const MarkerFrame& frame) noexcept {
+std::int64_t LiveRigImpl::advanceClock(const MarkerFrame& frame) noexcept {
   const std::int64_t source_ns = frame.device_timestamp_ns != 0 ? frame.device_timestamp_ns : frame.receive_timestamp_ns;
   std::int64_t dt_ns = 0;
   if (!have_time_) {
@@ -397,7 +398,7 @@ std::int64_t LiveRig::advanceClock(const MarkerFrame& frame) noexcept {
 
 // 2. Measurements: bound ids, valid, finite, sane after alignment, plausible (plausibleSample);
 // the pose sensors' samples move their regions. Returns the markers measured.
-std::uint32_t LiveRig::takeMeasurements(const MarkerFrame& frame, LiveFrameStats& stats) noexcept {
+std::uint32_t LiveRigImpl::takeMeasurements(const MarkerFrame& frame, LiveFrameStats& stats) noexcept {
   const Rig& rig = *rig_;
   const std::size_t markers = rig.markers.size();
   std::fill(measured_.begin(), measured_.end(), std::uint8_t{0});
@@ -457,7 +458,7 @@ std::uint32_t LiveRig::takeMeasurements(const MarkerFrame& frame, LiveFrameStats
 
 // 3. Predictions from the deformer's current pose, each marker's blend state, then the targets.
 // Returns the markers blending.
-std::uint32_t LiveRig::updateTracksAndTargets(LiveFrameStats& stats) noexcept {
+std::uint32_t LiveRigImpl::updateTracksAndTargets(LiveFrameStats& stats) noexcept {
   const std::size_t markers = rig_->markers.size();
   previous_prediction_.swap(prediction_);
   refreshPredictions();
@@ -513,7 +514,7 @@ void addStep(StepStats& frame, const StepStats& more) noexcept {
 
 // 4. The solve: the coarse level's guide, then the fine step (split when the predictions are
 // refreshed after the first iteration or the volume constraint is linearized per iteration).
-void LiveRig::solve(const StepBudget& budget, std::uint32_t blending, LiveFrameStats& stats) noexcept {
+void LiveRigImpl::solve(const StepBudget& budget, std::uint32_t blending, LiveFrameStats& stats) noexcept {
   const std::size_t markers = rig_->markers.size();
   const HandleTargets targets = frameTargets();
   // Refresh only when some marker is fully measured: that is what moves the body in the first
@@ -578,7 +579,7 @@ void LiveRig::solve(const StepBudget& budget, std::uint32_t blending, LiveFrameS
 // 5. Pose transfer into the caller's buffer, and its bound: never publish a non-finite or
 // implausible value (the pose must lie near where most of this frame's markers are; without
 // markers, its handles' targets). A rejected pose writes the last one again and restarts the solver.
-void LiveRig::transferAndBound(std::uint32_t measured, float* positions, float* normals, LiveFrameStats& stats) noexcept {
+void LiveRigImpl::transferAndBound(std::uint32_t measured, float* positions, float* normals, LiveFrameStats& stats) noexcept {
   const std::size_t markers = rig_->markers.size();
   const std::int64_t t0 = monotonicNowNs();
   const std::size_t n = rest_positions_.size();
@@ -618,7 +619,7 @@ void LiveRig::transferAndBound(std::uint32_t measured, float* positions, float* 
   stats.pose_transfer_ns = monotonicNowNs() - t0;
 }
 
-std::int64_t LiveRig::prepareNextFrame(std::chrono::steady_clock::time_point deadline) noexcept {
+std::int64_t LiveRigImpl::prepareNextFrame(std::chrono::steady_clock::time_point deadline) noexcept {
   if (!next_frame_pending_) return 0;
   next_frame_pending_ = false;
   const std::int64_t t0 = monotonicNowNs();
@@ -646,7 +647,7 @@ std::int64_t LiveRig::prepareNextFrame(std::chrono::steady_clock::time_point dea
   return std::max<std::int64_t>(1, monotonicNowNs() - t0);
 }
 
-HandleTargets LiveRig::frameTargets() const noexcept {
+HandleTargets LiveRigImpl::frameTargets() const noexcept {
   HandleTargets targets;
   targets.vertex_positions = vertex_targets_;
   targets.region_transforms = region_targets_;
@@ -654,13 +655,13 @@ HandleTargets LiveRig::frameTargets() const noexcept {
   return targets;
 }
 
-void LiveRig::linearizeVolumeConstraint(const float* fine) noexcept {
+void LiveRigImpl::linearizeVolumeConstraint(const float* fine) noexcept {
   const double c = volume_constraint_->linearize(deformer_.positions(), fine, constraint_gradient_);
   deformer_.setLinearConstraint(constraint_gradient_, c);
   frames_since_linearized_ = 0;
 }
 
-void LiveRig::transferPose(float* positions) const noexcept {
+void LiveRigImpl::transferPose(float* positions) const noexcept {
   if (split_ && blocked_b_.rows > 0) {
     split_->apply(deformer_.paddedFloatPositions().data(), positions);
   } else if (split_) {
@@ -672,7 +673,7 @@ void LiveRig::transferPose(float* positions) const noexcept {
   }
 }
 
-bool LiveRig::plausibleSample(std::size_t k, const Eigen::Vector3d& x) const noexcept {
+bool LiveRigImpl::plausibleSample(std::size_t k, const Eigen::Vector3d& x) const noexcept {
   if (!(max_speed_ > 0.0)) return true;
   // The marker's own last accepted sample, while it is recent: no marker moves faster than v.
   if (has_accepted_[k]) {
@@ -690,11 +691,11 @@ bool LiveRig::plausibleSample(std::size_t k, const Eigen::Vector3d& x) const noe
   return (x - prediction_[k]).squaredNorm() <= bound * bound;
 }
 
-double LiveRig::dropoutWeight(const Track& track) const noexcept {
+double LiveRigImpl::dropoutWeight(const Track& track) const noexcept {
   return 1.0 - blendWeight(now_ns_ - track.dropout_ns);
 }
 
-void LiveRig::refreshPredictions() noexcept {
+void LiveRigImpl::refreshPredictions() noexcept {
   // A marker measured now that was measured (settled) before needs no prediction: its target is
   // the measurement. Every other one does (predicted, blending, or dropping out / returning now).
   for (std::size_t k = 0; k < skip_prediction_.size(); ++k)
@@ -708,7 +709,7 @@ void LiveRig::refreshPredictions() noexcept {
   }
 }
 
-std::uint32_t LiveRig::updateTargets() noexcept {
+std::uint32_t LiveRigImpl::updateTargets() noexcept {
   std::uint32_t blending = 0;
   for (std::size_t k = 0; k < tracks_.size(); ++k) {
     const Track& track = tracks_[k];
@@ -749,9 +750,47 @@ std::uint32_t LiveRig::updateTargets() noexcept {
   return blending;
 }
 
-void LiveRig::writeLastPose(float* positions, float* normals) const noexcept {
+void LiveRigImpl::writeLastPose(float* positions, float* normals) const noexcept {
   if (positions != nullptr) std::memcpy(positions, last_positions_.data(), last_positions_.size() * sizeof(float));
   if (normals != nullptr && options_.normals) std::memcpy(normals, last_normals_.data(), last_normals_.size() * sizeof(float));
 }
+
+// LiveRig: the public face, each member forwarding to its LiveRigImpl (one call, no other work).
+LiveRig::LiveRig(const Rig& rig, const LiveRigOptions& options, const Rig* coarse_rig)
+    : impl_(std::make_unique<LiveRigImpl>(rig, options, coarse_rig)) {}
+LiveRig::~LiveRig() = default;
+LiveRig::LiveRig(LiveRig&&) noexcept = default;
+LiveRig& LiveRig::operator=(LiveRig&&) noexcept = default;
+MarkerBindingReport LiveRig::bindLabels(std::span<const std::string> labels_by_id, std::string_view subject) {
+  return impl_->bindLabels(labels_by_id, subject);
+}
+LiveFrameStats LiveRig::processFrame(const MarkerFrame& frame, const StepBudget& budget, float* positions, float* normals) noexcept {
+  return impl_->processFrame(frame, budget, positions, normals);
+}
+std::int64_t LiveRig::prepareNextFrame(std::chrono::steady_clock::time_point deadline) noexcept {
+  return impl_->prepareNextFrame(deadline);
+}
+void LiveRig::writeLastPose(float* positions, float* normals) const noexcept { impl_->writeLastPose(positions, normals); }
+std::int32_t LiveRig::fineVertexCount() const noexcept { return impl_->fineVertexCount(); }
+std::span<const std::int32_t> LiveRig::fineTriangles() const noexcept { return impl_->fineTriangles(); }
+std::span<const float> LiveRig::restPositions() const noexcept { return impl_->restPositions(); }
+std::span<const float> LiveRig::restNormals() const noexcept { return impl_->restNormals(); }
+const Rig& LiveRig::rig() const noexcept { return impl_->rig(); }
+const Deformer& LiveRig::deformer() const noexcept { return impl_->deformer(); }
+const CoarseLevel* LiveRig::coarseLevel() const noexcept { return impl_->coarseLevel(); }
+const LiveRigOptions& LiveRig::options() const noexcept { return impl_->options(); }
+bool LiveRig::volumeNotKept() const noexcept { return impl_->volumeNotKept(); }
+std::int64_t LiveRig::poseTransferBytes() const noexcept { return impl_->poseTransferBytes(); }
+void LiveRig::setRegionTarget(std::int32_t region, const RigidTransform& target) noexcept { impl_->setRegionTarget(region, target); }
+std::span<const RigidTransform> LiveRig::regionTargets() const noexcept { return impl_->regionTargets(); }
+std::span<const Eigen::Vector3d> LiveRig::vertexTargets() const noexcept { return impl_->vertexTargets(); }
+std::span<const Eigen::Vector3d> LiveRig::pointTargets() const noexcept { return impl_->pointTargets(); }
+std::span<const Eigen::Vector3d> LiveRig::markerTargets() const noexcept { return impl_->markerTargets(); }
+std::span<const Eigen::Vector3d> LiveRig::markerPredictions() const noexcept { return impl_->markerPredictions(); }
+std::span<const std::uint8_t> LiveRig::markerMeasured() const noexcept { return impl_->markerMeasured(); }
+std::span<const std::uint8_t> LiveRig::markerRejected() const noexcept { return impl_->markerRejected(); }
+std::span<const Eigen::Quaterniond> LiveRig::markerAnchorRotations() const noexcept { return impl_->markerAnchorRotations(); }
+MarkerTrackState LiveRig::markerState(std::int32_t marker) const noexcept { return impl_->markerState(marker); }
+std::int32_t LiveRig::markerOfId(std::uint16_t id) const noexcept { return impl_->markerOfId(id); }
 
 }  // namespace tetrig

@@ -1,5 +1,6 @@
 // Pose transfer x_fine = B x_tet (Stoll et al. 2007, eq. 2.12) over a CSR matrix.
 #include "tetrig/pose_transfer.hpp"
+#include "tetrig/pose_transfer_padded.hpp"
 
 #include <cmath>
 #include <limits>

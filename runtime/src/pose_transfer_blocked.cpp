@@ -4,6 +4,7 @@
 //
 // W(c, l) = B(r_l, c), zero where row r_l does not use column c.
 #include "tetrig/pose_transfer_blocked.hpp"
+#include "tetrig/pose_transfer_padded.hpp"
 
 #include <algorithm>
 #include <cmath>

@@ -5,7 +5,7 @@
 // stride-3 kernel in pose_transfer.cpp). Two partial sums per row (even and odd entries), in double
 // whatever the weights' type. The live rig streams B's compact copy (float weights, 16-bit columns:
 // narrowPoseTransfer), half the bytes of the rig's double B.
-#include "tetrig/pose_transfer.hpp"
+#include "tetrig/pose_transfer_padded.hpp"
 
 #include <cstdint>
 

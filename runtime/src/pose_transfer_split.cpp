@@ -8,6 +8,7 @@
 // setting busy_ (seq_cst on both sides), so a worker that wakes after the caller has already
 // finished the job takes no chunk of it: next_chunk_ is exhausted, and the next job's reset
 // happens only after the caller saw busy_ == 0.
+#include "tetrig/pose_transfer_padded.hpp"
 #include "tetrig/pose_transfer_split.hpp"
 
 #include "futex.hpp"

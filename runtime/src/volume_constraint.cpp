@@ -1,6 +1,7 @@
 // The fine mesh's enclosed volume as a linear constraint on the tet-mesh positions
 // (tetrig/volume_constraint.hpp has the equations).
 #include "tetrig/volume_constraint.hpp"
+#include "tetrig/pose_transfer_padded.hpp"
 
 #include "padded_dot.hpp"
 #include "volume_gradient.hpp"

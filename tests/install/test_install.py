@@ -69,6 +69,24 @@ def main():
         leaked = [s for s in exported if not s.startswith("tetrig_") and s not in linker_defined]
         check(not leaked, f"libtetrig.so exports symbols other than tetrig_*: {leaked[:8]}")
 
+        # The public headers stand alone: each installed C++ header compiles by itself against the
+        # installed tree (a header that reached for one of the runtime's internal headers, which are
+        # not installed, fails here), and none of the internal headers is installed.
+        env_pc = dict(os.environ, PKG_CONFIG_PATH=os.path.join(lib, "pkgconfig"))
+        header_flags = run(["pkg-config", "--cflags", "tetrig-devices"], env=env_pc).stdout.split()
+        include_root = os.path.join(prefix, "include")
+        headers = sorted(os.path.relpath(os.path.join(d, f), include_root)
+                         for d, _, files in os.walk(os.path.join(include_root, "tetrig")) for f in files if f.endswith(".hpp"))
+        check(len(headers) > 10, f"only {len(headers)} C++ headers installed")
+        for header in headers:
+            compiled = subprocess.run(["c++", "-std=c++20", "-fsyntax-only", "-Wall", "-Wextra", "-Werror", "-x", "c++", "-"] + header_flags,
+                                      input=f"#include <{header}>\n", capture_output=True, text=True)
+            check(compiled.returncode == 0, f"the installed header {header} does not compile on its own: {compiled.stderr[-600:]}")
+        internal = sorted(os.listdir(os.path.join(source_dir, "runtime", "internal", "tetrig")))
+        installed_internal = [h for h in internal if os.path.exists(os.path.join(include_root, "tetrig", h))]
+        check(len(internal) > 10 and not installed_internal, f"internal headers installed: {installed_internal}")
+        print(f"{len(headers)} installed C++ headers compile on their own; {len(internal)} internal headers not installed")
+
         # 2. The outside project with the CMake package.
         built = {}
         cmake_build = os.path.join(tmp, "build-cmake")

@@ -7,6 +7,9 @@
 #include "scenes.hpp"
 #include "tetrig/live_rig.hpp"
 #include "tetrig/marker_prediction.hpp"
+#include "tetrig/pose_transfer_blocked.hpp"
+#include "tetrig/pose_transfer_padded.hpp"
+#include "tetrig/volume_constraint.hpp"
 
 #include <gtest/gtest.h>
 

@@ -1,4 +1,4 @@
-// PoseSensorDriver (runtime/include/tetrig/pose_sensor.hpp): a Razer Hydra controller driving a
+// PoseSensorDriver (runtime/internal/tetrig/pose_sensor.hpp): a Razer Hydra controller driving a
 // region handle, with a clutch or absolutely. The input is a RECORDED stream: 52-byte Hydra motion
 // reports built with the drivers' encoder (integer mm, quaternions in 1/32768), decoded by
 // HydraDecoder into MarkerFrames exactly as a live device's reports are. Expectations are computed

@@ -1,5 +1,6 @@
 // Run-time pose transfer x_fine = B x_tet over a CSR matrix.
 #include "tetrig/pose_transfer.hpp"
+#include "tetrig/pose_transfer_padded.hpp"
 #include "tetrig/pose_transfer_blocked.hpp"
 #include "tetrig/pose_transfer_split.hpp"
 

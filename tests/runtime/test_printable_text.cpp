@@ -1,4 +1,4 @@
-// Terminal-safe text (runtime/include/tetrig/printable_text.hpp): what is escaped (C0, DEL, C1 raw
+// Terminal-safe text (runtime/internal/tetrig/printable_text.hpp): what is escaped (C0, DEL, C1 raw
 // and UTF-8-encoded, malformed UTF-8 of every kind RFC 3629 forbids, line separators and bidi
 // controls), what is kept (ASCII, well-formed non-ASCII UTF-8, backslashes), the cut at a
 // character boundary, and that no output of any input holds a byte a terminal acts on.

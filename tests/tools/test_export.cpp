@@ -13,6 +13,7 @@
 #include "tetrig/drivers/c3d_playback.hpp"
 #include "tetrig/drivers/c3d_reader.hpp"
 #include "tetrig/live_rig.hpp"
+#include "tetrig/volume_constraint.hpp"
 
 #include <gtest/gtest.h>
 #include <tiny_gltf.h>

@@ -65,6 +65,22 @@ TEST(SolverSettings, TheDefaultsAreTheAccurateSettingsAndPlainIsTheFastOne) {
   EXPECT_NO_THROW(tools::checkSolverSettings(p));
 }
 
+// The help names each switch as a user types it (no CLI11 notation such as "{false}" or "!--no-x"),
+// and says which one is the default.
+TEST(SolverSettings, TheHelpSpellsEachSwitchAsTyped) {
+  CLI::App app{"solver flags"};
+  SolverSettings s;
+  tools::addSolverFlags(app, s);
+  const std::string help = app.help();
+  for (const char* flag : {"--predict", "--no-predict", "--keep-volume", "--no-keep-volume", "--no-coarse", "--relax",
+                           "--inversion-guard", "--inversion-guard-solves", "--inversion-guard-threshold", "--after-publish-iterations"}) {
+    EXPECT_NE(help.find(std::string("  ") + flag + " "), std::string::npos) << flag << " is not listed as typed:\n" << help;
+  }
+  EXPECT_EQ(help.find('{'), std::string::npos) << help;
+  EXPECT_EQ(help.find("!--"), std::string::npos) << help;
+  EXPECT_NE(help.find("Keep the body's volume constant (default on)"), std::string::npos) << help;
+}
+
 TEST(SolverSettings, EveryToolStartsFromTheSameDefaults) {
   EXPECT_EQ(LiveRigOptions{}.solver, SolverSettings{});
   EXPECT_EQ(tools::RunOptions{}.solver, SolverSettings{});
@@ -86,7 +102,8 @@ TEST(SolverSettings, TheFlagsSetWhatTheySay) {
   EXPECT_EQ(parsed("--inversion-guard-threshold 0.4").inversion_guard_threshold, 0.4);
   EXPECT_EQ(parsed("--after-publish-iterations 2").after_publish_iterations, 2);
   EXPECT_EQ(parsed("--relax 1.2 --relax 1.4").rotation_relaxation, 1.4) << "given twice: the last one counts";
-  EXPECT_FALSE(parsed("--keep-volume --no-keep-volume").volume_constraint);
+  EXPECT_THROW(parsed("--keep-volume --no-keep-volume"), CLI::ExcludesError) << "on and off at once is refused";
+  EXPECT_THROW(parsed("--predict --no-predict"), CLI::ExcludesError);
   // The plain settings by flags.
   SolverSettings plain = parsed("--no-predict --no-keep-volume --inversion-guard 0 --inversion-guard-solves 0 --inversion-guard-threshold 0.5");
   EXPECT_EQ(plain, SolverSettings::plain());

@@ -7,7 +7,7 @@
 //
 // Per frame: every bound, valid, finite, plausible marker (device mm) -> rig units through rig.alignment ->
 // its vertex handle's target; every other rig marker (occluded, invalid, rejected, or named by no source)
-// is driven by its prediction (tetrig/marker_prediction.hpp: its rest offset carried by the
+// is driven by its prediction (docs/live.md, "Occlusion": its rest offset carried by the
 // current rigid motion of the body it is bound to), blended in and out over
 // LiveRigOptions::occlusion_blend_s so nothing pops (docs/live.md, "Occlusion"); then
 // Deformer::step(budget); then x_fine = B x_tet (Stoll et al. 2007 eq. 2.12) from the deformer's
@@ -37,7 +37,7 @@
 // marker while it is recent, else its prediction, with floors from the rig's rest diagonal) is
 // rejected: counted, and the marker is treated as occluded for that frame. Its next plausible sample
 // is taken again (blending back from the prediction).
-// Published poses: outside tetrig/pose_bound.hpp's box (kPoseBoundReach rest diagonals around the
+// Published poses: outside a box (kPoseBoundReach = 2 rest diagonals, docs/live.md "Never NaN", around the
 // per-axis median of the markers' targets) the last pose is written again and flagged.
 // Refresh: when some markers are predicted or blending and
 // some are fully measured, the step runs one iteration, the predictions are recomputed from the
@@ -51,17 +51,10 @@
 // thread): processFrame() allocates nothing, takes no lock, throws nothing and does no I/O.
 #pragma once
 
-#include "tetrig/coarse_level.hpp"
 #include "tetrig/deformer.hpp"
 #include "tetrig/marker_frame.hpp"
-#include "tetrig/marker_prediction.hpp"
-#include "tetrig/pose_bound.hpp"
-#include "tetrig/pose_sensor.hpp"
-#include "tetrig/pose_transfer_blocked.hpp"
-#include "tetrig/pose_transfer_split.hpp"
 #include "tetrig/rig_file.hpp"
 #include "tetrig/solver_settings.hpp"
-#include "tetrig/volume_constraint.hpp"
 
 #include <Eigen/Core>
 
@@ -74,6 +67,9 @@
 #include <vector>
 
 namespace tetrig {
+
+class CoarseLevel;
+class LiveRigImpl;
 
 struct LiveRigOptions {
   double occlusion_blend_s = 0.15;   // blend time when a marker drops out and when it returns (0: no blend)
@@ -118,7 +114,7 @@ enum LiveFrameFlags : std::uint32_t {
   kLiveDeadlineHit = 1u << 3,       // the step stopped at the deadline before max_iterations
   kLiveTargetsRejected = 1u << 4,   // the deformer rejected the targets (kept the previous ones)
   kLivePoseRejected = 1u << 5,      // the step produced a non-finite or implausible pose (outside
-                                    // tetrig/pose_bound.hpp's box): the last pose was written and the
+                                    // the pose bound's box): the last pose was written and the
                                     // deformer was reset to rest (should never happen)
   kLiveMarkersRejected = 1u << 6,   // some valid marker samples were rejected (rejected_marker_samples): those
                                     // markers were driven by their prediction, as occluded ones
@@ -169,13 +165,16 @@ class LiveRig {
   // negative options.
   // coarse_rig (optional): a coarser rig of the same mesh and markers (tetrig build-rig with fewer
   // --tet-vertices) solved every frame before the fine iterations; its rotation change starts the
-  // fine tets (tetrig/coarse_level.hpp). Without one, the rig's own coarse level (Rig::coarse) is
+  // fine tets (docs/fidelity.md, "Coarse level"). Without one, the rig's own coarse level (Rig::coarse) is
   // used if it has one and options.solver.use_coarse_level. Its markers are matched to the rig's by label (every one
   // must be in the rig), its region handles take the rig's region targets (same count required),
   // its other handles stay at rest. Throws std::invalid_argument when it does not fit the rig
   // (coarseLevelMismatch in tetrig/rig_file.hpp: the same checks as a coarse level inside a rig file). The
   // live rig keeps no reference to it.
   explicit LiveRig(const Rig& rig, const LiveRigOptions& options = {}, const Rig* coarse_rig = nullptr);
+  ~LiveRig();
+  LiveRig(LiveRig&&) noexcept;
+  LiveRig& operator=(LiveRig&&) noexcept;
 
   // Load time (allocates): binds the source's label table (labels_by_id[id] labels every Marker
   // with that id; only ids < 65536 can occur) to the rig's markers. A label matches a rig marker
@@ -208,137 +207,45 @@ class LiveRig {
   // Same buffers as processFrame (normals written only with LiveRigOptions::normals). No allocation.
   void writeLastPose(float* positions, float* normals) const noexcept;
 
-  std::int32_t fineVertexCount() const noexcept { return static_cast<std::int32_t>(rest_positions_.size() / 3); }
+  std::int32_t fineVertexCount() const noexcept;
   std::span<const std::int32_t> fineTriangles() const noexcept;  // #F*3 vertex indices, outward (CCW from outside)
-  std::span<const float> restPositions() const noexcept { return rest_positions_; }   // #fine*3, rig units
-  std::span<const float> restNormals() const noexcept { return rest_normals_; }       // #fine*3 (empty unless normals)
-  const Rig& rig() const noexcept { return *rig_; }
-  const Deformer& deformer() const noexcept { return deformer_; }
-  const CoarseLevel* coarseLevel() const noexcept { return coarse_.get(); }  // nullptr without a coarse rig
-  const LiveRigOptions& options() const noexcept { return options_; }
+  std::span<const float> restPositions() const noexcept;   // #fine*3, rig units
+  std::span<const float> restNormals() const noexcept;     // #fine*3 (empty unless normals)
+  const Rig& rig() const noexcept;
+  const Deformer& deformer() const noexcept;
+  const CoarseLevel* coarseLevel() const noexcept;  // nullptr without a coarse rig (tools, tests: internal type)
+  const LiveRigOptions& options() const noexcept;
   // True when options.solver.volume_constraint asked for the fine mesh's volume to be kept but the
   // rig's fine mesh is not closed (and consistently oriented), so the constraint was skipped; tools
   // say so once.
-  bool volumeNotKept() const noexcept { return options_.solver.volume_constraint && volume_constraint_ == nullptr; }
+  bool volumeNotKept() const noexcept;
   // Bytes of B each frame's pose transfer streams: the blocked copy's, or the rig's double B's.
-  std::int64_t poseTransferBytes() const noexcept {
-    return blocked_b_.rows > 0 ? blocked_b_.bytes() : rig_->pose_transfer.bytes();
-  }
+  std::int64_t poseTransferBytes() const noexcept;
 
   // Region handles' targets (x = R x_rest + t, rig units), passed to every step: identity (rest)
   // unless something drives them, e.g. pose sensors, on the solver thread before processFrame.
   // setRegionTarget also makes the next processFrame step when no marker is measured (a held pose
   // would ignore the region); an index out of range is ignored. No allocation.
   void setRegionTarget(std::int32_t region, const RigidTransform& target) noexcept;
-  std::span<const RigidTransform> regionTargets() const noexcept { return region_targets_; }  // one per rig.setup.region_handles
+  std::span<const RigidTransform> regionTargets() const noexcept;  // one per rig.setup.region_handles
   // The vertex- and point-handle targets the last processFrame stepped with (rig units; markers'
   // handles carry their targets, the other handles their rest positions): with regionTargets(), what
   // a second Deformer of the rig needs to solve the same frame (tetrig_fidelity's converged reference).
-  std::span<const Eigen::Vector3d> vertexTargets() const noexcept { return vertex_targets_; }
-  std::span<const Eigen::Vector3d> pointTargets() const noexcept { return point_targets_; }
+  std::span<const Eigen::Vector3d> vertexTargets() const noexcept;
+  std::span<const Eigen::Vector3d> pointTargets() const noexcept;
 
   // For tests and tools, per rig marker (rig.markers order), as of the last processFrame:
-  std::span<const Eigen::Vector3d> markerTargets() const noexcept { return marker_target_; }      // the target it was driven with, rig units
-  std::span<const Eigen::Vector3d> markerPredictions() const noexcept { return prediction_; }    // its prediction, rig units
-  std::span<const std::uint8_t> markerMeasured() const noexcept { return measured_; }            // 1: measured in that frame
-  std::span<const std::uint8_t> markerRejected() const noexcept { return rejected_; }            // 1: its sample was rejected
-                                                                                                  // (so it was predicted)
-  std::span<const Eigen::Quaterniond> markerAnchorRotations() const noexcept { return rotation_; }  // R of its prediction
-  MarkerTrackState markerState(std::int32_t marker) const noexcept { return tracks_[static_cast<std::size_t>(marker)].state; }
+  std::span<const Eigen::Vector3d> markerTargets() const noexcept;      // the target it was driven with, rig units
+  std::span<const Eigen::Vector3d> markerPredictions() const noexcept;  // its prediction, rig units
+  std::span<const std::uint8_t> markerMeasured() const noexcept;        // 1: measured in that frame
+  std::span<const std::uint8_t> markerRejected() const noexcept;        // 1: its sample was rejected (so predicted)
+  std::span<const Eigen::Quaterniond> markerAnchorRotations() const noexcept;  // R of its prediction
+  MarkerTrackState markerState(std::int32_t marker) const noexcept;
   // The rig marker bound to source id `id`, or -1.
-  std::int32_t markerOfId(std::uint16_t id) const noexcept {
-    return id < marker_of_id_.size() ? marker_of_id_[id] : -1;
-  }
+  std::int32_t markerOfId(std::uint16_t id) const noexcept;
 
  private:
-  struct Track {
-    MarkerTrackState state = MarkerTrackState::kPredicted;
-    Eigen::Vector3d offset = Eigen::Vector3d::Zero();  // dropout offset o, in the anchor's frame (R^T o)
-    std::int64_t dropout_ns = 0;                       // t0 (internal clock)
-    std::int64_t return_ns = 0;                        // t1 (internal clock)
-  };
-
-  void buildCoarseLevel(const Rig& coarse);                  // load time
-  double blendWeight(std::int64_t since_ns) const noexcept;  // s((now - event) / T)
-  // processFrame's steps, in order (live_rig.cpp).
-  std::int64_t advanceClock(const MarkerFrame& frame) noexcept;                    // dt since the last frame
-  std::uint32_t takeMeasurements(const MarkerFrame& frame, LiveFrameStats& stats) noexcept;  // returns the markers measured
-  std::uint32_t updateTracksAndTargets(LiveFrameStats& stats) noexcept;           // returns the markers blending
-  void solve(const StepBudget& budget, std::uint32_t blending, LiveFrameStats& stats) noexcept;
-  void transferAndBound(std::uint32_t measured, float* positions, float* normals, LiveFrameStats& stats) noexcept;
-  double dropoutWeight(const Track& track) const noexcept;   // 1 - s((now - t0) / T)
-  void refreshPredictions() noexcept;                         // prediction_ from the deformer's pose
-  void transferPose(float* positions) const noexcept;         // B x_tet of the deformer's pose
-  void linearizeVolumeConstraint(const float* fine) noexcept; // the constraint at the deformer's pose (fine = B x_tet)
-  HandleTargets frameTargets() const noexcept;                // the last frame's vertex, region and point targets
-  std::uint32_t updateTargets() noexcept;                     // targets from the states; returns the blending count
-  bool plausibleSample(std::size_t marker, const Eigen::Vector3d& x) const noexcept;  // LiveRigOptions::max_marker_speed_mm_s
-
-  const Rig* rig_ = nullptr;
-  LiveRigOptions options_;
-  Deformer deformer_;
-  MarkerPredictor predictor_;
-  BlockedPoseTransfer blocked_b_;             // when options.compact_pose_transfer and the rig fits (else empty)
-  std::unique_ptr<PoseTransferSplit> split_;  // when options.split_pose_transfer
-  std::unique_ptr<FineVolumeConstraint> volume_constraint_;  // when options.solver.volume_constraint and the fine mesh is closed
-  std::vector<double> constraint_gradient_;                // its g, #tetV*3
-  std::vector<float> constraint_scratch_;                  // a first iteration's fine pose (#fine*3), on a cold frame
-  int frames_since_linearized_ = 0;
-  bool next_frame_pending_ = false;  // the last accepted frame awaits prepareNextFrame()
-  // Coarse level (with a coarse rig): its handle targets, and per coarse marker its vertex handle
-  // and the rig marker that drives it.
-  std::unique_ptr<CoarseLevel> coarse_;
-  std::vector<Eigen::Vector3d> coarse_vertex_targets_, coarse_point_targets_;
-  std::vector<RigidTransform> coarse_region_targets_;
-  std::vector<std::pair<std::int32_t, std::int32_t>> coarse_marker_handles_;  // (coarse vertex handle, rig marker)
-  std::int64_t blend_ns_ = 0;
-  std::int64_t untimed_ns_ = 0;
-  double max_abs_coordinate_ = 0.0;
-  PoseBound pose_bound_;                          // this frame's box (targets + margin)
-  std::vector<Eigen::Vector3d> region_centroid_;  // rest centroid of each region handle's tets
-
-  // Binding: source id -> rig marker (-1: unknown).
-  std::vector<std::int32_t> marker_of_id_;
-  std::vector<std::uint8_t> other_subject_of_id_;  // 1: another performer's marker (bindLabels' subject)
-  // Pose sensors (rig.pose_sensors): one driver each, the source id that carries it, and this
-  // frame's sample (tetrig/pose_sensor.hpp).
-  std::vector<PoseSensorDriver> sensors_;
-  std::vector<std::int32_t> sensor_of_id_;
-  std::vector<const Marker*> sensor_sample_;
-
-  // Handle targets passed to step().
-  std::vector<Eigen::Vector3d> vertex_targets_;  // one per vertex handle (non-marker ones stay at rest)
-  std::vector<RigidTransform> region_targets_;
-  std::vector<Eigen::Vector3d> point_targets_;   // rest positions of the point handles
-
-  // Per rig marker.
-  std::vector<Track> tracks_;
-  std::vector<Eigen::Vector3d> measurement_, prediction_, previous_prediction_, marker_target_;
-  std::vector<Eigen::Quaterniond> rotation_;  // the anchor rotation R of each prediction
-  std::vector<std::uint8_t> measured_;
-  std::vector<std::uint8_t> skip_prediction_;  // per marker: measured and settled, no prediction needed
-  // Plausible samples (plausibleSample): each marker's last accepted sample and when (sample clock).
-  std::vector<Eigen::Vector3d> accepted_position_;
-  std::vector<std::int64_t> accepted_ns_;
-  std::vector<std::uint8_t> has_accepted_, rejected_;
-  double max_speed_ = 0.0;          // rig units per second (0: no test)
-  double jump_floor_ = 0.0;         // rig units
-  double prediction_bound_ = 0.0;   // rig units
-  std::int64_t own_window_ns_ = 0;  // a marker's own last sample is its reference while this recent
-  std::int64_t sample_ns_ = 0;      // the frames' own clock, advanced on every frame (held ones too)
-  std::int64_t body_ns_ = 0;        // when the last pose solved from accepted samples was published
-  bool body_valid_ = false;         // such a pose exists since the start or the last reset
-
-  // Clock (internal, ns) and whether any frame has stepped yet.
-  bool have_time_ = false;
-  std::int64_t last_source_ns_ = 0;
-  std::int64_t now_ns_ = 0;
-  bool stepped_ = false;
-  bool regions_changed_ = false;  // setRegionTarget since the last processFrame
-
-  // Output: rest and last pose (floats, #fine*3), normals accumulator.
-  std::vector<float> rest_positions_, last_positions_;
-  std::vector<float> rest_normals_, last_normals_, normal_sum_;
+  std::unique_ptr<LiveRigImpl> impl_;  // the live rig's state (tetrig/live_rig_impl.hpp, internal)
 };
 
 }  // namespace tetrig

@@ -6,8 +6,7 @@
 //   // per frame: device marker (mm, device axes) -> rig units with rig.alignment, write the
 //   // target of marker k at targets.vertex_positions[rig.markers[k].vertex_handle];
 //   // x_fine = B x_tet with rig.pose_transfer (tetrig/pose_transfer.hpp).
-//   // pose sensors: one tetrig::PoseSensorDriver per rig.pose_sensors[k] (tetrig/pose_sensor.hpp)
-//   // updates targets.region_transforms[rig.pose_sensors[k].region_handle].
+//   // pose sensors (rig.pose_sensors): tetrig::LiveRig drives their region handles (docs/live.md, "Pose sensors").
 //
 // File = 32-byte header (magic "TETRIGRF", format version, section count, file size, CRC-32C of
 // every byte after the header) + a section table (tag, offset, size per section) + sections.
@@ -77,7 +76,7 @@ struct RigAlignment {
   Eigen::Vector3d apply(const Eigen::Vector3d& device_mm) const { return linear * device_mm + translation; }
 };
 
-// How a pose sensor drives its region handle (tetrig/pose_sensor.hpp has the equations).
+// How a pose sensor drives its region handle (docs/live.md, "Pose sensors", has the equations).
 enum class PoseSensorMode : std::uint8_t {
   kClutch = 0,    // the region follows the controller's motion while a clutch button is held
   kAbsolute = 1,  // the region follows the controller's pose, anchored at its first valid sample
@@ -147,7 +146,7 @@ struct Rig {
   RigAlignment alignment;
   std::vector<RigPoseSensor> pose_sensors;       // optional (empty: the file has no PSNS section)
   std::vector<RigMarkerRegion> marker_regions;   // optional (empty: the file has no MKRG section)
-  // Optional coarse level (tetrig/coarse_level.hpp; the file's CRSE section, absent when null): the
+  // Optional coarse level (docs/fidelity.md, "Coarse level"; the file's CRSE section, absent when null): the
   // same mesh and markers built with fewer tet vertices, in the same rig space. It has no coarse
   // level of its own, every marker of it is a marker of this rig (by label), and it has as many
   // region handles.

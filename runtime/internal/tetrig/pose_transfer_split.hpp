@@ -19,6 +19,7 @@
 #pragma once
 
 #include "tetrig/pose_transfer.hpp"
+#include "tetrig/pose_transfer_padded.hpp"
 #include "tetrig/pose_transfer_blocked.hpp"
 
 #include <atomic>

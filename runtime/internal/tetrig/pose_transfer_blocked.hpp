@@ -20,6 +20,7 @@
 
 #include "tetrig/aligned_vector.hpp"
 #include "tetrig/pose_transfer.hpp"
+#include "tetrig/pose_transfer_padded.hpp"
 
 #include <cstdint>
 #include <span>

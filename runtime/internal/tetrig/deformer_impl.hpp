@@ -1,0 +1,157 @@
+// The deformer's state and solver (internal): what tetrig::Deformer (tetrig/deformer.hpp) holds behind
+// its pointer. The equations, the iteration and the threading rules are those of deformer.hpp; the
+// storage is the solver's own: the split LDL^T factor (ldlt_factor.hpp), tets in blocks of vector
+// lanes (rotation_kernel.hpp), every array in solver order. deformer.cpp and inversion_guard.cpp
+// implement it; only the runtime and its tests include this header.
+#pragma once
+
+#include "tetrig/aligned_vector.hpp"
+#include "tetrig/deformer.hpp"
+#include "tetrig/laplacian.hpp"
+#include "tetrig/ldlt_factor.hpp"
+#include "tetrig/rotation_kernel.hpp"
+#include "tetrig/tet_mesh.hpp"
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <Eigen/SparseCore>
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+namespace tetrig {
+
+class DeformerImpl {
+ public:
+  // The members of tetrig::Deformer of the same names, which forward here (deformer.hpp documents them).
+  DeformerImpl(const TetMesh& mesh, const DeformerSetup& setup);
+  StepStats step(const HandleTargets& targets, const StepBudget& budget);
+  std::span<const double> positions() const { return positions_; }
+  std::span<const double> paddedPositions() const { return padded_positions_; }
+  std::span<const float> paddedFloatPositions() const { return padded_float_positions_; }
+  Eigen::Vector3d position(std::int32_t v) const;
+  Eigen::Quaterniond rotation(std::int32_t t) const;
+  void setRotations(std::span<const Eigen::Quaterniond> rotations);
+  bool setFrameGuide(std::span<const float> wxyz_per_tet) noexcept;
+  bool setLinearConstraint(std::span<const double> g, double c) noexcept;
+  bool setLinearConstraintValue(double c) noexcept;
+  void clearLinearConstraint() noexcept { constraint_active_ = false; }
+  bool hasLinearConstraint() const noexcept { return constraint_active_; }
+  void reset();
+  std::int32_t vertexCount() const { return vertex_count_; }
+  std::int32_t tetCount() const { return tet_count_; }
+  std::int32_t freeVertexCount() const { return free_count_; }
+  std::int64_t factorNonZeros() const { return factor_.factorNonZeros(); }
+  double factorizeSeconds() const { return factorize_seconds_; }
+
+ private:
+  // Load-time steps of the constructor, in order (deformer.cpp).
+  void checkOptions();
+  void checkMeshUsable(const TetMesh& mesh);
+  std::vector<std::int32_t> assignHandleSlots(const TetMesh& mesh, const DeformerSetup& setup);
+  void factorReducedSystem(const TetMesh& mesh, const DeformerSetup& setup, const Eigen::SparseMatrix<double>& laplacian,
+                           const std::vector<std::int32_t>& free_index);
+  void buildSolverOrder(const TetMesh& mesh, const std::vector<std::int32_t>& handle_of_vertex,
+                        const std::vector<std::int32_t>& free_index);
+  void buildHandleCoupling(const Eigen::SparseMatrix<double>& laplacian, const std::vector<std::int32_t>& handle_of_vertex,
+                           const std::vector<std::int32_t>& free_index);
+  void buildPointHandles(const TetMesh& mesh, const DeformerSetup& setup);
+  void buildTetBlocks(const TetMesh& mesh, const TetRestFrames& frames, const std::vector<double>& weights);
+  void buildHarmonicWeights(const TetMesh& mesh, const DeformerSetup& setup, const std::vector<std::int32_t>& handle_of_vertex);
+  void buildRigidGroupsAndCoefficients(const DeformerSetup& setup);
+
+  bool acceptTargets(const HandleTargets& targets, std::uint32_t& flags);
+  void updateConstantRhs();
+  void interpolateRotations();
+  void rebuildDelta();
+  void rememberRotations();  // previous_rotation_ <- the current rotations (no velocity)
+  void writePositions();
+  std::int32_t slotOfTet(std::int32_t t) const { return tet_slot_[static_cast<size_t>(t)]; }
+
+  std::int32_t vertex_count_ = 0, tet_count_ = 0, free_count_ = 0, handle_count_ = 0;
+  DeformerOptions options_;
+  SplitLdlt factor_;
+  double factorize_seconds_ = 0.0;
+
+  // Vertex ordering: free vertex v lives at solver index factor position; handle slot h at free_count_ + h.
+  std::vector<std::int32_t> solver_index_;    // mesh vertex -> solver index
+  std::vector<std::int32_t> mesh_vertex_;     // solver index -> mesh vertex
+  AlignedVector<double> rest_solver_;           // rest positions, solver order, kVectorStride per vertex
+  AlignedVector<double> u_;                     // displacements x - x_rest, solver order (free then handles)
+  AlignedVector<float> delta_;                  // sum_j a_j (R_j - I) G_j, solver order (float: rotation_kernel.hpp)
+  AlignedVector<double> rhs_constant_;          // -L_fh u_h + point terms, free part
+  std::vector<double> positions_;             // mesh order output
+  AlignedVector<double> padded_positions_;      // mesh order output, kVectorStride per vertex
+  AlignedVector<float> padded_float_positions_;  // the same in float
+
+  // -L_fh as CSR over the free rows next to a handle (coupling_row_: their solver index),
+  // columns = handle slots.
+  std::vector<std::int32_t> coupling_row_, coupling_start_, coupling_handle_;
+  std::vector<double> coupling_value_;
+
+  // Handles. Handle slot h: mesh vertex handle_vertex_[h], driven by vertex target or region.
+  std::int32_t vertex_handle_count_ = 0;
+  std::vector<std::int32_t> handle_vertex_;
+  std::vector<std::int32_t> handle_region_;       // region index, or -1 for a vertex handle
+  std::vector<Eigen::Vector3d> vertex_targets_;   // accepted targets
+  std::vector<RigidTransform> region_targets_;
+  std::vector<Eigen::Vector3d> point_targets_;
+
+  // Point handles (soft): corners in solver order, barycentric weights, lambda.
+  std::vector<std::int32_t> point_corner_;  // 4 per point handle
+  std::vector<double> point_weight_;        // 4 per point handle
+  std::vector<Eigen::Vector3d> point_rest_; // rest position of each point handle
+  double point_lambda_ = 0.0;
+
+  // Tets in blocks.
+  std::vector<TetBlock> blocks_;
+  std::vector<std::uint16_t> exact_lanes_;  // rotationPass scratch: one lane mask per block
+  std::vector<std::int32_t> tet_slot_;  // mesh tet -> block * kTetBlockWidth + lane
+
+  // Rotation interpolation: per oriented region, harmonic weights over tets and the rotation the
+  // mesh was last interpolated for.
+  std::vector<std::int32_t> oriented_regions_;          // region index of each oriented handle
+  std::vector<double> harmonic_weights_;                // oriented-handle-major, #T each, slot order
+  std::vector<Eigen::Quaterniond> interpolated_rotation_;
+  std::vector<Eigen::Quaterniond> rotation_increment_;  // scratch
+
+  // Temporal extrapolation (options_.rotation_extrapolation): each slot's rotation at the end of
+  // the previous frame, laid out like the blocks' rotations ([block][component][lane]).
+  AlignedVector<float> previous_rotation_;
+  float extrapolation_max_sin_half_ = 1.0f;  // sin(cap / 2)
+  // Frame guide (options_.frame_guide): this frame's increment per slot, same layout; identity in
+  // padding lanes.
+  AlignedVector<float> guide_;
+  bool guide_pending_ = false;
+
+  // Volume term (options_.volume_weight > 0): w per slot, the blocks' lane layout; 0 in padding
+  // lanes and rigid groups. Empty otherwise.
+  AlignedVector<float> volume_weight_;
+  const float* volumeWeights() const { return volume_weight_.empty() ? nullptr : volume_weight_.data(); }
+  // Inversion guard (options_.inversion_guard > 0): k per slot, 0 for unguarded tets and padding
+  AlignedVector<float> guard_;
+  // The kernels' (explicit) guard; nullptr when the guard is implicit.
+  const float* guard() const { return guard_.empty() || options_.inversion_guard_solves > 0 ? nullptr : guard_.data(); }
+  // Implicit guard (options_.inversion_guard_solves > 0; inversion_guard.cpp): the tets squashed
+  // below tau at the last rotation pass, with alpha_j a_j, and the conjugate-gradient vectors.
+  std::vector<std::int32_t> guarded_slot_;
+  std::vector<double> guarded_coef_;
+  AlignedVector<float> guard_det_;  // det F per slot at the last rotation pass (written by it)
+  std::size_t guarded_count_ = 0;
+  AlignedVector<double> cg_r_, cg_z_, cg_p_, cg_lp_;
+  void collectGuardedTets();
+  void implicitGuardSolve();
+
+  // Rigid groups: CSR over tet slots.
+  std::vector<std::int32_t> group_start_, group_slot_;
+
+  // Linear constraint (options_.linear_constraint): g and z = L_ff^-1 g_f in solver order
+  // (kVectorStride per vertex), c - g . x_rest, g_f . z.
+  AlignedVector<double> constraint_g_, constraint_z_;
+  double constraint_rhs_ = 0.0, constraint_gz_ = 0.0, constraint_rest_dot_ = 0.0;
+  bool constraint_active_ = false;
+  void applyLinearConstraint();
+};
+
+}  // namespace tetrig
