@@ -587,40 +587,74 @@ struct ExportOutputs {
   }
 };
 
-// Solves one clip frame into x: --iterations N, or to convergence (chunks of iterations until no
-// fine vertex moves more than `tolerance`, at most --max-iterations). Counts held, predicted and
-// capped frames (and measured ones in *measured_frames); a rejected pose or target is an error.
-// Returns the frame's iteration count.
-std::int32_t solveFrame(LiveRig& live, const MarkerFrame& frame, std::size_t f, const ExportOptions& o, double tolerance, std::vector<float>& x,
-                        std::vector<float>& previous, float* normals_out, std::size_t& measured_frames, ExportReport& report) {
-  std::int32_t frame_iterations = 0;
-  const int first_budget = o.iterations > 0 ? o.iterations : std::min(kConvergeChunkIterations, o.max_iterations);
-  LiveFrameStats s = live.processFrame(frame, StepBudget{first_budget}, x.data(), normals_out);
-  frame_iterations += s.step.iterations;
-  if (s.flags & kLivePoseHeld) ++report.held_frames;
-  else ++measured_frames;
-  if (s.flags & kLiveMarkersPredicted) ++report.predicted_frames;
-  if (o.iterations == 0 && !(s.flags & kLivePoseHeld)) {
-    double change = INFINITY;
-    while (frame_iterations < o.max_iterations) {
-      previous.swap(x);
-      const LiveFrameStats more =
-          live.processFrame(frame, StepBudget{std::min(kConvergeChunkIterations, o.max_iterations - frame_iterations)}, x.data(), normals_out);
-      s.flags |= more.flags;
-      frame_iterations += more.step.iterations;
-      change = maxChange(x, previous);
-      if (change <= tolerance || more.step.iterations == 0) break;
+// Solves the clip frame by frame into x (and the normals, for glTF); measures how closely the skin
+// follows the markers.
+struct FrameSolver {
+  FrameSolver(LiveRig& l, const Rig& rig, const ExportOptions& options, double tol, std::span<const float> rest, std::size_t values, bool gltf)
+      : live(l), o(options), tolerance(tol), x(rest.begin(), rest.end()), previous(values), normals(gltf ? values : 0),
+        normals_out(gltf ? normals.data() : nullptr), tracking(rig) {}
+
+  LiveRig& live;
+  const ExportOptions& o;
+  const double tolerance;  // convergence: a fine vertex that moved more than this (rig units) is still moving
+  std::vector<float> x, previous, normals;
+  float* const normals_out;
+  MarkerFrame frame{};
+  std::size_t measured_frames = 0;
+  rigbuild::TrackingMeasure tracking;
+
+  // Solves clip frame f (in `frame`): --iterations N, or to convergence (chunks of iterations until
+  // no fine vertex moves more than `tolerance`, at most --max-iterations). Counts held, measured,
+  // predicted and capped frames and the iterations; a rejected pose or target is an error.
+  void solve(std::size_t f, ExportReport& report) {
+    std::int32_t frame_iterations = 0;
+    const int first_budget = o.iterations > 0 ? o.iterations : std::min(kConvergeChunkIterations, o.max_iterations);
+    LiveFrameStats s = live.processFrame(frame, StepBudget{first_budget}, x.data(), normals_out);
+    frame_iterations += s.step.iterations;
+    if (s.flags & kLivePoseHeld) ++report.held_frames;
+    else ++measured_frames;
+    if (s.flags & kLiveMarkersPredicted) ++report.predicted_frames;
+    if (o.iterations == 0 && !(s.flags & kLivePoseHeld)) {
+      double change = INFINITY;
+      while (frame_iterations < o.max_iterations) {
+        previous.swap(x);
+        const LiveFrameStats more =
+            live.processFrame(frame, StepBudget{std::min(kConvergeChunkIterations, o.max_iterations - frame_iterations)}, x.data(), normals_out);
+        s.flags |= more.flags;
+        frame_iterations += more.step.iterations;
+        change = maxChange(x, previous);
+        if (change <= tolerance || more.step.iterations == 0) break;
+      }
+      if (change > tolerance && frame_iterations >= o.max_iterations) {
+        ++report.capped_frames;
+        report.worst_last_change = std::max(report.worst_last_change, change);
+      }
     }
-    if (change > tolerance && frame_iterations >= o.max_iterations) {
-      ++report.capped_frames;
-      report.worst_last_change = std::max(report.worst_last_change, change);
-    }
+    if (s.flags & kLivePoseRejected)
+      throw std::runtime_error("clip frame " + std::to_string(f) + ": the solver produced a non-finite or implausible pose (far outside its marker targets; a bug: please report it with the rig and the clip)");
+    if (s.flags & kLiveTargetsRejected)
+      throw std::runtime_error("clip frame " + std::to_string(f) + ": the solver rejected the marker targets as non-finite or absurd");
+    tracking.addFrame(x, live);
+    report.iterations += static_cast<std::uint64_t>(frame_iterations);
+    report.max_frame_iterations = std::max(report.max_frame_iterations, frame_iterations);
   }
-  if (s.flags & kLivePoseRejected)
-    throw std::runtime_error("clip frame " + std::to_string(f) + ": the solver produced a non-finite or implausible pose (far outside its marker targets; a bug: please report it with the rig and the clip)");
-  if (s.flags & kLiveTargetsRejected)
-    throw std::runtime_error("clip frame " + std::to_string(f) + ": the solver rejected the marker targets as non-finite or absurd");
-  return frame_iterations;
+};
+
+// Notes on stderr: an open fine mesh (its volume is not kept), rig markers the clip never names.
+void noteBinding(rigbuild::Progress& progress, const LiveRig& live, const MarkerBindingReport& binding) {
+  if (live.volumeNotKept())
+    progress.note("note: the rig's fine mesh is not closed, so its volume is not kept (the volume constraint needs a watertight surface)");
+  if (!binding.missing.empty())
+    progress.note("note: " + std::to_string(binding.missing.size()) + " rig markers the clip never names are predicted in every frame: " +
+                  joinLabels(binding.missing));
+}
+
+// --report: the JSON report, written atomically and counted among the files.
+void writeReportFile(const ExportOptions& o, const Rig& rig, ExportReport& report) {
+  const std::string text = reportJson(report, o, rig).dump(2) + "\n";
+  rigbuild::writeFileAtomically(o.report, std::span<const std::uint8_t>(reinterpret_cast<const std::uint8_t*>(text.data()), text.size()));
+  report.files.push_back(o.report);
+  report.bytes += text.size();
 }
 
 }  // namespace
@@ -672,11 +706,7 @@ ExportReport exportClip(const ExportOptions& o) {
   rigbuild::Progress progress("tetrig export", o.quiet ? rigbuild::Progress::Mode::kQuiet
                                                        : o.simple_progress ? rigbuild::Progress::Mode::kSimple
                                                                            : rigbuild::Progress::Mode::kAuto);
-  if (live.volumeNotKept())
-    progress.note("note: the rig's fine mesh is not closed, so its volume is not kept (the volume constraint needs a watertight surface)");
-  if (!binding.missing.empty())
-    progress.note("note: " + std::to_string(binding.missing.size()) + " rig markers the clip never names are predicted in every frame: " +
-                  joinLabels(binding.missing));
+  noteBinding(progress, live, binding);
 
   std::string frames_text = std::to_string(range.first) + ".." + std::to_string(range.end - 1);
   const std::vector<std::string> comment = exportComment(rig, o, range, report, frames_text);
@@ -700,21 +730,12 @@ ExportReport exportClip(const ExportOptions& o) {
                  (o.iterations > 0 ? std::to_string(o.iterations) + " iterations each" : std::string("to convergence")) + ")");
   const auto solve_start = std::chrono::steady_clock::now();
   double write_seconds = 0;
-  const double tolerance = o.tolerance * restDiagonal(rest);
-  std::vector<float> x(rest.begin(), rest.end()), previous(values), normals(gltf ? values : 0);
-  float* const normals_out = gltf ? normals.data() : nullptr;
-  MarkerFrame frame{};
-  std::size_t measured_frames = 0;
-  rigbuild::TrackingMeasure tracking(rig);
+  FrameSolver solver(live, rig, o, o.tolerance * restDiagonal(rest), rest, values, gltf);
   for (std::size_t f = range.first; f < range.end; ++f) {
-    playback.fillFrame(f, f, frame);
-    const std::int32_t frame_iterations = solveFrame(live, frame, f, o, tolerance, x, previous, normals_out, measured_frames, report);
-    tracking.addFrame(x, live);
-    report.iterations += static_cast<std::uint64_t>(frame_iterations);
-    report.max_frame_iterations = std::max(report.max_frame_iterations, frame_iterations);
-
+    playback.fillFrame(f, f, solver.frame);
+    solver.solve(f, report);
     const auto write_start = std::chrono::steady_clock::now();
-    outputs.writeFrame(f, x, normals, meshes);
+    outputs.writeFrame(f, solver.x, solver.normals, meshes);
     write_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - write_start).count();
     const std::size_t done = f - range.first + 1;
     progress.update(static_cast<double>(done) / static_cast<double>(report.frame_count));
@@ -725,7 +746,7 @@ ExportReport exportClip(const ExportOptions& o) {
   std::snprintf(detail, sizeof detail, "%.2f iterations per frame (max %d)", static_cast<double>(report.iterations) / static_cast<double>(report.frame_count),
                 report.max_frame_iterations);
   progress.end(detail);
-  if (measured_frames == 0)
+  if (solver.measured_frames == 0)
     throw std::invalid_argument("no frame in " + frames_text + " measures any rig marker (every marker invalid or unnamed): "
                                 "nothing to export; check the clip and --frames");
 
@@ -733,14 +754,9 @@ ExportReport exportClip(const ExportOptions& o) {
   progress.begin("writing " + target.path.string());
   const auto finish_start = std::chrono::steady_clock::now();
   outputs.finish(rig, live, rest, range, meshes, report);
-  report.tracking_mm = tracking.all();
-  for (std::size_t m = 0; m < rig.markers.size(); ++m) report.tracking_per_marker_mm.emplace_back(rig.markers[m].label, tracking.marker(m));
-  if (!o.report.empty()) {
-    const std::string text = reportJson(report, o, rig).dump(2) + "\n";
-    rigbuild::writeFileAtomically(o.report, std::span<const std::uint8_t>(reinterpret_cast<const std::uint8_t*>(text.data()), text.size()));
-    report.files.push_back(o.report);
-    report.bytes += text.size();
-  }
+  report.tracking_mm = solver.tracking.all();
+  for (std::size_t m = 0; m < rig.markers.size(); ++m) report.tracking_per_marker_mm.emplace_back(rig.markers[m].label, solver.tracking.marker(m));
+  if (!o.report.empty()) writeReportFile(o, rig, report);
   report.write_seconds = write_seconds + std::chrono::duration<double>(std::chrono::steady_clock::now() - finish_start).count();
   progress.end(std::to_string(report.files.size()) + (report.files.size() == 1 ? " file, " : " files, ") + megabytes(report.bytes));
   return report;
