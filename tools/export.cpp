@@ -361,7 +361,10 @@ FrameRange parseFrameRange(const std::string& text, std::size_t clip_frames) {
   return r;
 }
 
-ExportReport exportClip(const ExportOptions& o) {
+namespace {
+
+// Refuses iteration and solver settings that cannot work, before anything is read or written.
+void checkExportSettings(const ExportOptions& o) {
   if (o.iterations < 0) throw std::invalid_argument("--iterations must be at least 1 (or omitted: iterate to convergence)");
   if (o.iterations == 0 && (!(o.tolerance > 0.0) || !std::isfinite(o.tolerance)))
     throw std::invalid_argument("--tolerance must be a positive number");
@@ -369,66 +372,48 @@ ExportReport exportClip(const ExportOptions& o) {
   checkSolverSettings(o.solver);  // before anything is written
   if (o.solver.after_publish_iterations > 0 && o.iterations == 0)
     throw std::invalid_argument("--after-publish-iterations needs --iterations N: a frame solved to convergence has nothing left to refine");
+}
+
+// Every file this export would write, checked before any work: no input and no file tetrig
+// did not write is replaced (without --force).
+void checkOutputFiles(const ExportOptions& o, const ExportTarget& target, const FrameRange& range) {
+  const std::filesystem::path inputs[] = {o.rig_path, o.clip_path};
+  switch (target.format) {
+    case ExportFormat::kPc2:
+      rigbuild::checkOutputPath(target.path, rigbuild::OutputKind::kPc2, inputs, o.force);
+      rigbuild::checkOutputPath(target.rest_obj, rigbuild::OutputKind::kObj, inputs, o.force, "--out's rest mesh");
+      break;
+    case ExportFormat::kObjSequence:
+    case ExportFormat::kPlySequence: {
+      const auto kind = target.format == ExportFormat::kObjSequence ? rigbuild::OutputKind::kObj : rigbuild::OutputKind::kPly;
+      for (std::size_t f = range.first; f < range.end; ++f)
+        rigbuild::checkOutputPath(sequenceFramePath(target, f), kind, inputs, o.force, "--out's frame");
+      break;
+    }
+    case ExportFormat::kGltf:
+    case ExportFormat::kGlb:
+      rigbuild::checkOutputPath(target.path, target.format == ExportFormat::kGlb ? rigbuild::OutputKind::kGlb : rigbuild::OutputKind::kGltf,
+                                inputs, o.force);
+      break;
+  }
+  if (!o.report.empty()) {
+    rigbuild::checkOutputPath(o.report, rigbuild::OutputKind::kJson, inputs, o.force, "--report");
+    requireDirectory(o.report);
+  }
+}
+
+// glTF: the rig's up axis can be turned to +Y, and the clip has a frame rate (sample times).
+void checkGltfInputs(const Rig& rig, double rate_hz) {
+  std::vector<float> probe(3, 0.0f);
+  rotateUpToY(rig.alignment.rig_up, probe);  // an unknown up axis is refused before any work
+  if (!(rate_hz > 0.0))
+    throw std::invalid_argument("the clip has no frame rate and glTF needs sample times: give --rate HZ");
+}
+
+// The live rig's options for an export: the solver flags, the occlusion blend, normals for glTF.
+LiveRigOptions exportLiveOptions(const ExportOptions& o, bool gltf) {
   LiveRigOptions live_options;
   live_options.solver = o.solver;
-  ExportReport report;
-  report.target = parseExportTarget(o.out);
-  const ExportTarget& target = report.target;
-  requireDirectory(target.path);
-  const bool gltf = target.format == ExportFormat::kGltf || target.format == ExportFormat::kGlb;
-
-  // 1. Rig, clip, range (everything that can be refused is refused before any work).
-  const Rig rig = loadRigFile(o.rig_path);
-  drivers::C3DReadOptions read_options;
-  read_options.keep_zero_points = o.keep_zero_markers;
-  auto clip = std::make_shared<const drivers::C3DClip>(drivers::C3DClip::load(o.clip_path, read_options));
-  const FrameRange range = parseFrameRange(o.frames, clip->frameCount());
-  report.first_frame = range.first;
-  report.frame_count = range.end - range.first;
-  drivers::C3DPlaybackOptions playback_options;
-  playback_options.pacing = drivers::Pacing::kAsFastAsPossible;
-  playback_options.rate_override_hz = o.rate_hz;
-  const drivers::C3DPlayback playback(*clip, playback_options);
-  report.rate_hz = playback.framePeriodNs() > 0 ? playback.frameRate() : 0.0;
-  if (gltf && report.frame_count > kMaxGltfFrames)
-    throw std::invalid_argument("glTF holds one morph target per frame and frames x frames animated weights: " +
-                                std::to_string(report.frame_count) + " frames is more than " + std::to_string(kMaxGltfFrames) +
-                                "; export a range with --range A:B, or use FILE.pc2 or an OBJ/PLY sequence");
-  {
-    // Every file this export would write, checked before any work: no input and no file tetrig
-    // did not write is replaced (without --force).
-    const std::filesystem::path inputs[] = {o.rig_path, o.clip_path};
-    switch (target.format) {
-      case ExportFormat::kPc2:
-        rigbuild::checkOutputPath(target.path, rigbuild::OutputKind::kPc2, inputs, o.force);
-        rigbuild::checkOutputPath(target.rest_obj, rigbuild::OutputKind::kObj, inputs, o.force, "--out's rest mesh");
-        break;
-      case ExportFormat::kObjSequence:
-      case ExportFormat::kPlySequence: {
-        const auto kind = target.format == ExportFormat::kObjSequence ? rigbuild::OutputKind::kObj : rigbuild::OutputKind::kPly;
-        for (std::size_t f = range.first; f < range.end; ++f)
-          rigbuild::checkOutputPath(sequenceFramePath(target, f), kind, inputs, o.force, "--out's frame");
-        break;
-      }
-      case ExportFormat::kGltf:
-      case ExportFormat::kGlb:
-        rigbuild::checkOutputPath(target.path, target.format == ExportFormat::kGlb ? rigbuild::OutputKind::kGlb : rigbuild::OutputKind::kGltf,
-                                  inputs, o.force);
-        break;
-    }
-    if (!o.report.empty()) {
-      rigbuild::checkOutputPath(o.report, rigbuild::OutputKind::kJson, inputs, o.force, "--report");
-      requireDirectory(o.report);
-    }
-  }
-  if (gltf) {
-    std::vector<float> probe(3, 0.0f);
-    rotateUpToY(rig.alignment.rig_up, probe);  // an unknown up axis is refused before any work
-  }
-  if (gltf && !(report.rate_hz > 0.0))
-    throw std::invalid_argument("the clip has no frame rate and glTF needs sample times: give --rate HZ");
-
-  // 2. The live rig and the binding, exactly as `tetrig run` binds a c3d: source.
   live_options.occlusion_blend_s = o.occlusion_blend_ms * 1e-3;
   // The temporal prediction and the rig's coarse level (docs/fidelity.md) only set where a frame
   // starts: with --iterations N (one call per frame) they run as in `tetrig run`; iterating to
@@ -439,56 +424,45 @@ ExportReport exportClip(const ExportOptions& o) {
     live_options.solver.use_coarse_level = false;
   }
   live_options.normals = gltf;  // glTF carries the live rig's vertex normals (base NORMAL and morph-target deltas)
-  LiveRig live(rig, live_options);
-  report.solver = live_options.solver;
-  report.volume_not_kept = live.volumeNotKept();
+  return live_options;
+}
+
+// The clip's marker labels, as a c3d: source names them to `tetrig run`.
+std::vector<std::string> clipLabels(const std::shared_ptr<const drivers::C3DClip>& clip, const drivers::C3DPlaybackOptions& playback_options,
+                                    const std::filesystem::path& clip_path) {
   std::vector<std::string> labels;
-  {
-    const auto source = drivers::makeC3DSource(clip, playback_options, o.clip_path.string());
-    (void)source->waitForLabels(std::chrono::milliseconds(0), labels);
-  }
-  const MarkerBindingReport binding = live.bindLabels(labels);
+  const auto source = drivers::makeC3DSource(clip, playback_options, clip_path.string());
+  (void)source->waitForLabels(std::chrono::milliseconds(0), labels);
+  return labels;
+}
+
+// Refuses a clip that shares no marker or sensor label with the rig.
+void requireSharedLabel(const MarkerBindingReport& binding, const Rig& rig, const std::vector<std::string>& labels,
+                        const std::filesystem::path& clip_path) {
   if (binding.matched == 0 && binding.sensors_matched == 0) {
     std::vector<std::string> rig_labels, named;
     for (const RigMarker& m : rig.markers) rig_labels.push_back(m.label);
     for (const std::string& l : labels)
       if (!l.empty()) named.push_back(l);
     throw std::invalid_argument("the clip's markers share no label with the rig (rig: " + joinLabels(rig_labels) + "; clip " +
-                                o.clip_path.filename().string() + ": " + (named.empty() ? std::string("none") : joinLabels(named)) +
+                                clip_path.filename().string() + ": " + (named.empty() ? std::string("none") : joinLabels(named)) +
                                 "): export a clip of the marker set the rig was built from");
   }
-  report.markers_bound = binding.matched;
-  report.markers_missing = static_cast<std::int32_t>(binding.missing.size());
-  report.vertices = live.fineVertexCount();
-  report.triangles = static_cast<std::int32_t>(live.fineTriangles().size() / 3);
-  const std::size_t values = static_cast<std::size_t>(live.fineVertexCount()) * 3;
-  const auto triangles = live.fineTriangles();
-  const auto rest = live.restPositions();
+}
 
-  rigbuild::Progress progress("tetrig export", o.quiet ? rigbuild::Progress::Mode::kQuiet
-                                                       : o.simple_progress ? rigbuild::Progress::Mode::kSimple
-                                                                           : rigbuild::Progress::Mode::kAuto);
-  if (live.volumeNotKept())
-    progress.note("note: the rig's fine mesh is not closed, so its volume is not kept (the volume constraint needs a watertight surface)");
-  if (!binding.missing.empty())
-    progress.note("note: " + std::to_string(binding.missing.size()) + " rig markers the clip never names are predicted in every frame: " +
-                  joinLabels(binding.missing));
-
-  // Comment lines of the OBJ/PLY files; the Blender add-on reads the key=value line.
-  std::string frames_text = std::to_string(range.first) + ".." + std::to_string(range.end - 1);
-  std::vector<std::string> comment = {
+// Comment lines of the OBJ/PLY files; the Blender add-on reads the key=value line.
+std::vector<std::string> exportComment(const Rig& rig, const ExportOptions& o, const FrameRange& range, const ExportReport& report,
+                                       const std::string& frames_text) {
+  return {
       "tetrig export: " + commentText(rig.name) + ", clip " + commentText(o.clip_path.filename().string()) + " frames " + frames_text,
       "tetrig-export first_frame=" + std::to_string(range.first) + " frames=" + std::to_string(report.frame_count) +
           " rate_hz=" + rateText(report.rate_hz) + " unit=" + commentText(rig.unit) + " up=" + commentText(rig.alignment.rig_up) +
           " vertices=" + std::to_string(report.vertices)};
+}
 
-  // The asset's texture coordinates and materials (Rig::surface), files referenced from the output's folder.
-  std::vector<std::string> missing_files;
-  const SurfaceLayout surface = surfaceLayout(rig, directoryOf(target.path), missing_files);
-  const SurfaceLayout* surface_ptr = rig.surface.empty() ? nullptr : &surface;
-  for (const std::string& m : missing_files)
-    progress.note("note: the asset's file " + printableText(m, 200) + " is not beside the asset the rig was built from (" +
-                  printableText(rig.surface.asset, 200) + "): referenced as the asset names it");
+// A PLY sequence's per-vertex texture coordinates: none when the asset has none or has seams.
+std::optional<std::vector<float>> plyVertexUvs(const ExportTarget& target, const SurfaceLayout& surface, const LiveRig& live,
+                                               std::span<const std::int32_t> triangles, rigbuild::Progress& progress) {
   std::optional<std::vector<float>> ply_uvs;
   if (target.format == ExportFormat::kPlySequence && !surface.corner_uvs.empty()) {
     ply_uvs = perVertexUvs(static_cast<std::size_t>(live.fineVertexCount()), triangles, surface);
@@ -496,44 +470,143 @@ ExportReport exportClip(const ExportOptions& o) {
       progress.note("note: the asset's texture coordinates have seams (vertices with several uvs), which a PLY vertex cannot hold: "
                     "the PLY frames carry none (OBJ and glTF do)");
   }
+  return ply_uvs;
+}
 
-  // 3. Outputs staged before solving (a directory that refuses files fails now, not after minutes).
+// What the meshes of an export share: the fine triangles, the comment lines, the asset's surface
+// (or nullptr) and a PLY sequence's per-vertex uvs.
+struct ExportMeshes {
+  std::span<const std::int32_t> triangles;
+  const std::vector<std::string>& comment;
+  const SurfaceLayout* surface;
+  const std::optional<std::vector<float>>& ply_uvs;
+};
+
+// The output files: staged before solving, written frame by frame, put in place at the end.
+struct ExportOutputs {
+  explicit ExportOutputs(const ExportTarget& t) : target(t) {}
+
+  const ExportTarget& target;
   std::optional<AtomicFile> pc2, rest_obj;
   std::uint64_t pc2_bytes = 0, rest_obj_bytes = 0;
   std::optional<StagedDirectory> sequence;
   std::vector<float> gltf_frames, gltf_normals;
-  if (target.format == ExportFormat::kPc2) {
-    pc2.emplace(target.path);
-    rest_obj.emplace(target.rest_obj);
-    const auto header = pc2Header(live.fineVertexCount(), static_cast<float>(range.first), 1.0f, static_cast<std::int32_t>(report.frame_count));
-    pc2->write(header.data(), header.size());
-    pc2_bytes += header.size();
-    std::vector<std::string> obj_comment = comment;
-    obj_comment.insert(obj_comment.begin() + 1, "rest fine mesh; the animation is the point cache " + target.path.filename().string());
-    const std::string text = objText(rest, triangles, obj_comment, surface_ptr);
-    rest_obj->write(text.data(), text.size());
-    rest_obj_bytes = text.size();
-  } else if (!gltf) {
-    sequence.emplace(target);
-  } else {
-    gltf_frames.reserve(report.frame_count * values);
-    gltf_normals.reserve(report.frame_count * values);
+  std::vector<std::uint8_t> sample;
+
+  // Opens the outputs (a directory that refuses files fails now, not after minutes): PC2 with its
+  // header and rest OBJ, a sequence's staging directory, or room for glTF's frames.
+  void stage(const LiveRig& live, const FrameRange& range, const ExportReport& report, std::span<const float> rest, const ExportMeshes& m,
+             std::size_t values, bool gltf) {
+    if (target.format == ExportFormat::kPc2) {
+      pc2.emplace(target.path);
+      rest_obj.emplace(target.rest_obj);
+      const auto header = pc2Header(live.fineVertexCount(), static_cast<float>(range.first), 1.0f, static_cast<std::int32_t>(report.frame_count));
+      pc2->write(header.data(), header.size());
+      pc2_bytes += header.size();
+      std::vector<std::string> obj_comment = m.comment;
+      obj_comment.insert(obj_comment.begin() + 1, "rest fine mesh; the animation is the point cache " + target.path.filename().string());
+      const std::string text = objText(rest, m.triangles, obj_comment, m.surface);
+      rest_obj->write(text.data(), text.size());
+      rest_obj_bytes = text.size();
+    } else if (!gltf) {
+      sequence.emplace(target);
+    } else {
+      gltf_frames.reserve(report.frame_count * values);
+      gltf_normals.reserve(report.frame_count * values);
+    }
   }
 
-  // 4. Solve frame by frame, write as we go.
-  progress.begin("solving " + std::to_string(report.frame_count) + " frames (" +
-                 (o.iterations > 0 ? std::to_string(o.iterations) + " iterations each" : std::string("to convergence")) + ")");
-  const auto solve_start = std::chrono::steady_clock::now();
-  double write_seconds = 0;
-  const double tolerance = o.tolerance * restDiagonal(rest);
-  std::vector<float> x(rest.begin(), rest.end()), previous(values), normals(gltf ? values : 0);
-  float* const normals_out = gltf ? normals.data() : nullptr;
-  std::vector<std::uint8_t> sample;
+  // Writes clip frame f's fine mesh x (and its normals, for glTF).
+  void writeFrame(std::size_t f, const std::vector<float>& x, const std::vector<float>& normals, const ExportMeshes& m) {
+    switch (target.format) {
+      case ExportFormat::kPc2:
+        sample.clear();
+        appendPc2Sample(x, sample);
+        pc2->write(sample.data(), sample.size());
+        pc2_bytes += sample.size();
+        break;
+      case ExportFormat::kObjSequence: {
+        const std::string text = objText(x, m.triangles, m.comment, m.surface);
+        sequence->write(sequenceFramePath(target, f), std::span<const std::uint8_t>(reinterpret_cast<const std::uint8_t*>(text.data()), text.size()));
+        break;
+      }
+      case ExportFormat::kPlySequence:
+        sequence->write(sequenceFramePath(target, f),
+                        plyBytes(x, m.triangles, m.comment, m.ply_uvs ? std::span<const float>(*m.ply_uvs) : std::span<const float>()));
+        break;
+      case ExportFormat::kGltf:
+      case ExportFormat::kGlb:
+        gltf_frames.insert(gltf_frames.end(), x.begin(), x.end());
+        gltf_normals.insert(gltf_normals.end(), normals.begin(), normals.end());
+        break;
+    }
+  }
+
+  // Renames the staged files into place (glTF: writes the whole file); records the files and bytes.
+  void finish(const Rig& rig, const LiveRig& live, std::span<const float> rest, const FrameRange& range, const ExportMeshes& m,
+              ExportReport& report) {
+    switch (target.format) {
+      case ExportFormat::kPc2:
+        rest_obj->commit();
+        pc2->commit();
+        report.files = {target.rest_obj, target.path};
+        report.bytes = rest_obj_bytes + pc2_bytes;
+        break;
+      case ExportFormat::kObjSequence:
+      case ExportFormat::kPlySequence:
+        sequence->commit();
+        report.files = sequence->finalPaths();
+        report.bytes = sequence->bytes();
+        break;
+      case ExportFormat::kGltf:
+      case ExportFormat::kGlb: {
+        // glTF is +Y up: a rig with another up axis is turned (positions exact: axis permutations).
+        std::vector<float> rest_y(rest.begin(), rest.end()), rest_normals_y(live.restNormals().begin(), live.restNormals().end());
+        rotateUpToY(rig.alignment.rig_up, rest_y);
+        rotateUpToY(rig.alignment.rig_up, gltf_frames);
+        rotateUpToY(rig.alignment.rig_up, rest_normals_y);
+        rotateUpToY(rig.alignment.rig_up, gltf_normals);
+        GltfAnimation anim;
+        anim.name = rig.name;
+        anim.rest = rest_y;
+        anim.triangles = m.triangles;
+        anim.frames = gltf_frames;
+        anim.rest_normals = rest_normals_y;
+        anim.frame_normals = gltf_normals;
+        anim.surface = m.surface;
+        anim.frame_count = report.frame_count;
+        anim.rate_hz = report.rate_hz;
+        anim.first_frame = static_cast<std::int64_t>(range.first);
+        const std::vector<std::uint8_t> bytes = gltfBytes(anim, target.format == ExportFormat::kGlb);
+        rigbuild::writeFileAtomically(target.path, bytes);
+        report.files = {target.path};
+        report.bytes = bytes.size();
+        break;
+      }
+    }
+  }
+};
+
+// Solves the clip frame by frame into x (and the normals, for glTF); measures how closely the skin
+// follows the markers.
+struct FrameSolver {
+  FrameSolver(LiveRig& l, const Rig& rig, const ExportOptions& options, double tol, std::span<const float> rest, std::size_t values, bool gltf)
+      : live(l), o(options), tolerance(tol), x(rest.begin(), rest.end()), previous(values), normals(gltf ? values : 0),
+        normals_out(gltf ? normals.data() : nullptr), tracking(rig) {}
+
+  LiveRig& live;
+  const ExportOptions& o;
+  const double tolerance;  // convergence: a fine vertex that moved more than this (rig units) is still moving
+  std::vector<float> x, previous, normals;
+  float* const normals_out;
   MarkerFrame frame{};
   std::size_t measured_frames = 0;
-  rigbuild::TrackingMeasure tracking(rig);
-  for (std::size_t f = range.first; f < range.end; ++f) {
-    playback.fillFrame(f, f, frame);
+  rigbuild::TrackingMeasure tracking;
+
+  // Solves clip frame f (in `frame`): --iterations N, or to convergence (chunks of iterations until
+  // no fine vertex moves more than `tolerance`, at most --max-iterations). Counts held, measured,
+  // predicted and capped frames and the iterations; a rejected pose or target is an error.
+  void solve(std::size_t f, ExportReport& report) {
     std::int32_t frame_iterations = 0;
     const int first_budget = o.iterations > 0 ? o.iterations : std::min(kConvergeChunkIterations, o.max_iterations);
     LiveFrameStats s = live.processFrame(frame, StepBudget{first_budget}, x.data(), normals_out);
@@ -564,30 +637,105 @@ ExportReport exportClip(const ExportOptions& o) {
     tracking.addFrame(x, live);
     report.iterations += static_cast<std::uint64_t>(frame_iterations);
     report.max_frame_iterations = std::max(report.max_frame_iterations, frame_iterations);
+  }
+};
 
+// Notes on stderr: an open fine mesh (its volume is not kept), rig markers the clip never names.
+void noteBinding(rigbuild::Progress& progress, const LiveRig& live, const MarkerBindingReport& binding) {
+  if (live.volumeNotKept())
+    progress.note("note: the rig's fine mesh is not closed, so its volume is not kept (the volume constraint needs a watertight surface)");
+  if (!binding.missing.empty())
+    progress.note("note: " + std::to_string(binding.missing.size()) + " rig markers the clip never names are predicted in every frame: " +
+                  joinLabels(binding.missing));
+}
+
+// --report: the JSON report, written atomically and counted among the files.
+void writeReportFile(const ExportOptions& o, const Rig& rig, ExportReport& report) {
+  const std::string text = reportJson(report, o, rig).dump(2) + "\n";
+  rigbuild::writeFileAtomically(o.report, std::span<const std::uint8_t>(reinterpret_cast<const std::uint8_t*>(text.data()), text.size()));
+  report.files.push_back(o.report);
+  report.bytes += text.size();
+}
+
+}  // namespace
+
+ExportReport exportClip(const ExportOptions& o) {
+  checkExportSettings(o);
+  ExportReport report;
+  report.target = parseExportTarget(o.out);
+  const ExportTarget& target = report.target;
+  requireDirectory(target.path);
+  const bool gltf = target.format == ExportFormat::kGltf || target.format == ExportFormat::kGlb;
+
+  // 1. Rig, clip, range (everything that can be refused is refused before any work).
+  const Rig rig = loadRigFile(o.rig_path);
+  drivers::C3DReadOptions read_options;
+  read_options.keep_zero_points = o.keep_zero_markers;
+  auto clip = std::make_shared<const drivers::C3DClip>(drivers::C3DClip::load(o.clip_path, read_options));
+  const FrameRange range = parseFrameRange(o.frames, clip->frameCount());
+  report.first_frame = range.first;
+  report.frame_count = range.end - range.first;
+  drivers::C3DPlaybackOptions playback_options;
+  playback_options.pacing = drivers::Pacing::kAsFastAsPossible;
+  playback_options.rate_override_hz = o.rate_hz;
+  const drivers::C3DPlayback playback(*clip, playback_options);
+  report.rate_hz = playback.framePeriodNs() > 0 ? playback.frameRate() : 0.0;
+  if (gltf && report.frame_count > kMaxGltfFrames)
+    throw std::invalid_argument("glTF holds one morph target per frame and frames x frames animated weights: " +
+                                std::to_string(report.frame_count) + " frames is more than " + std::to_string(kMaxGltfFrames) +
+                                "; export a range with --range A:B, or use FILE.pc2 or an OBJ/PLY sequence");
+  checkOutputFiles(o, target, range);
+  if (gltf) checkGltfInputs(rig, report.rate_hz);
+
+  // 2. The live rig and the binding, exactly as `tetrig run` binds a c3d: source.
+  const LiveRigOptions live_options = exportLiveOptions(o, gltf);
+  LiveRig live(rig, live_options);
+  report.solver = live_options.solver;
+  report.volume_not_kept = live.volumeNotKept();
+  const std::vector<std::string> labels = clipLabels(clip, playback_options, o.clip_path);
+  const MarkerBindingReport binding = live.bindLabels(labels);
+  requireSharedLabel(binding, rig, labels, o.clip_path);
+  report.markers_bound = binding.matched;
+  report.markers_missing = static_cast<std::int32_t>(binding.missing.size());
+  report.vertices = live.fineVertexCount();
+  report.triangles = static_cast<std::int32_t>(live.fineTriangles().size() / 3);
+  const std::size_t values = static_cast<std::size_t>(live.fineVertexCount()) * 3;
+  const auto triangles = live.fineTriangles();
+  const auto rest = live.restPositions();
+
+  rigbuild::Progress progress("tetrig export", o.quiet ? rigbuild::Progress::Mode::kQuiet
+                                                       : o.simple_progress ? rigbuild::Progress::Mode::kSimple
+                                                                           : rigbuild::Progress::Mode::kAuto);
+  noteBinding(progress, live, binding);
+
+  std::string frames_text = std::to_string(range.first) + ".." + std::to_string(range.end - 1);
+  const std::vector<std::string> comment = exportComment(rig, o, range, report, frames_text);
+
+  // The asset's texture coordinates and materials (Rig::surface), files referenced from the output's folder.
+  std::vector<std::string> missing_files;
+  const SurfaceLayout surface = surfaceLayout(rig, directoryOf(target.path), missing_files);
+  const SurfaceLayout* surface_ptr = rig.surface.empty() ? nullptr : &surface;
+  for (const std::string& m : missing_files)
+    progress.note("note: the asset's file " + printableText(m, 200) + " is not beside the asset the rig was built from (" +
+                  printableText(rig.surface.asset, 200) + "): referenced as the asset names it");
+  const std::optional<std::vector<float>> ply_uvs = plyVertexUvs(target, surface, live, triangles, progress);
+  const ExportMeshes meshes{triangles, comment, surface_ptr, ply_uvs};
+
+  // 3. Outputs staged before solving (a directory that refuses files fails now, not after minutes).
+  ExportOutputs outputs(target);
+  outputs.stage(live, range, report, rest, meshes, values, gltf);
+
+  // 4. Solve frame by frame, write as we go.
+  progress.begin("solving " + std::to_string(report.frame_count) + " frames (" +
+                 (o.iterations > 0 ? std::to_string(o.iterations) + " iterations each" : std::string("to convergence")) + ")");
+  const auto solve_start = std::chrono::steady_clock::now();
+  double write_seconds = 0;
+  FrameSolver solver(live, rig, o, o.tolerance * restDiagonal(rest), rest, values, gltf);
+  for (std::size_t f = range.first; f < range.end; ++f) {
+    playback.fillFrame(f, f, solver.frame);
+    solver.solve(f, report);
     const auto write_start = std::chrono::steady_clock::now();
-    switch (target.format) {
-      case ExportFormat::kPc2:
-        sample.clear();
-        appendPc2Sample(x, sample);
-        pc2->write(sample.data(), sample.size());
-        pc2_bytes += sample.size();
-        break;
-      case ExportFormat::kObjSequence: {
-        const std::string text = objText(x, triangles, comment, surface_ptr);
-        sequence->write(sequenceFramePath(target, f), std::span<const std::uint8_t>(reinterpret_cast<const std::uint8_t*>(text.data()), text.size()));
-        break;
-      }
-      case ExportFormat::kPlySequence:
-        sequence->write(sequenceFramePath(target, f),
-                        plyBytes(x, triangles, comment, ply_uvs ? std::span<const float>(*ply_uvs) : std::span<const float>()));
-        break;
-      case ExportFormat::kGltf:
-      case ExportFormat::kGlb:
-        gltf_frames.insert(gltf_frames.end(), x.begin(), x.end());
-        gltf_normals.insert(gltf_normals.end(), normals.begin(), normals.end());
-        break;
-    }
+    outputs.writeFrame(f, solver.x, solver.normals, meshes);
     write_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - write_start).count();
     const std::size_t done = f - range.first + 1;
     progress.update(static_cast<double>(done) / static_cast<double>(report.frame_count));
@@ -598,60 +746,17 @@ ExportReport exportClip(const ExportOptions& o) {
   std::snprintf(detail, sizeof detail, "%.2f iterations per frame (max %d)", static_cast<double>(report.iterations) / static_cast<double>(report.frame_count),
                 report.max_frame_iterations);
   progress.end(detail);
-  if (measured_frames == 0)
+  if (solver.measured_frames == 0)
     throw std::invalid_argument("no frame in " + frames_text + " measures any rig marker (every marker invalid or unnamed): "
                                 "nothing to export; check the clip and --frames");
 
   // 5. Finish and rename into place.
   progress.begin("writing " + target.path.string());
   const auto finish_start = std::chrono::steady_clock::now();
-  switch (target.format) {
-    case ExportFormat::kPc2:
-      rest_obj->commit();
-      pc2->commit();
-      report.files = {target.rest_obj, target.path};
-      report.bytes = rest_obj_bytes + pc2_bytes;
-      break;
-    case ExportFormat::kObjSequence:
-    case ExportFormat::kPlySequence:
-      sequence->commit();
-      report.files = sequence->finalPaths();
-      report.bytes = sequence->bytes();
-      break;
-    case ExportFormat::kGltf:
-    case ExportFormat::kGlb: {
-      // glTF is +Y up: a rig with another up axis is turned (positions exact: axis permutations).
-      std::vector<float> rest_y(rest.begin(), rest.end()), rest_normals_y(live.restNormals().begin(), live.restNormals().end());
-      rotateUpToY(rig.alignment.rig_up, rest_y);
-      rotateUpToY(rig.alignment.rig_up, gltf_frames);
-      rotateUpToY(rig.alignment.rig_up, rest_normals_y);
-      rotateUpToY(rig.alignment.rig_up, gltf_normals);
-      GltfAnimation anim;
-      anim.name = rig.name;
-      anim.rest = rest_y;
-      anim.triangles = triangles;
-      anim.frames = gltf_frames;
-      anim.rest_normals = rest_normals_y;
-      anim.frame_normals = gltf_normals;
-      anim.surface = surface_ptr;
-      anim.frame_count = report.frame_count;
-      anim.rate_hz = report.rate_hz;
-      anim.first_frame = static_cast<std::int64_t>(range.first);
-      const std::vector<std::uint8_t> bytes = gltfBytes(anim, target.format == ExportFormat::kGlb);
-      rigbuild::writeFileAtomically(target.path, bytes);
-      report.files = {target.path};
-      report.bytes = bytes.size();
-      break;
-    }
-  }
-  report.tracking_mm = tracking.all();
-  for (std::size_t m = 0; m < rig.markers.size(); ++m) report.tracking_per_marker_mm.emplace_back(rig.markers[m].label, tracking.marker(m));
-  if (!o.report.empty()) {
-    const std::string text = reportJson(report, o, rig).dump(2) + "\n";
-    rigbuild::writeFileAtomically(o.report, std::span<const std::uint8_t>(reinterpret_cast<const std::uint8_t*>(text.data()), text.size()));
-    report.files.push_back(o.report);
-    report.bytes += text.size();
-  }
+  outputs.finish(rig, live, rest, range, meshes, report);
+  report.tracking_mm = solver.tracking.all();
+  for (std::size_t m = 0; m < rig.markers.size(); ++m) report.tracking_per_marker_mm.emplace_back(rig.markers[m].label, solver.tracking.marker(m));
+  if (!o.report.empty()) writeReportFile(o, rig, report);
   report.write_seconds = write_seconds + std::chrono::duration<double>(std::chrono::steady_clock::now() - finish_start).count();
   progress.end(std::to_string(report.files.size()) + (report.files.size() == 1 ? " file, " : " files, ") + megabytes(report.bytes));
   return report;

@@ -103,10 +103,8 @@ const char* stateName(std::uint8_t s) {
   }
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
-  Args a;
+// Reads the command line into a; returns -1 to go on, else the exit status (--help: 0, a mistake: 1).
+int parseArgs(int argc, char** argv, Args& a) {
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
     auto value = [&](const char* what) -> const char* {
@@ -151,35 +149,18 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "tetrig-dds-cat: no NAME given\n%s", kUsage);
     return 1;
   }
-  std::signal(SIGINT, onSignal);
-  std::signal(SIGTERM, onSignal);
+  return -1;
+}
 
-  std::FILE* dump = nullptr;
-  if (!a.dump.empty()) {
-    dump = std::fopen(a.dump.c_str(), "wb");
-    if (dump == nullptr) return std::fprintf(stderr, "tetrig-dds-cat: cannot write %s: %s\n", a.dump.c_str(), std::strerror(errno)), 1;
-    std::fwrite("TSHMDMP1", 1, 8, dump);
-  }
+// What the subscriber saw: the frame checker, the counts and latencies, the frames held for their
+// static data; and whether and how it is done.
+struct Subscription {
+  Subscription(const Args& args, std::FILE* dump_file, long long lease) : a(args), dump(dump_file), lease_ms(lease) {}
 
-  std::string base;
-  try {
-    base = tetrig::dds::topicBaseName(a.name);
-  } catch (const tetrig::dds::DdsError& e) {
-    return std::fprintf(stderr, "tetrig-dds-cat: %s\n", e.what()), 1;
-  }
-  tetrig::dds::DdsOptions options;
-  options.domain_id = a.domain;
-  const long long lease_ms = options.liveliness_lease_ns / 1'000'000;  // the publishers' lease: a reader must not ask for less
-  std::unique_ptr<tetrig::dds::FrameSubscriber> sub;
-  try {
-    sub = std::make_unique<tetrig::dds::FrameSubscriber>(base, options);
-  } catch (const tetrig::dds::DdsError& e) {
-    return std::fprintf(stderr, "tetrig-dds-cat: %s\n", e.what()), 1;
-  }
-  if (!a.quiet) std::fprintf(stderr, "tetrig-dds-cat: waiting on %s\n", tetrig::dds::frameTopicName(base).c_str());
-
+  const Args& a;
+  std::FILE* dump;
+  const long long lease_ms;  // the publishers' liveliness lease
   tetrig::dds::FrameChecker checker;
-  std::vector<tetrig::dds::SubscriberEvent> events;
   std::vector<double> receive_to_seen, published_to_seen, written_to_seen;
   std::uint64_t seen = 0, missed = 0, refused = 0, static_refused = 0, before_static = 0, instances = 0, lost = 0;
   std::uint64_t last_instance = 0, last_id = 0;
@@ -192,10 +173,11 @@ int main(int argc, char** argv) {
   bool done = false;
   // Frames that came before their instance's static data (the two topics are not ordered with
   // each other): held, at most kPending, and checked once it comes.
-  constexpr std::size_t kPending = 16;
+  static constexpr std::size_t kPending = 16;
   std::deque<tetrig::dds::ReceivedFrame> pending;
+
   // Checks, counts, prints and dumps one frame; true when --frames is reached.
-  auto onFrame = [&](const tetrig::dds::ReceivedFrame& f, std::int64_t now) {
+  bool onFrame(const tetrig::dds::ReceivedFrame& f, std::int64_t now) {
     std::string why;
     const auto verdict = checker.checkFrame(f, why);
     if (verdict == tetrig::dds::FrameChecker::Verdict::kWaitingForStatic) {
@@ -244,52 +226,64 @@ int main(int argc, char** argv) {
       std::fwrite(f.positions.data(), sizeof(float), f.positions.size(), dump);
     }
     return a.frames > 0 && seen >= a.frames;
-  };
-  while (!done && g_stop == 0) {
-    events.clear();
-    sub->poll(20'000'000, events);
-    const std::int64_t now = tetrig::dds::monotonicNs();
-    for (const tetrig::dds::SubscriberEvent& e : events) {
-      using K = tetrig::dds::SubscriberEvent;
-      if (e.kind == K::kPublisherAlive) {
-        last_activity = now;
-        if (!a.quiet) std::fprintf(stderr, "tetrig-dds-cat: publisher alive (%d alive)\n", e.alive_count);
-      } else if (e.kind == K::kPublisherLost) {
-        ++lost;
-        std::fprintf(stderr, "tetrig-dds-cat: publisher lost: no sign of it for the liveliness lease (%lld ms); last frame %.0f ms ago (%d alive)\n",
-                     lease_ms, static_cast<double>(now - last_activity) * 1e-6, e.alive_count);
-        if (!a.follow && e.alive_count == 0) {
-          exit_code = 3;
+  }
+
+  // Static data: accepted (its frames held so far are checked now) or refused.
+  void onStatic(const tetrig::dds::SubscriberEvent& e, std::int64_t now) {
+    std::string why;
+    if (checker.acceptStatic(e.static_data, why)) {
+      rig_name = e.static_data.rig_name;
+      vertex_count = e.static_data.vertex_count;
+      std::fprintf(stderr, "tetrig-dds-cat: static data: rig '%s', %u vertices, %zu triangles, %zu markers%s (instance %016" PRIx64 ")\n",
+                   printable(rig_name).c_str(), vertex_count, e.static_data.triangles.size() / 3, e.static_data.marker_labels.size(),
+                   e.static_data.has_normals ? ", normals" : "", e.static_data.instance_id);
+      // The frames held for this instance, in the order they came.
+      std::deque<tetrig::dds::ReceivedFrame> held;
+      held.swap(pending);
+      for (const auto& f : held) {
+        if (f.instance_id != e.static_data.instance_id) {
+          pending.push_back(f);
+        } else if (!(a.frames > 0 && seen >= a.frames) && onFrame(f, now)) {
           done = true;
         }
-      } else if (e.kind == K::kPublisherLeft) {
-        if (!a.quiet) std::fprintf(stderr, "tetrig-dds-cat: publisher left (a clean stop; %d alive)\n", e.alive_count);
-        if (!a.follow && e.alive_count == 0) done = true;
-      } else if (e.kind == K::kStatic) {
-        std::string why;
-        if (checker.acceptStatic(e.static_data, why)) {
-          rig_name = e.static_data.rig_name;
-          vertex_count = e.static_data.vertex_count;
-          std::fprintf(stderr, "tetrig-dds-cat: static data: rig '%s', %u vertices, %zu triangles, %zu markers%s (instance %016" PRIx64 ")\n",
-                       printable(rig_name).c_str(), vertex_count, e.static_data.triangles.size() / 3, e.static_data.marker_labels.size(),
-                       e.static_data.has_normals ? ", normals" : "", e.static_data.instance_id);
-          // The frames held for this instance, in the order they came.
-          std::deque<tetrig::dds::ReceivedFrame> held;
-          held.swap(pending);
-          for (const auto& f : held) {
-            if (f.instance_id != e.static_data.instance_id) {
-              pending.push_back(f);
-            } else if (!(a.frames > 0 && seen >= a.frames) && onFrame(f, now)) {
-              done = true;
-            }
-          }
-        } else {
-          ++static_refused;
-          std::fprintf(stderr, "tetrig-dds-cat: %s\n", why.c_str());
-        }
-      } else if (!(a.frames > 0 && seen >= a.frames) && onFrame(e.frame, now)) {
-        done = true;  // frames of this batch after a liveliness event still count: the events come first
       }
+    } else {
+      ++static_refused;
+      std::fprintf(stderr, "tetrig-dds-cat: %s\n", why.c_str());
+    }
+  }
+
+  // One event: the publisher alive, lost or gone, static data, or a frame.
+  void onEvent(const tetrig::dds::SubscriberEvent& e, std::int64_t now) {
+    using K = tetrig::dds::SubscriberEvent;
+    if (e.kind == K::kPublisherAlive) {
+      last_activity = now;
+      if (!a.quiet) std::fprintf(stderr, "tetrig-dds-cat: publisher alive (%d alive)\n", e.alive_count);
+    } else if (e.kind == K::kPublisherLost) {
+      ++lost;
+      std::fprintf(stderr, "tetrig-dds-cat: publisher lost: no sign of it for the liveliness lease (%lld ms); last frame %.0f ms ago (%d alive)\n",
+                   lease_ms, static_cast<double>(now - last_activity) * 1e-6, e.alive_count);
+      if (!a.follow && e.alive_count == 0) {
+        exit_code = 3;
+        done = true;
+      }
+    } else if (e.kind == K::kPublisherLeft) {
+      if (!a.quiet) std::fprintf(stderr, "tetrig-dds-cat: publisher left (a clean stop; %d alive)\n", e.alive_count);
+      if (!a.follow && e.alive_count == 0) done = true;
+    } else if (e.kind == K::kStatic) {
+      onStatic(e, now);
+    } else if (!(a.frames > 0 && seen >= a.frames) && onFrame(e.frame, now)) {
+      done = true;  // frames of this batch after a liveliness event still count: the events come first
+    }
+  }
+
+  // Waits up to 20 ms for events and handles them; a publisher silent for --timeout-ms ends the run.
+  void poll(tetrig::dds::FrameSubscriber& sub, std::vector<tetrig::dds::SubscriberEvent>& events) {
+    events.clear();
+    sub.poll(20'000'000, events);
+    const std::int64_t now = tetrig::dds::monotonicNs();
+    for (const tetrig::dds::SubscriberEvent& e : events) {
+      onEvent(e, now);
       if (a.frames > 0 && seen >= a.frames) break;
     }
     if (!done && now - last_activity > a.timeout_ms * 1'000'000) {
@@ -298,21 +292,21 @@ int main(int argc, char** argv) {
       done = true;
     }
   }
-  std::fflush(stdout);
-  if (dump != nullptr && std::fclose(dump) != 0) {
-    std::fprintf(stderr, "tetrig-dds-cat: cannot write %s: %s\n", a.dump.c_str(), std::strerror(errno));
-    exit_code = 1;
+
+  // The counts on stderr (unless --quiet, or on a fault).
+  void printSummary() const {
+    if (!a.quiet || exit_code == 0)
+      std::fprintf(stderr,
+                   "tetrig-dds-cat: %" PRIu64 " frames (%" PRIu64 " missed, %" PRIu64 " refused, %" PRIu64 " before static data), %zu bytes per frame, "
+                   "%" PRIu64 " static refused, %" PRIu64 " liveliness losses\n",
+                   seen, missed, refused, before_static, bytes_per_frame, static_refused, lost);
   }
-  const double seconds = static_cast<double>(tetrig::dds::monotonicNs() - start) * 1e-9;
-  before_static += pending.size();  // never checked: their static data did not come
-  if (!a.quiet || exit_code == 0)
-    std::fprintf(stderr,
-                 "tetrig-dds-cat: %" PRIu64 " frames (%" PRIu64 " missed, %" PRIu64 " refused, %" PRIu64 " before static data), %zu bytes per frame, "
-                 "%" PRIu64 " static refused, %" PRIu64 " liveliness losses\n",
-                 seen, missed, refused, before_static, bytes_per_frame, static_refused, lost);
-  if (!a.latency_json.empty()) {
+
+  // --latency-json: the counts and latency percentiles of the topic; false (said on stderr) when it
+  // cannot be written.
+  bool writeLatencyJson(const std::string& base, double seconds) const {
     std::FILE* out = std::fopen(a.latency_json.c_str(), "w");
-    if (out == nullptr) return std::fprintf(stderr, "tetrig-dds-cat: cannot write %s: %s\n", a.latency_json.c_str(), std::strerror(errno)), 1;
+    if (out == nullptr) return std::fprintf(stderr, "tetrig-dds-cat: cannot write %s: %s\n", a.latency_json.c_str(), std::strerror(errno)), false;
     std::fprintf(out,
                  "{ \"topic\": %s, \"frames_seen\": %" PRIu64 ", \"frames_missed\": %" PRIu64 ", \"frames_refused\": %" PRIu64
                  ", \"frames_before_static\": %" PRIu64 ", \"static_refused\": %" PRIu64 ", \"instances\": %" PRIu64
@@ -321,7 +315,54 @@ int main(int argc, char** argv) {
                  jsonString(tetrig::dds::frameTopicName(base)).c_str(), seen, missed, refused, before_static, static_refused, instances, lost,
                  jsonString(rig_name).c_str(), vertex_count, bytes_per_frame, seconds, statsJson(receive_to_seen).c_str(),
                  statsJson(published_to_seen).c_str(), statsJson(written_to_seen).c_str());
-    if (std::fclose(out) != 0) return std::fprintf(stderr, "tetrig-dds-cat: cannot write %s\n", a.latency_json.c_str()), 1;
+    if (std::fclose(out) != 0) return std::fprintf(stderr, "tetrig-dds-cat: cannot write %s\n", a.latency_json.c_str()), false;
+    return true;
   }
-  return exit_code;
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Args a;
+  if (const int status = parseArgs(argc, argv, a); status >= 0) return status;
+  std::signal(SIGINT, onSignal);
+  std::signal(SIGTERM, onSignal);
+
+  std::FILE* dump = nullptr;
+  if (!a.dump.empty()) {
+    dump = std::fopen(a.dump.c_str(), "wb");
+    if (dump == nullptr) return std::fprintf(stderr, "tetrig-dds-cat: cannot write %s: %s\n", a.dump.c_str(), std::strerror(errno)), 1;
+    std::fwrite("TSHMDMP1", 1, 8, dump);
+  }
+
+  std::string base;
+  try {
+    base = tetrig::dds::topicBaseName(a.name);
+  } catch (const tetrig::dds::DdsError& e) {
+    return std::fprintf(stderr, "tetrig-dds-cat: %s\n", e.what()), 1;
+  }
+  tetrig::dds::DdsOptions options;
+  options.domain_id = a.domain;
+  const long long lease_ms = options.liveliness_lease_ns / 1'000'000;  // the publishers' lease: a reader must not ask for less
+  std::unique_ptr<tetrig::dds::FrameSubscriber> sub;
+  try {
+    sub = std::make_unique<tetrig::dds::FrameSubscriber>(base, options);
+  } catch (const tetrig::dds::DdsError& e) {
+    return std::fprintf(stderr, "tetrig-dds-cat: %s\n", e.what()), 1;
+  }
+  if (!a.quiet) std::fprintf(stderr, "tetrig-dds-cat: waiting on %s\n", tetrig::dds::frameTopicName(base).c_str());
+
+  Subscription s(a, dump, lease_ms);
+  std::vector<tetrig::dds::SubscriberEvent> events;
+  while (!s.done && g_stop == 0) s.poll(*sub, events);
+  std::fflush(stdout);
+  if (dump != nullptr && std::fclose(dump) != 0) {
+    std::fprintf(stderr, "tetrig-dds-cat: cannot write %s: %s\n", a.dump.c_str(), std::strerror(errno));
+    s.exit_code = 1;
+  }
+  const double seconds = static_cast<double>(tetrig::dds::monotonicNs() - s.start) * 1e-9;
+  s.before_static += s.pending.size();  // never checked: their static data did not come
+  s.printSummary();
+  if (!a.latency_json.empty() && !s.writeLatencyJson(base, seconds)) return 1;
+  return s.exit_code;
 }

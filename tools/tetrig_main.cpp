@@ -267,16 +267,43 @@ int commandLineError(CLI::App& app, const CLI::ParseError& e, int argc, char** a
   return 2;
 }
 
-}  // namespace
+// The option groups of the commands' --help.
+const char* const kEssentials = "Essentials";
+const char* const kStage = "Several performers (docs/live.md, \"Several performers\")";
+const char* const kAccuracy = "Accuracy (how closely the skin follows the markers)";
+const char* const kLatency = "Latency";
+const char* const kSources = "Sources";
+const char* const kOutput = "Output";
 
-int main(int argc, char** argv) {
-  CLI::App app{"tetrig: real-time volumetric deformation driven by motion-capture markers (Stoll et al. 2007)"};
-  app.require_subcommand(1);
-  app.set_version_flag("--version", "tetrig " TETRIG_VERSION_STRING);  // tetrig/version.h: project(VERSION) in CMakeLists.txt
+// `tetrig run`'s options beyond RunOptions, and its command and options that the checks after parsing query.
+struct RunArgs {
+  tetrig::tools::RunOptions run;
+  std::string run_clip;
+  std::vector<std::string> run_performers;
+  std::string run_stage;
+  bool no_mlock = false;
+  std::string shm_mode;
+  CLI::App* run_cmd = nullptr;
+  CLI::Option* run_rig = nullptr;
+  CLI::Option* run_source = nullptr;
+};
 
+// Every command's options, as the parser fills them.
+struct CommandLine {
   BuildArgs build;
+  std::string inspect_path;
+  bool inspect_markers = false;
+  tetrig::tools::DemoOptions demo;
+  RunArgs run;
+  tetrig::tools::ExportOptions exp;
+  tetrig::tools::ViewOptions view;
+  tetrig::tools::PoseOptions pose;
+  std::string character_out;
+};
+
+// `tetrig build-rig` and its options.
+void addBuildRigCommand(CLI::App& app, BuildArgs& build) {
   CLI::App* build_cmd = app.add_subcommand("build-rig", "Build a rig file from a mesh, a rig description and a marker clip");
-  const char* kEssentials = "Essentials";
   build_cmd->add_option("--mesh", build.mesh, "The character: a surface mesh (OBJ, PLY, OFF, STL, glTF, ...) or a ready tet mesh (.node/.ele, .mesh)")
       ->required()
       ->group(kEssentials);
@@ -346,14 +373,17 @@ int main(int argc, char** argv) {
   build_cmd->add_flag("--simple-progress", build.simple, "Plain progress lines even on a terminal")->group("Output");
   build_cmd->add_flag("--force", build.force, "Replace an existing --out that is not a tetrig rig (an input is never replaced)")->group("Output");
   build_cmd->add_flag("-q,--quiet", build.quiet, "No progress and no summary")->group("Output");
+}
 
-  std::string inspect_path;
-  bool inspect_markers = false;
+// `tetrig inspect` and its options.
+void addInspectCommand(CLI::App& app, std::string& inspect_path, bool& inspect_markers) {
   CLI::App* inspect_cmd = app.add_subcommand("inspect", "Show what a rig file holds: counts, bounding box, handles, markers, memory");
   inspect_cmd->add_option("RIG", inspect_path, "Rig file")->required();
   inspect_cmd->add_flag("--markers", inspect_markers, "List every marker");
+}
 
-  tetrig::tools::DemoOptions demo;
+// `tetrig demo` and its options.
+void addDemoCommand(CLI::App& app, tetrig::tools::DemoOptions& demo) {
   CLI::App* demo_cmd = app.add_subcommand("demo", "Run the live path (source -> solver -> shared memory -> a consumer) on the project's own default data, or on --mesh/--c3d");
   demo_cmd->add_option("--frames", demo.frames, "Frames to solve (default: one pass of the default character's performance, 1152 frames; the whole clip with --c3d)")
       ->check(CLI::Range(1, 100000000));
@@ -378,23 +408,27 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::Range(1, 48));
   demo_cmd->add_flag("-q,--quiet", demo.quiet, "Less output");
+}
 
-  tetrig::tools::RunOptions run;
-  CLI::App* run_cmd = app.add_subcommand("run", "Run the live path: a marker source -> the rig, frame after frame -> shared memory");
-  std::string run_clip;
-  CLI::Option* run_rig = run_cmd->add_option("--rig", run.rig_path, "Rig file (tetrig build-rig)")->group(kEssentials);
-  std::vector<std::string> run_performers;
-  std::string run_stage;
-  const char* kStage = "Several performers (docs/live.md, \"Several performers\")";
+// `tetrig run` and its options.
+void addRunCommand(CLI::App& app, RunArgs& r) {
+  tetrig::tools::RunOptions& run = r.run;
+  std::string& run_clip = r.run_clip;
+  std::vector<std::string>& run_performers = r.run_performers;
+  std::string& run_stage = r.run_stage;
+  bool& no_mlock = r.no_mlock;
+  std::string& shm_mode = r.shm_mode;
+  CLI::App* run_cmd = r.run_cmd = app.add_subcommand("run", "Run the live path: a marker source -> the rig, frame after frame -> shared memory");
+  r.run_rig = run_cmd->add_option("--rig", run.rig_path, "Rig file (tetrig build-rig)")->group(kEssentials);
   run_cmd->add_option("--performer", run_performers,
                       "One performer: rig=PATH,source=SPEC,publish=NAME[,subject=S][,name=N][,coarse-rig=PATH][,cpu=K]; repeat for each "
                       "(performers naming one source share it; subject=S takes its S:LABEL markers)")
       ->group(kStage);
   run_cmd->add_option("--stage", run_stage, "A stage file (JSON) listing the performers")->group(kStage);
-  CLI::Option* run_source = run_cmd->add_option("--source", run.source,
-                      "Where the markers come from: c3d:PATH, replay:PATH, synthetic[:N], synthetic:character, hid:VID:PID, "
-                      "usb:VID:PID (hex ids), hydra[:SERIAL]")
-      ->group(kEssentials);
+  r.run_source = run_cmd->add_option("--source", run.source,
+                                     "Where the markers come from: c3d:PATH, replay:PATH, synthetic[:N], synthetic:character, hid:VID:PID, "
+                                     "usb:VID:PID (hex ids), hydra[:SERIAL]")
+                     ->group(kEssentials);
   run_cmd->add_option("--clip", run_clip, "Play this C3D clip (the same as --source c3d:PATH)")->group(kEssentials);
   run_cmd->add_option("--publish", run.publish, "Shared-memory segment the engine reads (docs/shm.md)")->capture_default_str()->group(kEssentials);
   run_cmd->add_option("--frames", run.frames, "Stop after this many solved frames (default: until the source ends or Ctrl-C)")
@@ -403,7 +437,6 @@ int main(int argc, char** argv) {
         return "'" + v + "' is not a number of frames (a whole number, 0 = until the source ends; a range A:B is tetrig export's --range)";
       })
       ->group(kEssentials);
-  const char* kAccuracy = "Accuracy (how closely the skin follows the markers)";
   run_cmd->add_option("--iterations", run.iterations, "Solver iterations per frame: more land nearer the final shape, each costs time")
       ->capture_default_str()
       ->check(CLI::Range(1, 1000))
@@ -417,7 +450,6 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::Range(0.0, 10000.0))
       ->group(kAccuracy);
-  const char* kLatency = "Latency";
   run_cmd->add_option("--budget-ms", run.budget_ms, "Receive -> published deadline per frame (default: 0.9 of the source's period)")
       ->check(CLI::Range(0.01, 60000.0))
       ->group(kLatency);
@@ -426,9 +458,7 @@ int main(int argc, char** argv) {
       ->group(kLatency);
   run_cmd->add_option("--cpu", run.cpu, "Pin the solver thread to this CPU")->check(CLI::Range(0, 4095))->group(kLatency);
   run_cmd->add_flag("--fifo", run.fifo, "Run the solver thread under SCHED_FIFO (needs the privilege; reported when refused)")->group(kLatency);
-  bool no_mlock = false;
   run_cmd->add_flag("--no-mlock", no_mlock, "Do not lock the process's memory")->group(kLatency);
-  const char* kSources = "Sources";
   run_cmd->add_flag("--as-fast-as-possible", run.as_fast_as_possible, "Playback: as fast as the solver takes frames (each frame waits until the last was taken: none dropped; offline runs)")->group(kSources);
   run_cmd->add_option("--speed", run.speed, "Playback speed factor (the budget follows it)")
       ->capture_default_str()
@@ -449,16 +479,16 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::Range(1.0, 600000.0))
       ->group(kSources);
-  const char* kOutput = "Output";
   run_cmd->add_flag("--normals", run.normals, "Also publish per-vertex normals")->group(kOutput);
   run_cmd->add_flag("--dds", run.dds, "Also publish the frames over DDS: topics tetrig/<publish name>/frame and /static (docs/dds.md)")->group(kOutput);
   run_cmd->add_option("--stats-json", run.stats_json, "Write the run's statistics (keys: docs/live.md)")->group(kOutput);
-  std::string shm_mode;
   run_cmd->add_option("--shm-mode", shm_mode, "Segment permissions in octal (default 600: owner only; read bits for group/others, e.g. 640 or 644, but no write bits)")
       ->group(kOutput);
   run_cmd->add_flag("-q,--quiet", run.quiet, "Only errors")->group(kOutput);
+}
 
-  tetrig::tools::ExportOptions exp;
+// `tetrig export` and its options.
+void addExportCommand(CLI::App& app, tetrig::tools::ExportOptions& exp) {
   CLI::App* export_cmd = app.add_subcommand(
       "export", "Run a clip offline through a rig at full quality and write the fine-mesh animation (PC2 + OBJ, OBJ/PLY sequence, glTF)");
   export_cmd->add_option("--rig", exp.rig_path, "Rig file (tetrig build-rig)")->required()->group(kEssentials);
@@ -516,8 +546,10 @@ int main(int argc, char** argv) {
   export_cmd->add_flag("--force", exp.force, "Replace existing output files that tetrig did not write (an input is never replaced)")
       ->group(kOutput);
   export_cmd->add_flag("-q,--quiet", exp.quiet, "No progress and no summary")->group(kOutput);
+}
 
-  tetrig::tools::ViewOptions view;
+// `tetrig view` and its options.
+void addViewCommand(CLI::App& app, tetrig::tools::ViewOptions& view) {
   CLI::App* view_cmd = app.add_subcommand(
       "view", "A window showing a shared-memory segment live: shaded mesh, orbit/zoom, frame id, rate, latency (docs/view.md)");
   view_cmd->add_option("NAME", view.name, "Segment name (the --publish name of tetrig run / tetrig demo; default: tetrig run's)")
@@ -539,8 +571,10 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1.0, 600000.0));
   view_cmd->add_flag("-q,--quiet", view.quiet, "No status lines on stderr");
   view_cmd->add_flag("--dds", view.dds, "Read NAME's frames over DDS (topics tetrig/NAME/frame and /static) instead of its segment (docs/dds.md)");
+}
 
-  tetrig::tools::PoseOptions pose;
+// `tetrig pose` and its options.
+void addPoseCommand(CLI::App& app, tetrig::tools::PoseOptions& pose) {
   CLI::App* pose_cmd = app.add_subcommand("pose", "Pose a rig: rigid transforms (.def files) for its region handles -> the fine mesh as OBJ");
   pose_cmd->add_option("RIG", pose.rig_path, "Rig file (tetrig build-rig)")->required();
   pose_cmd->add_option("--region", pose.regions,
@@ -560,13 +594,100 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0.0, 0.99));
   pose_cmd->add_flag("--force", pose.force, "Replace an existing --out that tetrig did not write (an input is never replaced)");
   pose_cmd->add_flag("-q,--quiet", pose.quiet, "No summary");
+}
 
-  std::string character_out;
+// `tetrig make-character` and its options.
+void addMakeCharacterCommand(CLI::App& app, std::string& character_out) {
   CLI::App* character_cmd = app.add_subcommand(
       "make-character", "Generate the default character's assets (skin OBJ + T-pose markers CSV; docs/character.md) into a folder");
   character_cmd->add_option("--out", character_out, "Folder to write character.obj and markers.csv into (each replaced atomically)")
       ->required();
+}
 
+// `tetrig make-character`: writes the default character's assets and says what they are.
+int makeCharacterCommand(const std::string& character_out) {
+  const tetrig::character::CharacterSkinStats made = tetrig::character::writeCharacterAssets(character_out);
+  std::printf("tetrig make-character: %s/%s: %d vertices, %d triangles, genus %d, %.3f m tall, %.4f m^3 (%.2f s); %s/%s: %d markers\n",
+              character_out.c_str(), tetrig::character::kCharacterObjName, made.vertices, made.triangles, made.genus, made.height_m,
+              made.volume_m3, made.seconds, character_out.c_str(), tetrig::character::kCharacterMarkersName,
+              tetrig::drivers::kCharacterMarkerCount);
+  return 0;
+}
+
+// `tetrig run`: checks the performers, the source and --shm-mode, then runs the live path.
+int runCommand(RunArgs& r) {
+  tetrig::tools::RunOptions& run = r.run;
+  const std::string& run_clip = r.run_clip;
+  const std::string& run_stage = r.run_stage;
+  const std::vector<std::string>& run_performers = r.run_performers;
+  const std::string& shm_mode = r.shm_mode;
+  run.lock_memory = !r.no_mlock;
+  if (!run_performers.empty() && !run_stage.empty())
+    throw std::invalid_argument("give the performers with --performer or in a --stage file, not both");
+  const bool stage = !run_performers.empty() || !run_stage.empty();
+  if (stage) {
+    if (r.run_rig->count() > 0 || r.run_source->count() > 0 || !run_clip.empty() || r.run_cmd->get_option("--publish")->count() > 0 ||
+        r.run_cmd->get_option("--coarse-rig")->count() > 0 || r.run_cmd->get_option("--cpu")->count() > 0)
+      throw std::invalid_argument("with --performer or --stage, each performer names its rig, source, segment, coarse rig and CPU: "
+                                  "not --rig, --source, --clip, --publish, --coarse-rig or --cpu");
+    if (!run_stage.empty()) run.performers = tetrig::tools::loadStageFile(run_stage);
+    for (const std::string& text : run_performers) run.performers.push_back(tetrig::tools::parsePerformerSpec(text));
+    tetrig::tools::checkStage(run.performers);
+  } else {
+    if (r.run_rig->count() == 0) throw std::invalid_argument("no rig: give --rig RIG (or --performer / --stage for several performers)");
+    if (!run_clip.empty() && r.run_source->count() > 0)
+      throw std::invalid_argument("give --clip PATH or --source SOURCE, not both (--clip PATH is --source c3d:PATH)");
+    if (!run_clip.empty()) run.source = "c3d:" + run_clip;
+    if (run_clip.empty() && r.run_source->count() == 0)
+      throw std::invalid_argument("no marker source: give --clip CLIP.c3d or --source SOURCE (c3d:PATH, synthetic, hid:VID:PID, ...)");
+  }
+  if (!shm_mode.empty()) {
+    // Octal digits only (std::stoul would take spaces and signs, and throw "stoul" on other text).
+    if (shm_mode.size() > 4 || shm_mode.find_first_not_of("01234567") != std::string::npos || std::stoul(shm_mode, nullptr, 8) > 0777) {
+      throw std::invalid_argument("--shm-mode '" + shm_mode + "' is not octal permissions such as 600, 640 or 644");
+    }
+    const unsigned long mode = std::stoul(shm_mode, nullptr, 8);
+    if ((mode & 022) != 0) {
+      throw std::invalid_argument("--shm-mode " + shm_mode + " lets group or others write the segment: any such user could rewrite or "
+                                  "truncate it and crash its readers, which refuse it; use 600, 640 or 644");
+    }
+    run.shm_permissions = static_cast<unsigned>(mode);
+  }
+  return tetrig::tools::runLive(run);
+}
+
+// Runs the command the parser chose (none: 0).
+int runChosenCommand(const std::string& cmd, CommandLine& c) {
+  if (cmd == "build-rig") return buildRigCommand(c.build);
+  if (cmd == "inspect") return inspectCommand(c.inspect_path, c.inspect_markers);
+  if (cmd == "demo") return tetrig::tools::runDemo(c.demo);
+  if (cmd == "pose") return tetrig::tools::runPose(c.pose);
+  if (cmd == "view") return tetrig::tools::runView(c.view);
+  if (cmd == "make-character") return makeCharacterCommand(c.character_out);
+  if (cmd == "export") return tetrig::tools::runExport(c.exp);
+  if (cmd == "run") return runCommand(c.run);
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"tetrig: real-time volumetric deformation driven by motion-capture markers (Stoll et al. 2007)"};
+  app.require_subcommand(1);
+  app.set_version_flag("--version", "tetrig " TETRIG_VERSION_STRING);  // tetrig/version.h: project(VERSION) in CMakeLists.txt
+
+  // The commands and their options, in the order --help lists them.
+  CommandLine commands;
+  addBuildRigCommand(app, commands.build);
+  addInspectCommand(app, commands.inspect_path, commands.inspect_markers);
+  addDemoCommand(app, commands.demo);
+  addRunCommand(app, commands.run);
+  addExportCommand(app, commands.exp);
+  addViewCommand(app, commands.view);
+  addPoseCommand(app, commands.pose);
+  addMakeCharacterCommand(app, commands.character_out);
+
+  // A mistake on the command line: one line, status 2 (--help and --version: 0).
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -574,56 +695,9 @@ int main(int argc, char** argv) {
   }
 
   const std::string cmd = app.get_subcommands().empty() ? std::string() : app.get_subcommands().front()->get_name();
+  // The chosen command; an error is one line on stderr, status 1.
   try {
-    if (cmd == "build-rig") return buildRigCommand(build);
-    if (cmd == "inspect") return inspectCommand(inspect_path, inspect_markers);
-    if (cmd == "demo") return tetrig::tools::runDemo(demo);
-    if (cmd == "pose") return tetrig::tools::runPose(pose);
-    if (cmd == "view") return tetrig::tools::runView(view);
-    if (cmd == "make-character") {
-      const tetrig::character::CharacterSkinStats made = tetrig::character::writeCharacterAssets(character_out);
-      std::printf("tetrig make-character: %s/%s: %d vertices, %d triangles, genus %d, %.3f m tall, %.4f m^3 (%.2f s); %s/%s: %d markers\n",
-                  character_out.c_str(), tetrig::character::kCharacterObjName, made.vertices, made.triangles, made.genus, made.height_m,
-                  made.volume_m3, made.seconds, character_out.c_str(), tetrig::character::kCharacterMarkersName,
-                  tetrig::drivers::kCharacterMarkerCount);
-      return 0;
-    }
-    if (cmd == "export") return tetrig::tools::runExport(exp);
-    if (cmd == "run") {
-      run.lock_memory = !no_mlock;
-      if (!run_performers.empty() && !run_stage.empty())
-        throw std::invalid_argument("give the performers with --performer or in a --stage file, not both");
-      const bool stage = !run_performers.empty() || !run_stage.empty();
-      if (stage) {
-        if (run_rig->count() > 0 || run_source->count() > 0 || !run_clip.empty() || run_cmd->get_option("--publish")->count() > 0 ||
-            run_cmd->get_option("--coarse-rig")->count() > 0 || run_cmd->get_option("--cpu")->count() > 0)
-          throw std::invalid_argument("with --performer or --stage, each performer names its rig, source, segment, coarse rig and CPU: "
-                                      "not --rig, --source, --clip, --publish, --coarse-rig or --cpu");
-        if (!run_stage.empty()) run.performers = tetrig::tools::loadStageFile(run_stage);
-        for (const std::string& text : run_performers) run.performers.push_back(tetrig::tools::parsePerformerSpec(text));
-        tetrig::tools::checkStage(run.performers);
-      } else {
-        if (run_rig->count() == 0) throw std::invalid_argument("no rig: give --rig RIG (or --performer / --stage for several performers)");
-        if (!run_clip.empty() && run_source->count() > 0)
-          throw std::invalid_argument("give --clip PATH or --source SOURCE, not both (--clip PATH is --source c3d:PATH)");
-        if (!run_clip.empty()) run.source = "c3d:" + run_clip;
-        if (run_clip.empty() && run_source->count() == 0)
-          throw std::invalid_argument("no marker source: give --clip CLIP.c3d or --source SOURCE (c3d:PATH, synthetic, hid:VID:PID, ...)");
-      }
-      if (!shm_mode.empty()) {
-        // Octal digits only (std::stoul would take spaces and signs, and throw "stoul" on other text).
-        if (shm_mode.size() > 4 || shm_mode.find_first_not_of("01234567") != std::string::npos || std::stoul(shm_mode, nullptr, 8) > 0777) {
-          throw std::invalid_argument("--shm-mode '" + shm_mode + "' is not octal permissions such as 600, 640 or 644");
-        }
-        const unsigned long mode = std::stoul(shm_mode, nullptr, 8);
-        if ((mode & 022) != 0) {
-          throw std::invalid_argument("--shm-mode " + shm_mode + " lets group or others write the segment: any such user could rewrite or "
-                                      "truncate it and crash its readers, which refuse it; use 600, 640 or 644");
-        }
-        run.shm_permissions = static_cast<unsigned>(mode);
-      }
-      return tetrig::tools::runLive(run);
-    }
+    return runChosenCommand(cmd, commands);
   } catch (const std::exception& e) {
     // One line, and no control sequence from a file's text (a label, a JSON key) reaches the terminal.
     std::string what = e.what();
@@ -633,5 +707,4 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "tetrig %s: error: %s\n", cmd.c_str(), printableText(what).c_str());
     return 1;
   }
-  return 0;
 }

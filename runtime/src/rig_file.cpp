@@ -291,7 +291,10 @@ std::vector<std::array<float, 3>> markerRestPositionsMm(const Rig& rig) {
   return out;
 }
 
-std::string validateRig(const Rig& rig) {
+namespace {
+
+// The tet mesh (body counts, tets) and the fine mesh (finite vertices, triangles in range).
+std::string meshFault(const Rig& rig) {
   const std::int32_t nv = rig.tet_mesh.vertexCount();
   const std::int32_t nt = rig.tet_mesh.tetCount();
   const std::int32_t nf = static_cast<std::int32_t>(rig.fine_vertices.rows());
@@ -309,6 +312,14 @@ std::string validateRig(const Rig& rig) {
       if (v < 0 || v >= nf) return "fine triangle " + num(f) + " names vertex " + num(v) + " of " + num(nf);
     }
   }
+  return {};
+}
+
+// The pose-transfer matrix B: its size, its CSR arrays, rows summing to 1.
+std::string poseTransferFault(const Rig& rig) {
+  const std::int32_t nv = rig.tet_mesh.vertexCount();
+  const std::int32_t nf = static_cast<std::int32_t>(rig.fine_vertices.rows());
+  auto num = [](auto v) { return std::to_string(v); };
   const PoseTransferCsr<double>& b = rig.pose_transfer;
   if (b.rows != nf || b.cols != nv) {
     return "pose transfer B is " + num(b.rows) + " x " + num(b.cols) + ", expected " + num(nf) + " x " + num(nv);
@@ -326,6 +337,14 @@ std::string validateRig(const Rig& rig) {
     }
     if (!(std::abs(sum - 1.0) <= 1e-6)) return "pose transfer B: row " + num(r) + " sums to " + std::to_string(sum) + ", not 1";
   }
+  return {};
+}
+
+// The vertex, region and point handles: in range, no vertex handle twice.
+std::string handlesFault(const Rig& rig) {
+  const std::int32_t nv = rig.tet_mesh.vertexCount();
+  const std::int32_t nt = rig.tet_mesh.tetCount();
+  auto num = [](auto v) { return std::to_string(v); };
   const DeformerSetup& s = rig.setup;
   std::vector<std::uint8_t> used(static_cast<std::size_t>(nv), 0);
   for (std::size_t h = 0; h < s.vertex_handles.size(); ++h) {
@@ -347,6 +366,14 @@ std::string validateRig(const Rig& rig) {
       return "point handle " + num(p) + " has barycentric weights that are not finite or do not sum to 1";
     }
   }
+  return {};
+}
+
+// The rigid groups (disjoint), the stiffness and the volume weights (one valid value per tet).
+std::string groupsAndWeightsFault(const Rig& rig) {
+  const std::int32_t nt = rig.tet_mesh.tetCount();
+  auto num = [](auto v) { return std::to_string(v); };
+  const DeformerSetup& s = rig.setup;
   std::vector<std::uint8_t> grouped(static_cast<std::size_t>(nt), 0);
   for (std::size_t g = 0; g < s.rigid_groups.size(); ++g) {
     for (const std::int32_t t : s.rigid_groups[g].tets) {
@@ -369,10 +396,56 @@ std::string validateRig(const Rig& rig) {
       if (!(s.volume_weights[t] >= 0.0 && s.volume_weights[t] < 1.0)) return "volume weight of tet " + num(t) + " is not in [0, 1)";
     }
   }
+  return {};
+}
+
+// One name per handle and rigid group.
+std::string handleNamesFault(const Rig& rig) {
+  const DeformerSetup& s = rig.setup;
   if (rig.vertex_handle_names.size() != s.vertex_handles.size() || rig.region_handle_names.size() != s.region_handles.size() ||
       rig.point_handle_names.size() != s.point_handles.size() || rig.rigid_group_names.size() != s.rigid_groups.size()) {
     return "the handle name lists do not match the handle counts";
   }
+  return {};
+}
+
+// The invisible tets: each body tet without a marker corner, each invisible tet with one; each
+// marker joined to the body by as many invisible tets as it says (marker_of: marker vertex -> marker).
+std::string markerBindingFault(const Rig& rig, const std::vector<std::int32_t>& marker_of) {
+  const std::int32_t nt = rig.tet_mesh.tetCount();
+  auto num = [](auto v) { return std::to_string(v); };
+  std::vector<std::int32_t> bound(rig.markers.size(), 0);
+  for (std::int32_t t = 0; t < nt; ++t) {
+    std::int32_t markers_in_tet = 0, marker_vertex = -1;
+    for (int k = 0; k < 4; ++k) {
+      const std::int32_t v = rig.tet_mesh.tets(t, k);
+      if (v >= rig.body_vertex_count) {
+        ++markers_in_tet;
+        marker_vertex = v;
+      }
+    }
+    if (t < rig.body_tet_count && markers_in_tet != 0) return "body tet " + num(t) + " names marker vertex " + num(marker_vertex);
+    if (t >= rig.body_tet_count) {
+      if (markers_in_tet != 1) return "invisible tet " + num(t) + " has " + num(markers_in_tet) + " marker corners, not 1";
+      ++bound[static_cast<std::size_t>(marker_of[static_cast<std::size_t>(marker_vertex - rig.body_vertex_count)])];
+    }
+  }
+  for (std::size_t m = 0; m < rig.markers.size(); ++m) {
+    if (rig.markers[m].bound_faces != bound[m]) {
+      return "marker " + num(m) + " (" + printableText(rig.markers[m].label, 64) + ") says " + num(rig.markers[m].bound_faces) +
+             " bound faces but " + num(bound[m]) + " invisible tets join it to the body";
+    }
+    if (bound[m] == 0) return "marker " + num(m) + " (" + printableText(rig.markers[m].label, 64) + ") is joined to the body by no invisible tet";
+  }
+  return {};
+}
+
+// The markers: one marker vertex each, its vertex handle, finite values, distinct UTF-8 labels; then
+// their binding by the invisible tets.
+std::string markersFault(const Rig& rig) {
+  const std::int32_t nv = rig.tet_mesh.vertexCount();
+  auto num = [](auto v) { return std::to_string(v); };
+  const DeformerSetup& s = rig.setup;
   // Markers: the tet vertices after the body ones, one per marker, each joined to the body by the
   // invisible tets (the tets after the body ones, each with three body corners and one marker).
   const std::int32_t marker_vertices = nv - rig.body_vertex_count;
@@ -404,35 +477,25 @@ std::string validateRig(const Rig& rig) {
       return who + " has the label of marker " + num(it->second) + ": labels must be distinct";
     }
   }
-  std::vector<std::int32_t> bound(rig.markers.size(), 0);
-  for (std::int32_t t = 0; t < nt; ++t) {
-    std::int32_t markers_in_tet = 0, marker_vertex = -1;
-    for (int k = 0; k < 4; ++k) {
-      const std::int32_t v = rig.tet_mesh.tets(t, k);
-      if (v >= rig.body_vertex_count) {
-        ++markers_in_tet;
-        marker_vertex = v;
-      }
-    }
-    if (t < rig.body_tet_count && markers_in_tet != 0) return "body tet " + num(t) + " names marker vertex " + num(marker_vertex);
-    if (t >= rig.body_tet_count) {
-      if (markers_in_tet != 1) return "invisible tet " + num(t) + " has " + num(markers_in_tet) + " marker corners, not 1";
-      ++bound[static_cast<std::size_t>(marker_of[static_cast<std::size_t>(marker_vertex - rig.body_vertex_count)])];
-    }
-  }
-  for (std::size_t m = 0; m < rig.markers.size(); ++m) {
-    if (rig.markers[m].bound_faces != bound[m]) {
-      return "marker " + num(m) + " (" + printableText(rig.markers[m].label, 64) + ") says " + num(rig.markers[m].bound_faces) +
-             " bound faces but " + num(bound[m]) + " invisible tets join it to the body";
-    }
-    if (bound[m] == 0) return "marker " + num(m) + " (" + printableText(rig.markers[m].label, 64) + ") is joined to the body by no invisible tet";
-  }
+  return markerBindingFault(rig, marker_of);
+}
+
+// The alignment: finite, invertible, positive scale and unit.
+std::string alignmentFault(const Rig& rig) {
   const RigAlignment& a = rig.alignment;
   if (!a.linear.allFinite() || !a.translation.allFinite() || !std::isfinite(a.fit_scale) || !std::isfinite(a.rig_units_per_mm) ||
       std::abs(a.linear.determinant()) <= 0.0) {
     return "the alignment transform is not finite and invertible";
   }
   if (!(a.fit_scale > 0.0) || !(a.rig_units_per_mm > 0.0)) return "the alignment's fit scale or unit conversion is not positive";
+  return {};
+}
+
+// The pose sensors and marker regions: each drives one oriented region handle, none driven twice;
+// a marker region names at least three distinct, not collinear markers.
+std::string drivenRegionsFault(const Rig& rig) {
+  auto num = [](auto v) { return std::to_string(v); };
+  const DeformerSetup& s = rig.setup;
   // Each oriented region handle is driven by at most one pose sensor or marker cluster.
   std::vector<std::uint8_t> driven(s.region_handles.size(), 0);
   const auto claimRegion = [&](const std::string& who, std::int32_t region) -> std::string {
@@ -479,6 +542,13 @@ std::string validateRig(const Rig& rig) {
     const Eigen::Vector3d ev = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(cov, Eigen::EigenvaluesOnly).eigenvalues();
     if (!(ev(1) > 1e-6 * ev(2))) return who + ": its markers lie on a line at rest (the rotation about it is not defined)";
   }
+  return {};
+}
+
+// Every string is valid UTF-8.
+std::string stringsFault(const Rig& rig) {
+  auto num = [](auto v) { return std::to_string(v); };
+  const RigAlignment& a = rig.alignment;
   // Every string is UTF-8 (the format says so); printing escapes control characters (printable_text.hpp).
   auto utf8 = [](const std::string& text, const std::string& what) -> std::string {
     return isWellFormedUtf8(text) ? std::string() : what + " is not valid UTF-8 ('" + printableText(text, 64) + "')";
@@ -500,13 +570,37 @@ std::string validateRig(const Rig& rig) {
   for (std::size_t p = 0; p < rig.pose_sensors.size(); ++p) {
     if (std::string e = utf8(rig.pose_sensors[p].sensor_label, "the label of pose sensor " + num(p)); !e.empty()) return e;
   }
-  if (std::string e = surfaceAttributesFault(rig.surface, static_cast<std::int32_t>(rig.fine_triangles.rows())); !e.empty()) return e;
-  const DeformerOptions& o = s.options;
+  return {};
+}
+
+// The deformer options: rotation steps in range, positive finite weights.
+std::string optionsFault(const Rig& rig) {
+  auto num = [](auto v) { return std::to_string(v); };
+  const DeformerOptions& o = rig.setup.options;
   if (o.rotation_steps < 0 || o.rotation_steps > 64) return "rotation_steps " + num(o.rotation_steps) + " is not in [0, 64]";
   if (!(o.point_handle_weight > 0.0) || !std::isfinite(o.point_handle_weight) || !(o.max_abs_coordinate > 0.0) ||
       !std::isfinite(o.max_abs_coordinate)) {
     return "deformer options hold a non-positive or non-finite weight";
   }
+  return {};
+}
+
+}  // namespace
+
+std::string validateRig(const Rig& rig) {
+  // Each step returns the first fault it finds ("" when none).
+  if (std::string e = meshFault(rig); !e.empty()) return e;
+  if (std::string e = poseTransferFault(rig); !e.empty()) return e;
+  if (std::string e = handlesFault(rig); !e.empty()) return e;
+  if (std::string e = groupsAndWeightsFault(rig); !e.empty()) return e;
+  if (std::string e = handleNamesFault(rig); !e.empty()) return e;
+  if (std::string e = markersFault(rig); !e.empty()) return e;
+  if (std::string e = alignmentFault(rig); !e.empty()) return e;
+  if (std::string e = drivenRegionsFault(rig); !e.empty()) return e;
+  if (std::string e = stringsFault(rig); !e.empty()) return e;
+  // The texture coordinates and materials fit the fine mesh.
+  if (std::string e = surfaceAttributesFault(rig.surface, static_cast<std::int32_t>(rig.fine_triangles.rows())); !e.empty()) return e;
+  if (std::string e = optionsFault(rig); !e.empty()) return e;
   if (rig.coarse) return coarseLevelMismatch(rig, *rig.coarse);
   return {};
 }
@@ -719,19 +813,14 @@ std::vector<std::uint8_t> serializeRig(const Rig& rig) {
 }
 
 namespace {
-Rig parseRigAt(std::span<const std::uint8_t> bytes, std::string_view source_name, const RigParseOptions& options, bool nested);
-}  // namespace
 
-Rig parseRig(std::span<const std::uint8_t> bytes, std::string_view source_name, const RigParseOptions& options) {
-  return parseRigAt(bytes, source_name, options, false);
-}
+// A fault in the file `name`: thrown as "name: what".
+[[noreturn]] void fileFault(const std::string& name, const std::string& what) { throw RigFileError(name + ": " + what); }
 
-namespace {
-// nested: parsing a CRSE section, which may not hold one of its own (checked before parsing it, so
-// a crafted file cannot nest levels to any depth).
-Rig parseRigAt(std::span<const std::uint8_t> bytes, std::string_view source_name, const RigParseOptions& options, bool nested) {
-  const std::string name(source_name);
-  auto fail = [&name](const std::string& what) -> void { throw RigFileError(name + ": " + what); };
+// Checks the header (magic, version, size, reserved word, checksum, section count); returns the
+// section count.
+std::uint32_t checkHeader(std::span<const std::uint8_t> bytes, const std::string& name, const RigParseOptions& options) {
+  auto fail = [&name](const std::string& what) -> void { fileFault(name, what); };
   if (bytes.size() < kHeaderBytes) {
     fail("not a rig file: " + std::to_string(bytes.size()) + " bytes, shorter than the 32-byte header");
   }
@@ -761,13 +850,21 @@ Rig parseRigAt(std::span<const std::uint8_t> bytes, std::string_view source_name
     }
   }
   if (section_count == 0 || section_count > kMaxSections) fail("absurd section count " + std::to_string(section_count));
-  const std::size_t table_end = kHeaderBytes + section_count * kTableEntryBytes;
-  if (table_end > bytes.size()) fail("truncated section table");
+  return section_count;
+}
 
-  struct Entry {
-    std::uint32_t tag;
-    std::size_t offset, size;
-  };
+// One entry of the section table.
+struct Entry {
+  std::uint32_t tag;
+  std::size_t offset, size;
+};
+
+// Reads the section table and checks each entry (a printable tag, a reserved 0, inside the file,
+// 8-byte aligned, no tag twice).
+std::vector<Entry> readSectionTable(std::span<const std::uint8_t> bytes, const std::string& name, std::uint32_t section_count,
+                                    std::size_t table_end) {
+  auto fail = [&name](const std::string& what) -> void { fileFault(name, what); };
+  if (table_end > bytes.size()) fail("truncated section table");
   std::vector<Entry> entries;
   Cursor table(bytes.data() + kHeaderBytes, section_count * kTableEntryBytes, name + ": section table");
   for (std::uint32_t i = 0; i < section_count; ++i) {
@@ -792,69 +889,83 @@ Rig parseRigAt(std::span<const std::uint8_t> bytes, std::string_view source_name
     }
     entries.push_back({t, static_cast<std::size_t>(offset), static_cast<std::size_t>(size)});
   }
-  // Layout (docs/rig-format.md): in file order, the first section starts right after the table
-  // and each further one at the end of the one before rounded up to 8 bytes, with zero padding
-  // between them; the last one ends the file. No byte of the file is outside the header, the
-  // table, a section or that padding, and no two sections share a byte.
-  {
-    std::vector<Entry> by_offset = entries;
-    std::stable_sort(by_offset.begin(), by_offset.end(),
-                     [](const Entry& a, const Entry& b) { return a.offset != b.offset ? a.offset < b.offset : a.size < b.size; });
-    std::size_t end = table_end;
-    std::string previous = "the section table";
-    for (const Entry& e : by_offset) {
-      const std::string here = "section " + tagName(e.tag) + " (bytes " + std::to_string(e.offset) + ".." + std::to_string(e.offset + e.size) + ")";
-      if (e.offset < end) fail(here + " overlaps " + previous + ", which ends at byte " + std::to_string(end));
-      const std::size_t expected = (end + 7) / 8 * 8;
-      if (e.offset != expected) {
-        fail(here + " starts " + std::to_string(e.offset - end) + " bytes after the end of " + previous + " (byte " + std::to_string(end) +
-             "); only the zero padding up to the next 8-byte boundary (byte " + std::to_string(expected) + ") may lie between sections");
-      }
-      for (std::size_t at = end; at < e.offset; ++at) {
-        if (bytes[at] != 0) fail("padding byte " + std::to_string(at) + " before " + here + " is not 0");
-      }
-      end = e.offset + e.size;
-      previous = "section " + tagName(e.tag);
+  return entries;
+}
+
+// Layout (docs/rig-format.md): in file order, the first section starts right after the table
+// and each further one at the end of the one before rounded up to 8 bytes, with zero padding
+// between them; the last one ends the file. No byte of the file is outside the header, the
+// table, a section or that padding, and no two sections share a byte.
+void checkSectionLayout(std::span<const std::uint8_t> bytes, const std::string& name, const std::vector<Entry>& entries, std::size_t table_end) {
+  auto fail = [&name](const std::string& what) -> void { fileFault(name, what); };
+  std::vector<Entry> by_offset = entries;
+  std::stable_sort(by_offset.begin(), by_offset.end(),
+                   [](const Entry& a, const Entry& b) { return a.offset != b.offset ? a.offset < b.offset : a.size < b.size; });
+  std::size_t end = table_end;
+  std::string previous = "the section table";
+  for (const Entry& e : by_offset) {
+    const std::string here = "section " + tagName(e.tag) + " (bytes " + std::to_string(e.offset) + ".." + std::to_string(e.offset + e.size) + ")";
+    if (e.offset < end) fail(here + " overlaps " + previous + ", which ends at byte " + std::to_string(end));
+    const std::size_t expected = (end + 7) / 8 * 8;
+    if (e.offset != expected) {
+      fail(here + " starts " + std::to_string(e.offset - end) + " bytes after the end of " + previous + " (byte " + std::to_string(end) +
+           "); only the zero padding up to the next 8-byte boundary (byte " + std::to_string(expected) + ") may lie between sections");
     }
-    if (end != bytes.size()) {
-      fail(std::to_string(bytes.size() - end) + " bytes after the last section (" + previous + " ends at byte " + std::to_string(end) +
-           ", the file at " + std::to_string(bytes.size()) + "): the file is corrupt or was appended to");
+    for (std::size_t at = end; at < e.offset; ++at) {
+      if (bytes[at] != 0) fail("padding byte " + std::to_string(at) + " before " + here + " is not 0");
     }
+    end = e.offset + e.size;
+    previous = "section " + tagName(e.tag);
   }
-  auto has_section = [&](std::uint32_t t) {
+  if (end != bytes.size()) {
+    fail(std::to_string(bytes.size() - end) + " bytes after the last section (" + previous + " ends at byte " + std::to_string(end) +
+         ", the file at " + std::to_string(bytes.size()) + "): the file is corrupt or was appended to");
+  }
+}
+
+// The checked sections of a file, by tag.
+struct Sections {
+  std::span<const std::uint8_t> bytes;
+  const std::string& name;
+  std::vector<Entry> entries;
+
+  bool has(std::uint32_t t) const {
     return std::any_of(entries.begin(), entries.end(), [t](const Entry& e) { return e.tag == t; });
-  };
-  auto section = [&](std::uint32_t t) -> Cursor {
+  }
+  // A cursor over section t; a missing section is an error.
+  Cursor section(std::uint32_t t) const {
     for (const Entry& e : entries) {
       if (e.tag == t) return Cursor(bytes.data() + e.offset, e.size, name + ": section " + tagName(t));
     }
     throw RigFileError(name + ": section " + tagName(t) + " is missing");
-  };
+  }
+};
 
-  Rig rig;
+// META, TETV, TETS, FINE: the rig's name, unit and builder, the tet mesh and the fine mesh.
+void readMeshSections(const Sections& sections, Rig& rig) {
   {
-    Cursor c = section(kTagMeta);
+    Cursor c = sections.section(kTagMeta);
     rig.name = c.str("rig name");
     rig.unit = c.str("unit");
     rig.builder = c.str("builder");
     c.end();
   }
   {
-    Cursor c = section(kTagTetVertices);
+    Cursor c = sections.section(kTagTetVertices);
     const std::size_t n = c.count("tet vertices", 0);
     rig.body_vertex_count = static_cast<std::int32_t>(c.u32("body vertex count"));
     c.rows(rig.tet_mesh.vertices, n, "tet vertex positions");
     c.end();
   }
   {
-    Cursor c = section(kTagTets);
+    Cursor c = sections.section(kTagTets);
     const std::size_t n = c.count("tets", 0);
     rig.body_tet_count = static_cast<std::int32_t>(c.u32("body tet count"));
     c.rows(rig.tet_mesh.tets, n, "tet corners");
     c.end();
   }
   {
-    Cursor c = section(kTagFine);
+    Cursor c = sections.section(kTagFine);
     const std::size_t nv = c.count("fine vertices", 0);
     const std::size_t nf = c.count("fine triangles", 0);
     c.need(nv * 24 + nf * 12, "fine mesh");
@@ -862,29 +973,33 @@ Rig parseRigAt(std::span<const std::uint8_t> bytes, std::string_view source_name
     c.rows(rig.fine_triangles, nf, "fine triangle corners");
     c.end();
   }
-  {
-    Cursor c = section(kTagPoseTransfer);
-    PoseTransferCsr<double>& b = rig.pose_transfer;
-    const std::uint32_t rows = c.u32("B rows");
-    const std::uint32_t cols = c.u32("B columns");
-    if (rows > static_cast<std::uint32_t>(std::numeric_limits<std::int32_t>::max() - 1) ||
-        cols > static_cast<std::uint32_t>(std::numeric_limits<std::int32_t>::max())) {
-      c.fail("absurd B size");
-    }
-    const std::size_t nnz = c.count("pose-transfer weights", 0);
-    c.need((static_cast<std::size_t>(rows) + 1) * 4 + nnz * 12, "pose-transfer matrix");
-    b.rows = static_cast<std::int32_t>(rows);
-    b.cols = static_cast<std::int32_t>(cols);
-    b.row_offsets.resize(static_cast<std::size_t>(rows) + 1);
-    for (std::int32_t& o : b.row_offsets) o = c.i32("B row offset");
-    b.columns.resize(nnz);
-    for (std::int32_t& col : b.columns) col = c.i32("B column");
-    b.weights.resize(nnz);
-    for (double& x : b.weights) x = c.f64("B weight");
-    c.end();
+}
+
+// The pose-transfer matrix B (CSR).
+void readPoseTransfer(Cursor c, PoseTransferCsr<double>& b) {
+  const std::uint32_t rows = c.u32("B rows");
+  const std::uint32_t cols = c.u32("B columns");
+  if (rows > static_cast<std::uint32_t>(std::numeric_limits<std::int32_t>::max() - 1) ||
+      cols > static_cast<std::uint32_t>(std::numeric_limits<std::int32_t>::max())) {
+    c.fail("absurd B size");
   }
+  const std::size_t nnz = c.count("pose-transfer weights", 0);
+  c.need((static_cast<std::size_t>(rows) + 1) * 4 + nnz * 12, "pose-transfer matrix");
+  b.rows = static_cast<std::int32_t>(rows);
+  b.cols = static_cast<std::int32_t>(cols);
+  b.row_offsets.resize(static_cast<std::size_t>(rows) + 1);
+  for (std::int32_t& o : b.row_offsets) o = c.i32("B row offset");
+  b.columns.resize(nnz);
+  for (std::int32_t& col : b.columns) col = c.i32("B column");
+  b.weights.resize(nnz);
+  for (double& x : b.weights) x = c.f64("B weight");
+  c.end();
+}
+
+// VHND, RHND, PHND, RGRP, STIF: the handles with their names, the rigid groups and the stiffness.
+void readHandleSections(const Sections& sections, Rig& rig) {
   {
-    Cursor c = section(kTagVertexHandles);
+    Cursor c = sections.section(kTagVertexHandles);
     const std::size_t n = c.count("vertex handles", 8);
     rig.setup.vertex_handles.resize(n);
     rig.vertex_handle_names.resize(n);
@@ -895,7 +1010,7 @@ Rig parseRigAt(std::span<const std::uint8_t> bytes, std::string_view source_name
     c.end();
   }
   {
-    Cursor c = section(kTagRegionHandles);
+    Cursor c = sections.section(kTagRegionHandles);
     const std::size_t n = c.count("region handles", 9);
     rig.setup.region_handles.resize(n);
     rig.region_handle_names.resize(n);
@@ -911,7 +1026,7 @@ Rig parseRigAt(std::span<const std::uint8_t> bytes, std::string_view source_name
     c.end();
   }
   {
-    Cursor c = section(kTagPointHandles);
+    Cursor c = sections.section(kTagPointHandles);
     const std::size_t n = c.count("point handles", 40);
     rig.setup.point_handles.resize(n);
     rig.point_handle_names.resize(n);
@@ -923,7 +1038,7 @@ Rig parseRigAt(std::span<const std::uint8_t> bytes, std::string_view source_name
     c.end();
   }
   {
-    Cursor c = section(kTagRigidGroups);
+    Cursor c = sections.section(kTagRigidGroups);
     const std::size_t n = c.count("rigid groups", 8);
     rig.setup.rigid_groups.resize(n);
     rig.rigid_group_names.resize(n);
@@ -936,121 +1051,160 @@ Rig parseRigAt(std::span<const std::uint8_t> bytes, std::string_view source_name
     c.end();
   }
   {
-    Cursor c = section(kTagStiffness);
+    Cursor c = sections.section(kTagStiffness);
     const std::size_t n = c.count("stiffness values", 8);
     rig.setup.stiffness.resize(n);
     for (double& x : rig.setup.stiffness) x = c.f64("stiffness");
     c.end();
   }
-  {
-    Cursor c = section(kTagMarkers);
-    const std::size_t n = c.count("markers", 48);
-    rig.markers.resize(n);
-    for (RigMarker& m : rig.markers) {
-      m.label = c.str("marker label");
-      m.tet_vertex = c.i32("marker tet vertex");
-      m.vertex_handle = c.i32("marker vertex handle");
-      for (int k = 0; k < 3; ++k) m.rest_position[k] = c.f64("marker rest position");
-      m.bound_faces = c.i32("marker bound faces");
-      m.surface_distance = c.f64("marker surface distance");
+}
+
+// MARK: the markers.
+void readMarkers(Cursor c, std::vector<RigMarker>& markers) {
+  const std::size_t n = c.count("markers", 48);
+  markers.resize(n);
+  for (RigMarker& m : markers) {
+    m.label = c.str("marker label");
+    m.tet_vertex = c.i32("marker tet vertex");
+    m.vertex_handle = c.i32("marker vertex handle");
+    for (int k = 0; k < 3; ++k) m.rest_position[k] = c.f64("marker rest position");
+    m.bound_faces = c.i32("marker bound faces");
+    m.surface_distance = c.f64("marker surface distance");
+  }
+  c.end();
+}
+
+// ALGN: device mm -> rig units.
+void readAlignment(Cursor c, RigAlignment& a) {
+  for (int r = 0; r < 3; ++r) {
+    for (int k = 0; k < 3; ++k) a.linear(r, k) = c.f64("alignment matrix");
+  }
+  for (int k = 0; k < 3; ++k) a.translation[k] = c.f64("alignment translation");
+  a.fit_scale = c.f64("alignment scale");
+  a.rig_units_per_mm = c.f64("alignment unit");
+  a.device_up = c.str("device up axis");
+  a.rig_up = c.str("rig up axis");
+  c.end();
+}
+
+// OPTS: the deformer options.
+void readOptions(Cursor c, DeformerOptions& o) {
+  const std::uint8_t update = c.u8("update_rotations");
+  const std::uint8_t interpolate = c.u8("interpolate_rotations");
+  if (update > 1 || interpolate > 1) c.fail("option flags are not 0 or 1");
+  o.update_rotations = update == 1;
+  o.interpolate_rotations = interpolate == 1;
+  o.rotation_steps = c.i32("rotation_steps");
+  o.point_handle_weight = c.f64("point_handle_weight");
+  o.max_abs_coordinate = c.f64("max_abs_coordinate");
+  c.end();
+}
+
+// The optional pose-sensor section.
+void readPoseSensors(Cursor c, std::vector<RigPoseSensor>& pose_sensors) {
+  const std::size_t n = c.count("pose sensors", kPoseSensorMinBytes);
+  pose_sensors.resize(n);
+  for (RigPoseSensor& ps : pose_sensors) {
+    ps.sensor_label = c.str("pose sensor label");
+    ps.region_handle = c.i32("pose sensor region handle");
+    const std::uint8_t mode = c.u8("pose sensor mode");
+    if (mode > static_cast<std::uint8_t>(PoseSensorMode::kAbsolute)) {
+      c.fail("pose sensor mode " + std::to_string(mode) + " is not 0 (clutch) or 1 (absolute)");
     }
-    c.end();
+    ps.mode = static_cast<PoseSensorMode>(mode);
+    ps.clutch_buttons = c.u8("pose sensor clutch buttons");
+    ps.translation_scale = c.f64("pose sensor translation scale");
   }
-  {
-    Cursor c = section(kTagAlignment);
-    RigAlignment& a = rig.alignment;
-    for (int r = 0; r < 3; ++r) {
-      for (int k = 0; k < 3; ++k) a.linear(r, k) = c.f64("alignment matrix");
-    }
-    for (int k = 0; k < 3; ++k) a.translation[k] = c.f64("alignment translation");
-    a.fit_scale = c.f64("alignment scale");
-    a.rig_units_per_mm = c.f64("alignment unit");
-    a.device_up = c.str("device up axis");
-    a.rig_up = c.str("rig up axis");
-    c.end();
+  c.end();
+}
+
+// The optional marker-region section.
+void readMarkerRegions(Cursor c, std::vector<RigMarkerRegion>& marker_regions) {
+  const std::size_t n = c.count("marker regions", 8);
+  marker_regions.resize(n);
+  for (RigMarkerRegion& mr : marker_regions) {
+    mr.region_handle = c.i32("marker region handle");
+    const std::size_t k = c.count("markers of a marker region", 4);
+    mr.markers.resize(k);
+    for (std::int32_t& m : mr.markers) m = c.i32("marker region marker");
   }
-  {
-    Cursor c = section(kTagOptions);
-    DeformerOptions& o = rig.setup.options;
-    const std::uint8_t update = c.u8("update_rotations");
-    const std::uint8_t interpolate = c.u8("interpolate_rotations");
-    if (update > 1 || interpolate > 1) c.fail("option flags are not 0 or 1");
-    o.update_rotations = update == 1;
-    o.interpolate_rotations = interpolate == 1;
-    o.rotation_steps = c.i32("rotation_steps");
-    o.point_handle_weight = c.f64("point_handle_weight");
-    o.max_abs_coordinate = c.f64("max_abs_coordinate");
-    c.end();
+  c.end();
+}
+
+// The optional volume-weight section.
+void readVolumeWeights(Cursor c, std::vector<double>& volume_weights) {
+  const std::size_t n = c.count("volume weights", 8);
+  volume_weights.resize(n);
+  for (double& x : volume_weights) x = c.f64("volume weight");
+  c.end();
+}
+
+// The optional section of texture coordinates and materials; it may not be empty.
+void readSurface(Cursor c, RigSurfaceAttributes& a) {
+  a.asset = c.str("asset path");
+  a.material_libraries.resize(c.count("material libraries", 4));
+  for (std::string& l : a.material_libraries) l = c.str("material library");
+  a.materials.resize(c.count("materials", 32));
+  for (RigMaterial& m : a.materials) {
+    m.name = c.str("material name");
+    m.diffuse_texture = c.str("material texture");
+    for (int k = 0; k < 3; ++k) m.diffuse_color[k] = c.f64("material colour");
   }
-  if (has_section(kTagPoseSensors)) {
-    Cursor c = section(kTagPoseSensors);
-    const std::size_t n = c.count("pose sensors", kPoseSensorMinBytes);
-    rig.pose_sensors.resize(n);
-    for (RigPoseSensor& ps : rig.pose_sensors) {
-      ps.sensor_label = c.str("pose sensor label");
-      ps.region_handle = c.i32("pose sensor region handle");
-      const std::uint8_t mode = c.u8("pose sensor mode");
-      if (mode > static_cast<std::uint8_t>(PoseSensorMode::kAbsolute)) {
-        c.fail("pose sensor mode " + std::to_string(mode) + " is not 0 (clutch) or 1 (absolute)");
-      }
-      ps.mode = static_cast<PoseSensorMode>(mode);
-      ps.clutch_buttons = c.u8("pose sensor clutch buttons");
-      ps.translation_scale = c.f64("pose sensor translation scale");
-    }
-    c.end();
+  const std::size_t uvs = c.count("texture coordinates", 16);
+  c.rows(a.uvs, uvs, "texture coordinates");
+  const std::size_t triangles = c.count("textured triangles", 16);
+  a.corner_uvs.resize(static_cast<Eigen::Index>(triangles), 3);
+  a.triangle_materials.resize(triangles);
+  for (std::size_t f = 0; f < triangles; ++f) {
+    for (int k = 0; k < 3; ++k) a.corner_uvs(static_cast<Eigen::Index>(f), k) = c.i32("corner uv");
+    a.triangle_materials[f] = c.i32("triangle material");
   }
-  if (has_section(kTagMarkerRegions)) {
-    Cursor c = section(kTagMarkerRegions);
-    const std::size_t n = c.count("marker regions", 8);
-    rig.marker_regions.resize(n);
-    for (RigMarkerRegion& mr : rig.marker_regions) {
-      mr.region_handle = c.i32("marker region handle");
-      const std::size_t k = c.count("markers of a marker region", 4);
-      mr.markers.resize(k);
-      for (std::int32_t& m : mr.markers) m = c.i32("marker region marker");
-    }
-    c.end();
-  }
-  if (has_section(kTagVolumeWeights)) {
-    Cursor c = section(kTagVolumeWeights);
-    const std::size_t n = c.count("volume weights", 8);
-    rig.setup.volume_weights.resize(n);
-    for (double& x : rig.setup.volume_weights) x = c.f64("volume weight");
-    c.end();
-  }
-  if (has_section(kTagSurface)) {
-    Cursor c = section(kTagSurface);
-    RigSurfaceAttributes& a = rig.surface;
-    a.asset = c.str("asset path");
-    a.material_libraries.resize(c.count("material libraries", 4));
-    for (std::string& l : a.material_libraries) l = c.str("material library");
-    a.materials.resize(c.count("materials", 32));
-    for (RigMaterial& m : a.materials) {
-      m.name = c.str("material name");
-      m.diffuse_texture = c.str("material texture");
-      for (int k = 0; k < 3; ++k) m.diffuse_color[k] = c.f64("material colour");
-    }
-    const std::size_t uvs = c.count("texture coordinates", 16);
-    c.rows(a.uvs, uvs, "texture coordinates");
-    const std::size_t triangles = c.count("textured triangles", 16);
-    a.corner_uvs.resize(static_cast<Eigen::Index>(triangles), 3);
-    a.triangle_materials.resize(triangles);
-    for (std::size_t f = 0; f < triangles; ++f) {
-      for (int k = 0; k < 3; ++k) a.corner_uvs(static_cast<Eigen::Index>(f), k) = c.i32("corner uv");
-      a.triangle_materials[f] = c.i32("triangle material");
-    }
-    c.end();
-    if (a.empty()) c.fail("the section holds neither texture coordinates nor materials");
-  }
-  if (has_section(kTagCoarse)) {
-    if (nested) fail("the coarse level has a coarse level of its own (section CRSE)");
-    for (const Entry& e : entries) {
+  c.end();
+  if (a.empty()) c.fail("the section holds neither texture coordinates nor materials");
+}
+
+Rig parseRigAt(std::span<const std::uint8_t> bytes, std::string_view source_name, const RigParseOptions& options, bool nested);
+
+}  // namespace
+
+Rig parseRig(std::span<const std::uint8_t> bytes, std::string_view source_name, const RigParseOptions& options) {
+  return parseRigAt(bytes, source_name, options, false);
+}
+
+namespace {
+// nested: parsing a CRSE section, which may not hold one of its own (checked before parsing it, so
+// a crafted file cannot nest levels to any depth).
+Rig parseRigAt(std::span<const std::uint8_t> bytes, std::string_view source_name, const RigParseOptions& options, bool nested) {
+  const std::string name(source_name);
+  // The header, then the section table and the sections' layout.
+  const std::uint32_t section_count = checkHeader(bytes, name, options);
+  const std::size_t table_end = kHeaderBytes + section_count * kTableEntryBytes;
+  const Sections sections{bytes, name, readSectionTable(bytes, name, section_count, table_end)};
+  checkSectionLayout(bytes, name, sections.entries, table_end);
+
+  // The required sections, in file-format order.
+  Rig rig;
+  readMeshSections(sections, rig);
+  readPoseTransfer(sections.section(kTagPoseTransfer), rig.pose_transfer);
+  readHandleSections(sections, rig);
+  readMarkers(sections.section(kTagMarkers), rig.markers);
+  readAlignment(sections.section(kTagAlignment), rig.alignment);
+  readOptions(sections.section(kTagOptions), rig.setup.options);
+  // The optional sections.
+  if (sections.has(kTagPoseSensors)) readPoseSensors(sections.section(kTagPoseSensors), rig.pose_sensors);
+  if (sections.has(kTagMarkerRegions)) readMarkerRegions(sections.section(kTagMarkerRegions), rig.marker_regions);
+  if (sections.has(kTagVolumeWeights)) readVolumeWeights(sections.section(kTagVolumeWeights), rig.setup.volume_weights);
+  if (sections.has(kTagSurface)) readSurface(sections.section(kTagSurface), rig.surface);
+  // The coarse level: a whole rig in section CRSE, itself without one.
+  if (sections.has(kTagCoarse)) {
+    if (nested) fileFault(name, "the coarse level has a coarse level of its own (section CRSE)");
+    for (const Entry& e : sections.entries) {
       if (e.tag != kTagCoarse) continue;
       Rig coarse = parseRigAt(bytes.subspan(e.offset, e.size), name + ": section CRSE (the coarse level)", options, true);
       rig.coarse = std::make_shared<const Rig>(std::move(coarse));
     }
   }
-  if (std::string e = validateRig(rig); !e.empty()) fail(e);
+  if (std::string e = validateRig(rig); !e.empty()) fileFault(name, e);
   return rig;
 }
 }  // namespace

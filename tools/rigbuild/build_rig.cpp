@@ -329,53 +329,80 @@ bool isTetMeshPath(const std::filesystem::path& path) {
   return ext == ".node" || ext == ".ele" || ext == ".mesh";
 }
 
-Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress* progress) {
-  BuildRigReport report;
-  Progress quiet("", Progress::Mode::kQuiet);
-  Progress& prog = progress ? *progress : quiet;
-  const RigDescription& desc = inputs.description;
-  const MarkerOptions& mopt = desc.markers;
-  const std::int32_t target = inputs.tet_vertices.value_or(desc.tet_vertices);
-  if (target < 4) throw RigBuildError("--tet-vertices must be at least 4");
-  if (inputs.coarse_tet_vertices) {  // checked before any heavy work
-    const std::int32_t n = *inputs.coarse_tet_vertices;
-    if (n < 4 || n >= target) {
-      throw RigBuildError("--coarse-tet-vertices " + std::to_string(n) + " must be at least 4 and below the rig's --tet-vertices (" +
-                          std::to_string(target) + ")");
-    }
-    if (isTetMeshPath(inputs.mesh)) {
-      throw RigBuildError("--coarse-tet-vertices needs a surface mesh: a ready tet mesh (" + inputs.mesh.filename().string() +
-                          ") is used as it is and cannot be made coarser");
-    }
-  }
+namespace {
 
+// The plausibility limits of a marker alignment: every check measured (all) and those that decide
+// whether the build stops (decide: without the ones overridden).
+struct AlignmentLimits {
+  AlignmentCheckLimits all;
+  AlignmentCheckLimits decide;
+};
+
+// One build: the inputs, and the state buildRig's steps pass on from one to the next.
+struct RigBuilder {
+  const BuildRigInputs& inputs;
+  const RigDescription& desc;
+  const MarkerOptions& mopt;
+  Progress& prog;
+  BuildRigReport report;
   Rig rig;
-  rig.builder = "tetrig build-rig " TETRIG_VERSION_STRING;
-  rig.name = desc.name.empty() ? inputs.mesh.filename().string() : desc.name;
+  std::int32_t target = 0;
+  std::optional<std::filesystem::path> clip;  // the marker clip (--markers or markers.clip), if any
+  bool given = false;                         // marker positions given directly
   SurfaceMesh fine;
   TetMesh body;
+  TetMesh full;  // body plus the invisible tets binding the markers
   Context ctx;
   Eigen::SparseMatrix<double, Eigen::RowMajor> b;
+  std::string unit;
+  MarkerSet markers;
+  std::vector<RigidMarkerGroup> rigid_groups;  // found in the clip (rigid_marker_groups.hpp)
+  std::vector<Eigen::Vector3d> marker_rig;
+  std::vector<double> marker_distance;
+  std::vector<std::string> vertex_owner;                 // per body vertex: the handle that claimed it
+  std::vector<std::vector<std::int32_t>> group_regions;  // per rigid group: its region handle's tets (empty: none)
+  std::vector<double> stiffness;
+  std::vector<double> volume;
 
-  if (!std::filesystem::exists(inputs.mesh)) {
-    throw RigBuildError(inputs.mesh.string() + ": no such file (--mesh)");
+  RigBuilder(const BuildRigInputs& in, Progress& progress) : inputs(in), desc(in.description), mopt(in.description.markers), prog(progress) {}
+
+  // Checks the tet-vertex budgets (--tet-vertices, --coarse-tet-vertices) before any heavy work.
+  void checkTetBudgets() {
+    target = inputs.tet_vertices.value_or(desc.tet_vertices);
+    if (target < 4) throw RigBuildError("--tet-vertices must be at least 4");
+    if (inputs.coarse_tet_vertices) {  // checked before any heavy work
+      const std::int32_t n = *inputs.coarse_tet_vertices;
+      if (n < 4 || n >= target) {
+        throw RigBuildError("--coarse-tet-vertices " + std::to_string(n) + " must be at least 4 and below the rig's --tet-vertices (" +
+                            std::to_string(target) + ")");
+      }
+      if (isTetMeshPath(inputs.mesh)) {
+        throw RigBuildError("--coarse-tet-vertices needs a surface mesh: a ready tet mesh (" + inputs.mesh.filename().string() +
+                            ") is used as it is and cannot be made coarser");
+      }
+    }
   }
-  // Nothing would drive a rig without handles: say so before any heavy work.
-  const std::optional<std::filesystem::path> clip = inputs.clip ? inputs.clip : (mopt.clip.empty() ? std::nullopt : std::optional(mopt.clip));
-  const bool given = inputs.marker_positions.has_value();
-  if (clip && given) {
-    throw RigBuildError("markers from both a clip (" + clip->string() + ") and given marker positions (" + inputs.marker_positions->what +
-                        "): choose one");
+
+  // Checks that the mesh exists and that something will drive the rig; picks the marker source.
+  void checkInputs() {
+    if (!std::filesystem::exists(inputs.mesh)) {
+      throw RigBuildError(inputs.mesh.string() + ": no such file (--mesh)");
+    }
+    // Nothing would drive a rig without handles: say so before any heavy work.
+    clip = inputs.clip ? inputs.clip : (mopt.clip.empty() ? std::nullopt : std::optional(mopt.clip));
+    given = inputs.marker_positions.has_value();
+    if (clip && given) {
+      throw RigBuildError("markers from both a clip (" + clip->string() + ") and given marker positions (" + inputs.marker_positions->what +
+                          "): choose one");
+    }
+    if (!clip && !given && desc.vertex_handles.empty() && desc.region_handles.empty() && desc.point_handles.empty()) {
+      throw RigBuildError("the rig would have no handles, so nothing could move it: add markers (--markers CLIP.c3d) or a rig description "
+                          "(--rig RIG.json) with vertex_handles, region_handles or point_handles (docs/rig-format.md)");
+    }
   }
-  if (!clip && !given && desc.vertex_handles.empty() && desc.region_handles.empty() && desc.point_handles.empty()) {
-    throw RigBuildError("the rig would have no handles, so nothing could move it: add markers (--markers CLIP.c3d) or a rig description "
-                        "(--rig RIG.json) with vertex_handles, region_handles or point_handles (docs/rig-format.md)");
-  }
-  if (isTetMeshPath(inputs.mesh)) {
-    report.tet_input = true;
-    ctx.tet_input = true;
-    auto t0 = Clock::now();
-    prog.begin("reading tet mesh " + inputs.mesh.filename().string());
+
+  // Tet input: reads the tet mesh and checks its tets name vertices in range.
+  TetMesh readRawTetMesh() const {
     TetMesh raw = readTetMesh(inputs.mesh);
     if (raw.tetCount() == 0) throw RigBuildError(inputs.mesh.string() + ": the tet mesh has no tets");
     if (!raw.vertices.allFinite()) throw RigBuildError(inputs.mesh.string() + ": non-finite vertex coordinates");
@@ -386,7 +413,12 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
         }
       }
     }
-    // Positive orientation (swap two corners of inverted tets); unused vertices removed.
+    return raw;
+  }
+
+  // Tet input: the body is the raw tet mesh positively oriented (two corners of inverted tets
+  // swapped) with its unused vertices removed; returns the body's vertex count.
+  std::int32_t orientAndCompact(TetMesh& raw) {
     std::int32_t flipped = 0;
     for (std::int32_t t = 0; t < raw.tetCount(); ++t) {
       if (signedVolume(raw, t) < 0) {
@@ -412,7 +444,12 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
     }
     if (flipped) report.notes.push_back(std::to_string(flipped) + " inverted tets re-oriented");
     if (nv < raw.vertexCount()) report.notes.push_back(std::to_string(raw.vertexCount() - nv) + " unused vertices removed");
-    // Fine mesh = boundary surface; B picks the boundary vertices.
+    return nv;
+  }
+
+  // Tet input: the fine mesh is the body's boundary surface; B picks the boundary vertices.
+  // Returns the boundary triangles.
+  Triangles boundaryAsFineMesh(std::int32_t nv) {
     const Triangles faces = boundaryFaces(body);
     std::vector<std::int32_t> tet_to_fine(static_cast<std::size_t>(nv), -1);
     for (Eigen::Index f = 0; f < faces.rows(); ++f) {
@@ -437,18 +474,26 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
     for (std::int32_t i = 0; i < nf; ++i) trip.emplace_back(i, fine_to_tet[static_cast<std::size_t>(i)], 1.0);
     b.setFromTriplets(trip.begin(), trip.end());
     report.pose.nonzeros = nf;
+    return faces;
+  }
+
+  // Tet input: the body, the fine mesh (its boundary) and B from a ready tet mesh.
+  void readTetInput() {
+    report.tet_input = true;
+    ctx.tet_input = true;
+    auto t0 = Clock::now();
+    prog.begin("reading tet mesh " + inputs.mesh.filename().string());
+    TetMesh raw = readRawTetMesh();
+    const std::int32_t nv = orientAndCompact(raw);
+    const Triangles faces = boundaryAsFineMesh(nv);
+    const std::int32_t nf = fine.vertexCount();
     report.import_seconds = since(t0);
     prog.end(std::to_string(nv) + " vertices, " + std::to_string(body.tetCount()) + " tets, boundary " + std::to_string(nf) +
              " vertices / " + std::to_string(faces.rows()) + " triangles");
-  } else {
-    auto t0 = Clock::now();
-    prog.begin("importing " + inputs.mesh.filename().string());
-    ImportStats import_stats;
-    fine = importSurface(inputs.mesh, {}, &import_stats);
-    SurfaceReport surface_report = validateSurface(fine);
-    requireUsableSurface(surface_report, inputs.mesh.string());
-    report.import_seconds = since(t0);
-    prog.end(surface_report.summary());
+  }
+
+  // Surface input: maps the file's vertex ids (those selections name) to fine vertices.
+  void mapFileVertices(const ImportStats& import_stats, const SurfaceReport& surface_report) {
     // Vertex ids of selections: file order for OBJ, OFF and PLY (importSurface keeps it; welding and
     // the repairs may merge or drop vertices, vertex_map says where each went), else the fine order.
     if (import_stats.file_order) {
@@ -470,6 +515,19 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
       for (std::int32_t v = 0; v < fine.vertexCount(); ++v) ctx.file_to_fine[static_cast<std::size_t>(v)] = v;
       report.notes.push_back("vertex ids refer to the repaired surface's order (the format has no shared vertex list)");
     }
+  }
+
+  // Surface input: imports and repairs the surface (the fine mesh) and maps the file's vertex ids.
+  void importSurfaceInput() {
+    auto t0 = Clock::now();
+    prog.begin("importing " + inputs.mesh.filename().string());
+    ImportStats import_stats;
+    fine = importSurface(inputs.mesh, {}, &import_stats);
+    SurfaceReport surface_report = validateSurface(fine);
+    requireUsableSurface(surface_report, inputs.mesh.string());
+    report.import_seconds = since(t0);
+    prog.end(surface_report.summary());
+    mapFileVertices(import_stats, surface_report);
     // An OBJ's texture coordinates and materials, per fine-triangle corner; the fine triangles take
     // the file's face order (obj_surface_attributes.hpp). The coarse level's fine mesh is sorted
     // the same way but carries none (the rig has them).
@@ -482,46 +540,41 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
       }
     }
   }
-  // Unit and axes of the rig.
-  std::string unit = desc.mesh_unit;
-  if (unit == "auto") {
-    const Eigen::Vector3d up = axisVector(desc.mesh_up).cwiseAbs();
-    const double height = (fine.vertices.colwise().maxCoeff() - fine.vertices.colwise().minCoeff()).dot(up);
-    const double performer_mm = clip ? medianMarkerHeightMm(openMarkerClip(*clip, mopt), axisVector(mopt.device_up).cwiseAbs()) : 0.0;
-    if (performer_mm > 0.0) {
-      // The unit that makes the mesh about as tall as the performer's markers (a factor of 10
-      // between candidates, so the nearest ratio is unambiguous for any plausible body).
-      double best = INFINITY;
-      for (const char* candidate : {"m", "cm", "mm"}) {
-        const double ratio = std::abs(std::log(height / rigUnitsPerMm(candidate) / performer_mm));
-        if (ratio < best) {
-          best = ratio;
-          unit = candidate;
-        }
-      }
-      report.notes.push_back("mesh unit taken as " + unit + ": the mesh is " + formatNumber("%.4g", height) + " units tall, the performer's markers " +
-                             formatNumber("%.0f", performer_mm) + " mm (--mesh-unit to say otherwise)");
-    } else {
-      unit = height > 100 ? "mm" : height > 10 ? "cm" : "m";
-      report.notes.push_back("mesh unit taken as " + unit + " from its height " + formatNumber("%.4g", height) + " (--mesh-unit to say otherwise)");
-    }
-  }
-  rig.unit = unit;
-  rig.alignment.rig_units_per_mm = rigUnitsPerMm(unit);
-  rig.alignment.linear = rig.alignment.rig_units_per_mm * Eigen::Matrix3d::Identity();
-  rig.alignment.rig_up = desc.mesh_up;
-  rig.alignment.device_up = mopt.device_up;
 
-  // Markers: rest frame (given or searched), alignment, plausibility and distance checks, all
-  // before decimation and TetGen: a clip that does not fit the mesh stops the build in seconds.
-  MarkerSet markers;
-  std::vector<RigidMarkerGroup> rigid_groups;  // found in the clip (rigid_marker_groups.hpp)
-  std::vector<Eigen::Vector3d> marker_rig;
-  std::vector<double> marker_distance;
-  if (clip || given) {
-    auto t0 = Clock::now();
-    const std::optional<MarkerClip> source = clip ? std::optional<MarkerClip>(openMarkerClip(*clip, mopt)) : std::nullopt;
-    const std::string origin = clip ? clip->string() : inputs.marker_positions->what;
+  // The rig's unit (the description's, or guessed from the mesh's height) and its default alignment.
+  void chooseUnit() {
+    unit = desc.mesh_unit;
+    if (unit == "auto") {
+      const Eigen::Vector3d up = axisVector(desc.mesh_up).cwiseAbs();
+      const double height = (fine.vertices.colwise().maxCoeff() - fine.vertices.colwise().minCoeff()).dot(up);
+      const double performer_mm = clip ? medianMarkerHeightMm(openMarkerClip(*clip, mopt), axisVector(mopt.device_up).cwiseAbs()) : 0.0;
+      if (performer_mm > 0.0) {
+        // The unit that makes the mesh about as tall as the performer's markers (a factor of 10
+        // between candidates, so the nearest ratio is unambiguous for any plausible body).
+        double best = INFINITY;
+        for (const char* candidate : {"m", "cm", "mm"}) {
+          const double ratio = std::abs(std::log(height / rigUnitsPerMm(candidate) / performer_mm));
+          if (ratio < best) {
+            best = ratio;
+            unit = candidate;
+          }
+        }
+        report.notes.push_back("mesh unit taken as " + unit + ": the mesh is " + formatNumber("%.4g", height) + " units tall, the performer's markers " +
+                               formatNumber("%.0f", performer_mm) + " mm (--mesh-unit to say otherwise)");
+      } else {
+        unit = height > 100 ? "mm" : height > 10 ? "cm" : "m";
+        report.notes.push_back("mesh unit taken as " + unit + " from its height " + formatNumber("%.4g", height) + " (--mesh-unit to say otherwise)");
+      }
+    }
+    rig.unit = unit;
+    rig.alignment.rig_units_per_mm = rigUnitsPerMm(unit);
+    rig.alignment.linear = rig.alignment.rig_units_per_mm * Eigen::Matrix3d::Identity();
+    rig.alignment.rig_up = desc.mesh_up;
+    rig.alignment.device_up = mopt.device_up;
+  }
+
+  // The options of the marker alignment, from the description's markers section.
+  AlignmentOptions alignmentOptions() const {
     AlignmentOptions aopt;
     aopt.device_up = mopt.device_up;
     aopt.rig_up = desc.mesh_up;
@@ -533,9 +586,12 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
     aopt.max_scale_change = mopt.max_scale_change;
     aopt.marker_offset = mopt.marker_offset;
     aopt.fit_power = mopt.fit_power;
-    // The scale and pose checks judge an automatic fit; "units" and "matrix" are the user's own
-    // transform (the distance limit below still applies to them).
-    const bool automatic = aopt.mode == "auto";
+    return aopt;
+  }
+
+  // The plausibility limits: the description's, the fit scale range of the command line, and the
+  // overrides (--accept-implausible-alignment, --accept-pose-mismatch).
+  AlignmentLimits alignmentLimits(bool automatic) const {
     AlignmentCheckLimits all_checks = mopt.checks;
     if (inputs.min_fit_scale) all_checks.min_fit_scale = *inputs.min_fit_scale;
     if (inputs.max_fit_scale) all_checks.max_fit_scale = *inputs.max_fit_scale;
@@ -548,89 +604,79 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
     AlignmentCheckLimits limits = all_checks;
     limits.check_scale = automatic && mopt.checks.check_scale && !inputs.accept_implausible_alignment;
     limits.check_pose = automatic && mopt.checks.check_pose && !inputs.accept_implausible_alignment && !inputs.accept_pose_mismatch;
+    return {all_checks, limits};
+  }
 
-    const bool frame_auto = clip && (inputs.frame_auto || (!inputs.frame && mopt.frame_auto));
-    std::int64_t frame = inputs.frame.value_or(mopt.frame);
-    std::string frame_text = clip ? "frame " + std::to_string(frame) : std::string("the given positions");
-    if (frame_auto) {
-      prog.begin("searching " + clip->filename().string() + " for the frame that fits the mesh's rest pose");
-      RestFrameSearchOptions sopt;
-      sopt.progress = [&prog](double f) { prog.update(f); };
-      RestFrameSearch found;
-      try {
-        found = searchRestFrame(
-            static_cast<std::int64_t>(source->clip.frameCount()),
-            [&source](std::int64_t f, std::vector<Eigen::Vector3d>& out) { return markersAt(*source, f, out); }, source->labels, fine, aopt,
-            desc.mesh_up, limits, sopt);
-      } catch (const RigBuildError& e) {
-        throw RigBuildError(clip->string() + ": --frame auto: " + e.what());
+  // --frame auto: searches the clip for the frame that fits the mesh's rest pose; sets frame and
+  // frame_text.
+  void searchRestFrameOf(const MarkerClip& source, const AlignmentOptions& aopt, const AlignmentCheckLimits& limits, std::int64_t& frame,
+                         std::string& frame_text) {
+    prog.begin("searching " + clip->filename().string() + " for the frame that fits the mesh's rest pose");
+    RestFrameSearchOptions sopt;
+    sopt.progress = [this](double f) { prog.update(f); };
+    RestFrameSearch found;
+    try {
+      found = searchRestFrame(
+          static_cast<std::int64_t>(source.clip.frameCount()),
+          [&source](std::int64_t f, std::vector<Eigen::Vector3d>& out) { return markersAt(source, f, out); }, source.labels, fine, aopt,
+          desc.mesh_up, limits, sopt);
+    } catch (const RigBuildError& e) {
+      throw RigBuildError(clip->string() + ": --frame auto: " + e.what());
+    }
+    frame = found.frame;
+    frame_text = "frame " + std::to_string(frame) + " (chosen by --frame auto)";
+    const double rate = source.clip.frameRate();
+    const std::string when = rate > 0 ? " (" + formatNumber("%.3f", static_cast<double>(frame) / rate) + " s)" : std::string();
+    const std::string line = "--frame auto chose frame " + std::to_string(frame) + when + " of " + std::to_string(found.clip_frames) +
+                             ": fit scale " + formatNumber("%.4g", found.chosen.fit_scale) + ", median marker distance about " +
+                             formatNumber("%.3g", found.chosen.median_distance) + " " + unit + " (searched " + std::to_string(found.searched) +
+                             " frames, " + std::to_string(found.plausible) + " plausible)";
+    prog.end("frame " + std::to_string(frame) + when + ", fit scale " + formatNumber("%.4g", found.chosen.fit_scale) + " (" +
+             std::to_string(found.plausible) + " of " + std::to_string(found.searched) + " frames searched fit)");
+    report.notes.push_back(line);
+    report.frame_search = found;
+  }
+
+  // The error for an alignment the deciding checks reject: what failed and what to do.
+  RigBuildError implausibleAlignment(const AlignmentCheck& decided, const std::string& origin, const std::string& frame_text) const {
+    std::string what;
+    for (const auto* list : {&decided.scale_failures, &decided.pose_failures}) {
+      for (const std::string& f : *list) what += (what.empty() ? "" : "; ") + f;
+    }
+    std::string todo;
+    if (!decided.scale_failures.empty()) {
+      const Eigen::Vector3d up = axisVector(desc.mesh_up).cwiseAbs();
+      const double height = (fine.vertices.colwise().maxCoeff() - fine.vertices.colwise().minCoeff()).dot(up);
+      const Eigen::Vector3d device_up = axisVector(mopt.device_up).cwiseAbs();
+      double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+      for (const Eigen::Vector3d& m : markers.device_mm) {
+        lo = std::min(lo, m.dot(device_up));
+        hi = std::max(hi, m.dot(device_up));
       }
-      frame = found.frame;
-      frame_text = "frame " + std::to_string(frame) + " (chosen by --frame auto)";
-      const double rate = source->clip.frameRate();
-      const std::string when = rate > 0 ? " (" + formatNumber("%.3f", static_cast<double>(frame) / rate) + " s)" : std::string();
-      const std::string line = "--frame auto chose frame " + std::to_string(frame) + when + " of " + std::to_string(found.clip_frames) +
-                               ": fit scale " + formatNumber("%.4g", found.chosen.fit_scale) + ", median marker distance about " +
-                               formatNumber("%.3g", found.chosen.median_distance) + " " + unit + " (searched " + std::to_string(found.searched) +
-                               " frames, " + std::to_string(found.plausible) + " plausible)";
-      prog.end("frame " + std::to_string(frame) + when + ", fit scale " + formatNumber("%.4g", found.chosen.fit_scale) + " (" +
-               std::to_string(found.plausible) + " of " + std::to_string(found.searched) + " frames searched fit)");
-      report.notes.push_back(line);
-      report.frame_search = found;
+      todo += "check the mesh's unit (taken as " + unit + ": the mesh is " + formatNumber("%.4g", height) + " " + unit + " tall, the markers span " +
+              formatNumber("%.4g", hi - lo) + " mm; --mesh-unit) and that the markers belong to a body like this mesh (--min-fit-scale / "
+              "--max-fit-scale widen the range)";
     }
-    if (clip) {
-      report.rest_frame = frame;
-      prog.begin("aligning markers of " + clip->filename().string() + " (frame " + std::to_string(frame) + ")");
-      markers = readMarkers(*source, frame);
-    } else {
-      prog.begin("aligning " + origin);
-      markers = checkedMarkerPositions(*inputs.marker_positions);
+    if (!decided.pose_failures.empty()) {
+      todo += std::string(todo.empty() ? "" : "; ") + (clip ? "the clip's " + frame_text + " is" : frame_text + " are") +
+              " not in the mesh's rest pose (e.g. arms down on a T-pose mesh) or the markers cover only part of the body: choose a "
+              "frame in the mesh's pose (--frame N, or --frame auto) or a calibration clip, or pass --accept-pose-mismatch for a "
+              "partial marker set";
     }
-    aopt.progress = [&prog](double f) { prog.update(f); };
-    AlignmentResult aligned = alignMarkers(markers.device_mm, fine, aopt);
-    rig.alignment = aligned.alignment;
-    marker_rig = aligned.rig_positions;
-    marker_distance = aligned.distances;
-    report.align_seconds = since(t0);
-    prog.end(std::to_string(markers.labels.size()) + " markers, distance to surface median " + formatNumber("%.4g", aligned.median_distance) +
-             " max " + formatNumber("%.4g", aligned.max_distance) + " " + unit + ", scale " + formatNumber("%.4f", aligned.alignment.fit_scale));
-    report.alignment = aligned;
+    return RigBuildError(origin + ": " + frame_text + ": the marker alignment is implausible: " + what + ". To fix: " + todo +
+                         " (--accept-implausible-alignment builds anyway)");
+  }
 
-    // Plausibility: every check measured; those not overridden decide.
+  // Plausibility: every check measured; those not overridden decide.
+  void judgeAlignment(const AlignmentResult& aligned, const AlignmentLimits& limits, bool automatic, const std::string& origin,
+                      const std::string& frame_text) {
     const AlignmentCheck measured =
-        checkAlignment(fine, desc.mesh_up, marker_rig, marker_distance, markers.labels, aligned.alignment.fit_scale, all_checks);
+        checkAlignment(fine, desc.mesh_up, marker_rig, marker_distance, markers.labels, aligned.alignment.fit_scale, limits.all);
     const AlignmentCheck decided =
-        checkAlignment(fine, desc.mesh_up, marker_rig, marker_distance, markers.labels, aligned.alignment.fit_scale, limits);
+        checkAlignment(fine, desc.mesh_up, marker_rig, marker_distance, markers.labels, aligned.alignment.fit_scale, limits.decide);
     report.alignment_check = measured;
     if (automatic) report.notes.push_back("alignment checks: " + measured.summary());
-    if (!decided.ok()) {
-      std::string what;
-      for (const auto* list : {&decided.scale_failures, &decided.pose_failures}) {
-        for (const std::string& f : *list) what += (what.empty() ? "" : "; ") + f;
-      }
-      std::string todo;
-      if (!decided.scale_failures.empty()) {
-        const Eigen::Vector3d up = axisVector(desc.mesh_up).cwiseAbs();
-        const double height = (fine.vertices.colwise().maxCoeff() - fine.vertices.colwise().minCoeff()).dot(up);
-        const Eigen::Vector3d device_up = axisVector(mopt.device_up).cwiseAbs();
-        double lo = std::numeric_limits<double>::infinity(), hi = -lo;
-        for (const Eigen::Vector3d& m : markers.device_mm) {
-          lo = std::min(lo, m.dot(device_up));
-          hi = std::max(hi, m.dot(device_up));
-        }
-        todo += "check the mesh's unit (taken as " + unit + ": the mesh is " + formatNumber("%.4g", height) + " " + unit + " tall, the markers span " +
-                formatNumber("%.4g", hi - lo) + " mm; --mesh-unit) and that the markers belong to a body like this mesh (--min-fit-scale / "
-                "--max-fit-scale widen the range)";
-      }
-      if (!decided.pose_failures.empty()) {
-        todo += std::string(todo.empty() ? "" : "; ") + (clip ? "the clip's " + frame_text + " is" : frame_text + " are") +
-                " not in the mesh's rest pose (e.g. arms down on a T-pose mesh) or the markers cover only part of the body: choose a "
-                "frame in the mesh's pose (--frame N, or --frame auto) or a calibration clip, or pass --accept-pose-mismatch for a "
-                "partial marker set";
-      }
-      throw RigBuildError(origin + ": " + frame_text + ": the marker alignment is implausible: " + what + ". To fix: " + todo +
-                          " (--accept-implausible-alignment builds anyway)");
-    }
+    if (!decided.ok()) throw implausibleAlignment(decided, origin, frame_text);
     if (!measured.ok()) {
       std::string what;
       for (const auto* list : {&measured.scale_failures, &measured.pose_failures}) {
@@ -638,8 +684,11 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
       }
       report.notes.push_back("implausible alignment accepted as asked: " + what);
     }
+  }
 
-    // Distance limit: explicit (absolute) or a fraction of the mesh's size.
+  // Distance limit: explicit (absolute) or a fraction of the mesh's size; a marker beyond it stops
+  // the build.
+  void checkMarkerDistances() {
     const double diagonal = (fine.vertices.colwise().maxCoeff() - fine.vertices.colwise().minCoeff()).norm();
     const std::optional<double> absolute = inputs.max_marker_distance ? inputs.max_marker_distance : mopt.max_distance;
     const double limit = absolute ? *absolute : mopt.max_distance_fraction * diagonal;
@@ -657,33 +706,72 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
                           " from the surface after alignment, beyond the limit " + limit_text + " (too far: " + far +
                           "); check the clip's rest frame and axes, exclude the marker, or raise --max-marker-distance");
     }
-    // Markers that move as one rigid body over the clip drive the skin around them as a region.
-    if (clip && mopt.rigid_regions && desc.region_handles.empty()) {
-      const MarkerClip& mc = *source;
-      const double k = mc.clip.unitsToMm();
-      const MarkerFrameReader read = [&mc, k](std::int64_t f, std::vector<Eigen::Vector3d>& x, std::vector<std::uint8_t>& valid) {
-        const float* pos = mc.clip.positions(static_cast<std::size_t>(f));
-        for (std::size_t i = 0; i < mc.points.size(); ++i) {
-          const int p = mc.points[i];
-          valid[i] = mc.clip.isValid(static_cast<std::size_t>(f), p);
-          if (valid[i]) x[i] = Eigen::Vector3d(k * pos[3 * p], k * pos[3 * p + 1], k * pos[3 * p + 2]);
-        }
-      };
-      std::vector<RigidMarkerGroup> too_large;
-      rigid_groups = findRigidMarkerGroups(static_cast<std::int64_t>(mc.clip.frameCount()), mc.points.size(), read, marker_rig, {}, &too_large);
-      for (const RigidMarkerGroup& g : too_large) {
-        if (inputs.coarse_level) break;
-        std::string names;
-        for (const std::int32_t m : g.markers) names += (names.empty() ? "" : ", ") + markers.labels[static_cast<std::size_t>(m)];
-        report.notes.push_back(std::to_string(g.markers.size()) + " markers (" + names + ") keep their distances over the clip but span " +
-                               formatNumber("%.0f", g.extent_mm) + " mm, too much of the body for one part: the clip does not move the joints between "
-                               "them, so no rigid groups are taken from it there (build the rig from a clip in which the performer moves)");
+  }
+
+  // Markers that move as one rigid body over the clip drive the skin around them as a region.
+  void findRigidGroups(const MarkerClip& mc) {
+    const double k = mc.clip.unitsToMm();
+    const MarkerFrameReader read = [&mc, k](std::int64_t f, std::vector<Eigen::Vector3d>& x, std::vector<std::uint8_t>& valid) {
+      const float* pos = mc.clip.positions(static_cast<std::size_t>(f));
+      for (std::size_t i = 0; i < mc.points.size(); ++i) {
+        const int p = mc.points[i];
+        valid[i] = mc.clip.isValid(static_cast<std::size_t>(f), p);
+        if (valid[i]) x[i] = Eigen::Vector3d(k * pos[3 * p], k * pos[3 * p + 1], k * pos[3 * p + 2]);
       }
+    };
+    std::vector<RigidMarkerGroup> too_large;
+    rigid_groups = findRigidMarkerGroups(static_cast<std::int64_t>(mc.clip.frameCount()), mc.points.size(), read, marker_rig, {}, &too_large);
+    for (const RigidMarkerGroup& g : too_large) {
+      if (inputs.coarse_level) break;
+      std::string names;
+      for (const std::int32_t m : g.markers) names += (names.empty() ? "" : ", ") + markers.labels[static_cast<std::size_t>(m)];
+      report.notes.push_back(std::to_string(g.markers.size()) + " markers (" + names + ") keep their distances over the clip but span " +
+                             formatNumber("%.0f", g.extent_mm) + " mm, too much of the body for one part: the clip does not move the joints between "
+                             "them, so no rigid groups are taken from it there (build the rig from a clip in which the performer moves)");
     }
   }
 
-  // Surface input: the coarse tet mesh and B.
-  if (!report.tet_input) {
+  // Markers: rest frame (given or searched), alignment, plausibility and distance checks, all
+  // before decimation and TetGen: a clip that does not fit the mesh stops the build in seconds.
+  void fitMarkers() {
+    auto t0 = Clock::now();
+    const std::optional<MarkerClip> source = clip ? std::optional<MarkerClip>(openMarkerClip(*clip, mopt)) : std::nullopt;
+    const std::string origin = clip ? clip->string() : inputs.marker_positions->what;
+    AlignmentOptions aopt = alignmentOptions();
+    // The scale and pose checks judge an automatic fit; "units" and "matrix" are the user's own
+    // transform (the distance limit below still applies to them).
+    const bool automatic = aopt.mode == "auto";
+    const AlignmentLimits limits = alignmentLimits(automatic);
+
+    const bool frame_auto = clip && (inputs.frame_auto || (!inputs.frame && mopt.frame_auto));
+    std::int64_t frame = inputs.frame.value_or(mopt.frame);
+    std::string frame_text = clip ? "frame " + std::to_string(frame) : std::string("the given positions");
+    if (frame_auto) searchRestFrameOf(*source, aopt, limits.decide, frame, frame_text);
+    if (clip) {
+      report.rest_frame = frame;
+      prog.begin("aligning markers of " + clip->filename().string() + " (frame " + std::to_string(frame) + ")");
+      markers = readMarkers(*source, frame);
+    } else {
+      prog.begin("aligning " + origin);
+      markers = checkedMarkerPositions(*inputs.marker_positions);
+    }
+    aopt.progress = [this](double f) { prog.update(f); };
+    AlignmentResult aligned = alignMarkers(markers.device_mm, fine, aopt);
+    rig.alignment = aligned.alignment;
+    marker_rig = aligned.rig_positions;
+    marker_distance = aligned.distances;
+    report.align_seconds = since(t0);
+    prog.end(std::to_string(markers.labels.size()) + " markers, distance to surface median " + formatNumber("%.4g", aligned.median_distance) +
+             " max " + formatNumber("%.4g", aligned.max_distance) + " " + unit + ", scale " + formatNumber("%.4f", aligned.alignment.fit_scale));
+    report.alignment = aligned;
+
+    judgeAlignment(aligned, limits, automatic, origin, frame_text);
+    checkMarkerDistances();
+    if (clip && mopt.rigid_regions && desc.region_handles.empty()) findRigidGroups(*source);
+  }
+
+  // Surface input: the coarse tet mesh (decimation and TetGen) and the pose-transfer weights B.
+  void tetrahedralizeSurface() {
     auto t0 = Clock::now();
     prog.begin("decimating and tetrahedralizing (TetGen) to " + std::to_string(target) + " tet vertices");
     DecimateOptions dec;
@@ -712,14 +800,19 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
     report.pose_seconds = since(t0);
     prog.end(std::to_string(report.pose.nonzeros) + " non-zeros, " + formatNumber("%.1f", report.pose.mean_nonzeros_per_row) + " per row");
   }
-  ctx.body = &body;
-  ctx.fine = &fine.vertices;
-  report.fine_vertices = fine.vertexCount();
-  report.fine_triangles = fine.triangleCount();
-  report.body_vertices = body.vertexCount();
-  report.body_tets = body.tetCount();
 
-  if (!clip && !given && !desc.pose_sensors.empty()) {
+  // Records the meshes' sizes and points the selection context at the body and the fine mesh.
+  void recordMeshes() {
+    ctx.body = &body;
+    ctx.fine = &fine.vertices;
+    report.fine_vertices = fine.vertexCount();
+    report.fine_triangles = fine.triangleCount();
+    report.body_vertices = body.vertexCount();
+    report.body_tets = body.tetCount();
+  }
+
+  // Pose sensors without markers: the alignment from the description alone.
+  void alignForPoseSensors() {
     rig.alignment = poseSensorAlignment(mopt, desc.mesh_up, rig.alignment.rig_units_per_mm);
     report.notes.push_back(mopt.alignment == "matrix"
                                ? std::string("pose sensors: no marker clip, device mm -> rig units from markers.matrix")
@@ -727,63 +820,63 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
                                      mopt.device_up + " -> rig up " + desc.mesh_up + ", " + formatNumber("%.4g", rig.alignment.rig_units_per_mm) +
                                      " " + unit + " per mm)");
   }
-  ctx.marker_labels = &markers.labels;
-  ctx.marker_positions = &marker_rig;
 
-  // Selections onto the body tet mesh.
-  DeformerSetup& setup = rig.setup;
-  setup.options.rotation_steps = desc.rotation_steps;
-  setup.options.point_handle_weight = desc.point_handle_weight;
-  std::vector<std::string> vertex_owner(static_cast<std::size_t>(body.vertexCount()));
-  auto claim = [&](std::int32_t v, const std::string& who) {
+  // Gives tet vertex v to the handle `who`; a vertex of another handle is an error.
+  void claim(std::int32_t v, const std::string& who) {
     std::string& owner = vertex_owner[static_cast<std::size_t>(v)];
     if (!owner.empty() && owner != who) {
       throw RigBuildError("tet vertex " + std::to_string(v) + " belongs to both " + owner + " and " + who +
                           ": handles may not overlap; shrink one of the selections");
     }
     owner = who;
-  };
-  for (std::size_t h = 0; h < desc.vertex_handles.size(); ++h) {
-    const NamedSelection& n = desc.vertex_handles[h];
-    const std::string who = "vertex handle '" + n.name + "'";
-    const std::vector<std::uint8_t> mask = resolveVertices(ctx, n.select, who);
-    for (std::int32_t v = 0; v < body.vertexCount(); ++v) {
-      if (!mask[static_cast<std::size_t>(v)]) continue;
-      claim(v, who);
-      setup.vertex_handles.push_back(v);
-      rig.vertex_handle_names.push_back(n.name);
+  }
+
+  // The description's vertex handles: every tet vertex of each selection.
+  void addVertexHandles() {
+    DeformerSetup& setup = rig.setup;
+    for (std::size_t h = 0; h < desc.vertex_handles.size(); ++h) {
+      const NamedSelection& n = desc.vertex_handles[h];
+      const std::string who = "vertex handle '" + n.name + "'";
+      const std::vector<std::uint8_t> mask = resolveVertices(ctx, n.select, who);
+      for (std::int32_t v = 0; v < body.vertexCount(); ++v) {
+        if (!mask[static_cast<std::size_t>(v)]) continue;
+        claim(v, who);
+        setup.vertex_handles.push_back(v);
+        rig.vertex_handle_names.push_back(n.name);
+      }
     }
   }
-  for (const NamedSelection& n : desc.region_handles) {
-    const std::string who = "region handle '" + n.name + "'";
-    RegionHandle region;
-    region.tets = resolveTets(ctx, n.select, who);
-    region.oriented = n.oriented;
-    std::vector<std::int32_t> corners;
-    for (const std::int32_t t : region.tets) {
-      for (int k = 0; k < 4; ++k) corners.push_back(body.tets(t, k));
+
+  // The description's region handles: the tets of each selection.
+  void addRegionHandles() {
+    DeformerSetup& setup = rig.setup;
+    for (const NamedSelection& n : desc.region_handles) {
+      const std::string who = "region handle '" + n.name + "'";
+      RegionHandle region;
+      region.tets = resolveTets(ctx, n.select, who);
+      region.oriented = n.oriented;
+      std::vector<std::int32_t> corners;
+      for (const std::int32_t t : region.tets) {
+        for (int k = 0; k < 4; ++k) corners.push_back(body.tets(t, k));
+      }
+      std::sort(corners.begin(), corners.end());
+      corners.erase(std::unique(corners.begin(), corners.end()), corners.end());
+      for (const std::int32_t v : corners) claim(v, who);
+      setup.region_handles.push_back(std::move(region));
+      rig.region_handle_names.push_back(n.name);
     }
-    std::sort(corners.begin(), corners.end());
-    corners.erase(std::unique(corners.begin(), corners.end()), corners.end());
-    for (const std::int32_t v : corners) claim(v, who);
-    setup.region_handles.push_back(std::move(region));
-    rig.region_handle_names.push_back(n.name);
   }
-  // Regions of the rigid marker groups: the tets whose four corners lie in the group's skin and
-  // belong to no other handle.
-  std::vector<std::vector<std::int32_t>> group_regions;  // per rigid group: its region handle's tets (empty: none)
-  for (const RigidMarkerGroup& g : rigid_groups) {
-    std::string name;
-    for (const std::int32_t m : g.markers) name += (name.empty() ? "" : "+") + markers.labels[static_cast<std::size_t>(m)];
+
+  // The region of a rigid marker group (claimed for `who`): the tets wholly in the group's skin
+  // (the coarse level: with a corner in it); where none is, those with fewer corners in it, then
+  // the tet nearest the markers' centre: every group drives a region, and both levels have the
+  // same regions. No tet when every candidate belongs to another handle.
+  RegionHandle rigidGroupRegion(const RigidMarkerGroup& g, const std::string& who) {
     double extent = 0.0;
     for (const std::int32_t ga : g.markers) {
       for (const std::int32_t gb : g.markers) extent = std::max(extent, (marker_rig[static_cast<std::size_t>(ga)] - marker_rig[static_cast<std::size_t>(gb)]).norm());
     }
     const std::vector<std::uint8_t> mask = groupSkinMask(body.vertices, marker_rig, g.markers, extent);
-    // The tets wholly in the skin (the coarse level: with a corner in it); where none is, those with
-    // fewer corners in it, then the tet nearest the markers' centre: every group drives a region, and
-    // both levels have the same regions.
-    const std::string who = "markers:" + name;
     const auto free_of_others = [&](std::int32_t t) {
       for (int c = 0; c < 4; ++c) {
         const std::string& owner = vertex_owner[static_cast<std::size_t>(body.tets(t, c))];
@@ -821,172 +914,233 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
         for (int c = 0; c < 4; ++c) claim(body.tets(best, c), who);
       }
     }
-    std::vector<std::int32_t> corners;
-    for (const std::int32_t t : region.tets) {
-      for (int c = 0; c < 4; ++c) corners.push_back(body.tets(t, c));
-    }
-    std::sort(corners.begin(), corners.end());
-    corners.erase(std::unique(corners.begin(), corners.end()), corners.end());
-    report.rigid_groups.push_back({name, g.spread_mm, static_cast<std::int32_t>(corners.size())});
-    if (!region.tets.empty() && !inputs.coarse_level) {
-      report.notes.push_back("markers " + name + " move as one rigid body over the clip (their distances within " + formatNumber("%.1f", g.spread_mm) +
-                             " mm): they drive the skin around them, " + std::to_string(corners.size()) + " tet vertices, as region '" + who +
-                             "' (a description's region_handles, or \"markers\": {\"rigid_regions\": false}, turn this off)");
-    }
-    if (region.tets.empty()) {
-      report.notes.push_back("markers " + name + " move rigidly together (distances within " + formatNumber("%.1f", g.spread_mm) +
-                             " mm) but no tet lies wholly in the skin around them: they drive no region");
-      group_regions.emplace_back();
-      continue;
-    }
-    group_regions.push_back(region.tets);
-    setup.region_handles.push_back(std::move(region));
-    rig.region_handle_names.push_back("markers:" + name);
-  }
-  for (const PointHandleSpec& p : desc.point_handles) {
-    // The tet holding the point best (largest smallest barycentric coordinate).
-    PointHandle best;
-    double best_min = -std::numeric_limits<double>::infinity();
-    for (std::int32_t t = 0; t < body.tetCount(); ++t) {
-      Eigen::Matrix3d e;
-      const Eigen::Vector3d d = body.vertices.row(body.tets(t, 3));
-      for (int k = 0; k < 3; ++k) e.col(k) = body.vertices.row(body.tets(t, k)).transpose() - d;
-      const Eigen::Vector3d l = e.partialPivLu().solve(p.position - d);
-      const Eigen::Vector4d bary(l[0], l[1], l[2], 1.0 - l.sum());
-      if (bary.allFinite() && bary.minCoeff() > best_min) {
-        best_min = bary.minCoeff();
-        best.tet = t;
-        best.barycentric = bary;
-      }
-    }
-    if (best.tet < 0) throw RigBuildError("point handle '" + p.name + "': no tet can carry it");
-    setup.point_handles.push_back(best);
-    rig.point_handle_names.push_back(p.name);
-  }
-  // Pose sensors: the description parser resolved each region name to its index in
-  // desc.region_handles, which is its index in setup.region_handles (same order, above).
-  for (const PoseSensorSpec& p : desc.pose_sensors) {
-    if (p.region_index < 0 || static_cast<std::size_t>(p.region_index) >= setup.region_handles.size()) {
-      throw RigBuildError(p.where + ": pose sensor " + p.sensor + " names no region handle of this rig");
-    }
-    RigPoseSensor ps;
-    ps.sensor_label = p.sensor;
-    ps.region_handle = p.region_index;
-    ps.mode = p.mode;
-    ps.clutch_buttons = p.clutch_buttons;
-    ps.translation_scale = p.translation_scale;
-    rig.pose_sensors.push_back(ps);
-  }
-  std::vector<std::string> group_of(static_cast<std::size_t>(body.tetCount()));
-  for (const NamedSelection& n : desc.rigid_groups) {
-    RigidGroup g;
-    g.tets = resolveTets(ctx, n.select, "rigid group '" + n.name + "'");
-    for (const std::int32_t t : g.tets) {
-      std::string& owner = group_of[static_cast<std::size_t>(t)];
-      if (!owner.empty()) {
-        throw RigBuildError("tet " + std::to_string(t) + " is in rigid groups '" + owner + "' and '" + n.name +
-                            "': groups must be disjoint; shrink one");
-      }
-      owner = n.name;
-    }
-    setup.rigid_groups.push_back(std::move(g));
-    rig.rigid_group_names.push_back(n.name);
-  }
-  std::vector<double> stiffness(static_cast<std::size_t>(body.tetCount()), 1.0);
-  for (const NamedSelection& n : desc.stiffness) {
-    for (const std::int32_t t : resolveTets(ctx, n.select, "stiffness '" + n.name + "'")) stiffness[static_cast<std::size_t>(t)] = n.value;
-  }
-  std::vector<double> volume(static_cast<std::size_t>(body.tetCount()), 0.0);  // invisible tets take none
-  for (const NamedSelection& n : desc.volume) {
-    const std::string who = "volume '" + n.name + "'";
-    // The coarse level's few large tets may miss a small region: it then goes without it (the
-    // term is a refinement; the fine level has it).
-    const std::vector<std::int32_t> tets = inputs.coarse_level ? selectTets(ctx, n.select, who, true) : resolveTets(ctx, n.select, who);
-    if (tets.empty()) report.notes.push_back(who + ": no coarse tet has " + std::to_string(n.select.min_corners) +
-                                               " corners in it; the coarse level has no volume term there");
-    for (const std::int32_t t : tets) volume[static_cast<std::size_t>(t)] = n.value;
+    return region;
   }
 
-  // Markers bound by invisible tets.
-  TetMesh full = body;
-  if (!markers.labels.empty()) {
-    auto t0 = Clock::now();
-    prog.begin("binding markers by invisible tets");
-    MarkerBindOptions bopt;
-    bopt.faces_per_marker = mopt.faces_per_marker;
-    bopt.face_spread = mopt.face_spread;
-    bopt.fan_spread = mopt.fan_spread;
-    bopt.fan_spokes = mopt.fan_spokes;
-    bopt.fan_weight = mopt.fan_weight;
-    MarkerBindResult bound = bindMarkers(body, marker_rig, markers.labels, bopt);
-    full = bound.mesh;
-    report.invisible_tets = bound.invisible_tets;
-    report.markers_below_skin = bound.below_skin;
-    for (std::size_t m = 0; m < markers.labels.size(); ++m) {
-      RigMarker rm;
-      rm.label = markers.labels[m];
-      rm.tet_vertex = bound.bindings[m].tet_vertex;
-      rm.vertex_handle = static_cast<std::int32_t>(setup.vertex_handles.size());
-      rm.rest_position = marker_rig[m];
-      rm.bound_faces = bound.bindings[m].bound_faces;
-      rm.surface_distance = marker_distance[m];
-      setup.vertex_handles.push_back(rm.tet_vertex);
-      rig.vertex_handle_names.push_back("marker:" + rm.label);
-      rig.markers.push_back(rm);
-    }
-    stiffness.resize(static_cast<std::size_t>(full.tetCount()), mopt.invisible_stiffness);
-    for (std::size_t i = 0; i < bound.invisible_scale.size(); ++i) {
-      stiffness[static_cast<std::size_t>(body.tetCount()) + i] *= bound.invisible_scale[i];
-    }
-    report.bind_seconds = since(t0);
-    prog.end(std::to_string(bound.invisible_tets) + " invisible tets" +
-             (bound.below_skin ? ", " + std::to_string(bound.below_skin) + " markers below the skin" : std::string()));
-  }
-  report.markers = static_cast<std::int32_t>(markers.labels.size());
-  report.marker_labels = markers.labels;
-  // Regions driven by marker clusters (region_handles[i].markers), by label.
-  for (std::size_t h = 0; h < desc.region_handles.size(); ++h) {
-    const NamedSelection& n = desc.region_handles[h];
-    if (n.markers.empty()) continue;
-    RigMarkerRegion mr;
-    mr.region_handle = static_cast<std::int32_t>(h);
-    for (const std::string& label : n.markers) {
-      std::int32_t found = -1;
-      for (std::size_t m = 0; m < rig.markers.size(); ++m) {
-        if (rig.markers[m].label == label) found = static_cast<std::int32_t>(m);
+  // A region handle per rigid marker group (those with a region), reported with its size.
+  void addRigidGroupRegions() {
+    DeformerSetup& setup = rig.setup;
+    for (const RigidMarkerGroup& g : rigid_groups) {
+      std::string name;
+      for (const std::int32_t m : g.markers) name += (name.empty() ? "" : "+") + markers.labels[static_cast<std::size_t>(m)];
+      const std::string who = "markers:" + name;
+      RegionHandle region = rigidGroupRegion(g, who);
+      std::vector<std::int32_t> corners;
+      for (const std::int32_t t : region.tets) {
+        for (int c = 0; c < 4; ++c) corners.push_back(body.tets(t, c));
       }
-      if (found < 0) {
-        throw RigBuildError("region handle '" + n.name + "': marker '" + label + "' is not a marker of this rig" +
-                            (rig.markers.empty() ? std::string(" (the rig has no markers: give --markers CLIP.c3d)") : std::string()));
+      std::sort(corners.begin(), corners.end());
+      corners.erase(std::unique(corners.begin(), corners.end()), corners.end());
+      report.rigid_groups.push_back({name, g.spread_mm, static_cast<std::int32_t>(corners.size())});
+      if (!region.tets.empty() && !inputs.coarse_level) {
+        report.notes.push_back("markers " + name + " move as one rigid body over the clip (their distances within " + formatNumber("%.1f", g.spread_mm) +
+                               " mm): they drive the skin around them, " + std::to_string(corners.size()) + " tet vertices, as region '" + who +
+                               "' (a description's region_handles, or \"markers\": {\"rigid_regions\": false}, turn this off)");
       }
-      mr.markers.push_back(found);
+      if (region.tets.empty()) {
+        report.notes.push_back("markers " + name + " move rigidly together (distances within " + formatNumber("%.1f", g.spread_mm) +
+                               " mm) but no tet lies wholly in the skin around them: they drive no region");
+        group_regions.emplace_back();
+        continue;
+      }
+      group_regions.push_back(region.tets);
+      setup.region_handles.push_back(std::move(region));
+      rig.region_handle_names.push_back("markers:" + name);
     }
-    rig.marker_regions.push_back(std::move(mr));
-  }
-  for (std::size_t g = 0, h = desc.region_handles.size(); g < rigid_groups.size(); ++g) {
-    if (group_regions[g].empty()) continue;
-    RigMarkerRegion mr;
-    mr.region_handle = static_cast<std::int32_t>(h++);
-    mr.markers = rigid_groups[g].markers;  // rig.markers is in the order of markers.labels
-    rig.marker_regions.push_back(std::move(mr));
   }
 
-  rig.tet_mesh = full;
-  rig.body_vertex_count = body.vertexCount();
-  rig.body_tet_count = body.tetCount();
-  rig.fine_vertices = fine.vertices;
-  rig.fine_triangles = fine.triangles;
-  b.conservativeResize(b.rows(), full.vertexCount());
-  b.makeCompressed();
-  rig.pose_transfer = makePoseTransferCsr<double>(b);
-  rig.pose_transfer.cols = full.vertexCount();
-  const bool uniform = std::all_of(stiffness.begin(), stiffness.end(), [](double s) { return s == 1.0; });
-  if (!uniform) setup.stiffness = stiffness;
-  volume.resize(static_cast<std::size_t>(full.tetCount()), 0.0);
-  if (std::any_of(volume.begin(), volume.end(), [](double w) { return w > 0.0; })) setup.volume_weights = volume;
+  // The description's point handles, each in the tet holding it best.
+  void addPointHandles() {
+    DeformerSetup& setup = rig.setup;
+    for (const PointHandleSpec& p : desc.point_handles) {
+      // The tet holding the point best (largest smallest barycentric coordinate).
+      PointHandle best;
+      double best_min = -std::numeric_limits<double>::infinity();
+      for (std::int32_t t = 0; t < body.tetCount(); ++t) {
+        Eigen::Matrix3d e;
+        const Eigen::Vector3d d = body.vertices.row(body.tets(t, 3));
+        for (int k = 0; k < 3; ++k) e.col(k) = body.vertices.row(body.tets(t, k)).transpose() - d;
+        const Eigen::Vector3d l = e.partialPivLu().solve(p.position - d);
+        const Eigen::Vector4d bary(l[0], l[1], l[2], 1.0 - l.sum());
+        if (bary.allFinite() && bary.minCoeff() > best_min) {
+          best_min = bary.minCoeff();
+          best.tet = t;
+          best.barycentric = bary;
+        }
+      }
+      if (best.tet < 0) throw RigBuildError("point handle '" + p.name + "': no tet can carry it");
+      setup.point_handles.push_back(best);
+      rig.point_handle_names.push_back(p.name);
+    }
+  }
 
-  if (std::string e = validateRig(rig); !e.empty()) throw RigBuildError("the built rig is inconsistent: " + e);
-  if (inputs.check_deformer) {
+  // The description's pose sensors, each on its region handle.
+  void addPoseSensors() {
+    const DeformerSetup& setup = rig.setup;
+    // Pose sensors: the description parser resolved each region name to its index in
+    // desc.region_handles, which is its index in setup.region_handles (same order, above).
+    for (const PoseSensorSpec& p : desc.pose_sensors) {
+      if (p.region_index < 0 || static_cast<std::size_t>(p.region_index) >= setup.region_handles.size()) {
+        throw RigBuildError(p.where + ": pose sensor " + p.sensor + " names no region handle of this rig");
+      }
+      RigPoseSensor ps;
+      ps.sensor_label = p.sensor;
+      ps.region_handle = p.region_index;
+      ps.mode = p.mode;
+      ps.clutch_buttons = p.clutch_buttons;
+      ps.translation_scale = p.translation_scale;
+      rig.pose_sensors.push_back(ps);
+    }
+  }
+
+  // The description's rigid groups; they must be disjoint.
+  void addRigidGroups() {
+    DeformerSetup& setup = rig.setup;
+    std::vector<std::string> group_of(static_cast<std::size_t>(body.tetCount()));
+    for (const NamedSelection& n : desc.rigid_groups) {
+      RigidGroup g;
+      g.tets = resolveTets(ctx, n.select, "rigid group '" + n.name + "'");
+      for (const std::int32_t t : g.tets) {
+        std::string& owner = group_of[static_cast<std::size_t>(t)];
+        if (!owner.empty()) {
+          throw RigBuildError("tet " + std::to_string(t) + " is in rigid groups '" + owner + "' and '" + n.name +
+                              "': groups must be disjoint; shrink one");
+        }
+        owner = n.name;
+      }
+      setup.rigid_groups.push_back(std::move(g));
+      rig.rigid_group_names.push_back(n.name);
+    }
+  }
+
+  // Per body tet: the stiffness and the volume weight of the description's selections.
+  void assignStiffnessAndVolume() {
+    stiffness.assign(static_cast<std::size_t>(body.tetCount()), 1.0);
+    for (const NamedSelection& n : desc.stiffness) {
+      for (const std::int32_t t : resolveTets(ctx, n.select, "stiffness '" + n.name + "'")) stiffness[static_cast<std::size_t>(t)] = n.value;
+    }
+    volume.assign(static_cast<std::size_t>(body.tetCount()), 0.0);  // invisible tets take none
+    for (const NamedSelection& n : desc.volume) {
+      const std::string who = "volume '" + n.name + "'";
+      // The coarse level's few large tets may miss a small region: it then goes without it (the
+      // term is a refinement; the fine level has it).
+      const std::vector<std::int32_t> tets = inputs.coarse_level ? selectTets(ctx, n.select, who, true) : resolveTets(ctx, n.select, who);
+      if (tets.empty()) report.notes.push_back(who + ": no coarse tet has " + std::to_string(n.select.min_corners) +
+                                                 " corners in it; the coarse level has no volume term there");
+      for (const std::int32_t t : tets) volume[static_cast<std::size_t>(t)] = n.value;
+    }
+  }
+
+  // Selections onto the body tet mesh: the handles, rigid groups, stiffness and volume weights.
+  void resolveSelections() {
+    DeformerSetup& setup = rig.setup;
+    setup.options.rotation_steps = desc.rotation_steps;
+    setup.options.point_handle_weight = desc.point_handle_weight;
+    vertex_owner.assign(static_cast<std::size_t>(body.vertexCount()), std::string());
+    addVertexHandles();
+    addRegionHandles();
+    // Regions of the rigid marker groups: the tets whose four corners lie in the group's skin and
+    // belong to no other handle.
+    addRigidGroupRegions();
+    addPointHandles();
+    addPoseSensors();
+    addRigidGroups();
+    assignStiffnessAndVolume();
+  }
+
+  // Markers bound by invisible tets: the full tet mesh, a vertex handle per marker.
+  void bindMarkersToBody() {
+    DeformerSetup& setup = rig.setup;
+    full = body;
+    if (!markers.labels.empty()) {
+      auto t0 = Clock::now();
+      prog.begin("binding markers by invisible tets");
+      MarkerBindOptions bopt;
+      bopt.faces_per_marker = mopt.faces_per_marker;
+      bopt.face_spread = mopt.face_spread;
+      bopt.fan_spread = mopt.fan_spread;
+      bopt.fan_spokes = mopt.fan_spokes;
+      bopt.fan_weight = mopt.fan_weight;
+      MarkerBindResult bound = bindMarkers(body, marker_rig, markers.labels, bopt);
+      full = bound.mesh;
+      report.invisible_tets = bound.invisible_tets;
+      report.markers_below_skin = bound.below_skin;
+      for (std::size_t m = 0; m < markers.labels.size(); ++m) {
+        RigMarker rm;
+        rm.label = markers.labels[m];
+        rm.tet_vertex = bound.bindings[m].tet_vertex;
+        rm.vertex_handle = static_cast<std::int32_t>(setup.vertex_handles.size());
+        rm.rest_position = marker_rig[m];
+        rm.bound_faces = bound.bindings[m].bound_faces;
+        rm.surface_distance = marker_distance[m];
+        setup.vertex_handles.push_back(rm.tet_vertex);
+        rig.vertex_handle_names.push_back("marker:" + rm.label);
+        rig.markers.push_back(rm);
+      }
+      stiffness.resize(static_cast<std::size_t>(full.tetCount()), mopt.invisible_stiffness);
+      for (std::size_t i = 0; i < bound.invisible_scale.size(); ++i) {
+        stiffness[static_cast<std::size_t>(body.tetCount()) + i] *= bound.invisible_scale[i];
+      }
+      report.bind_seconds = since(t0);
+      prog.end(std::to_string(bound.invisible_tets) + " invisible tets" +
+               (bound.below_skin ? ", " + std::to_string(bound.below_skin) + " markers below the skin" : std::string()));
+    }
+    report.markers = static_cast<std::int32_t>(markers.labels.size());
+    report.marker_labels = markers.labels;
+  }
+
+  // Regions driven by marker clusters (region_handles[i].markers, by label) and by the rigid
+  // marker groups.
+  void addMarkerRegions() {
+    for (std::size_t h = 0; h < desc.region_handles.size(); ++h) {
+      const NamedSelection& n = desc.region_handles[h];
+      if (n.markers.empty()) continue;
+      RigMarkerRegion mr;
+      mr.region_handle = static_cast<std::int32_t>(h);
+      for (const std::string& label : n.markers) {
+        std::int32_t found = -1;
+        for (std::size_t m = 0; m < rig.markers.size(); ++m) {
+          if (rig.markers[m].label == label) found = static_cast<std::int32_t>(m);
+        }
+        if (found < 0) {
+          throw RigBuildError("region handle '" + n.name + "': marker '" + label + "' is not a marker of this rig" +
+                              (rig.markers.empty() ? std::string(" (the rig has no markers: give --markers CLIP.c3d)") : std::string()));
+        }
+        mr.markers.push_back(found);
+      }
+      rig.marker_regions.push_back(std::move(mr));
+    }
+    for (std::size_t g = 0, h = desc.region_handles.size(); g < rigid_groups.size(); ++g) {
+      if (group_regions[g].empty()) continue;
+      RigMarkerRegion mr;
+      mr.region_handle = static_cast<std::int32_t>(h++);
+      mr.markers = rigid_groups[g].markers;  // rig.markers is in the order of markers.labels
+      rig.marker_regions.push_back(std::move(mr));
+    }
+  }
+
+  // Puts the meshes, B, the stiffness and the volume weights into the rig and validates it.
+  void assembleRig() {
+    DeformerSetup& setup = rig.setup;
+    rig.tet_mesh = full;
+    rig.body_vertex_count = body.vertexCount();
+    rig.body_tet_count = body.tetCount();
+    rig.fine_vertices = fine.vertices;
+    rig.fine_triangles = fine.triangles;
+    b.conservativeResize(b.rows(), full.vertexCount());
+    b.makeCompressed();
+    rig.pose_transfer = makePoseTransferCsr<double>(b);
+    rig.pose_transfer.cols = full.vertexCount();
+    const bool uniform = std::all_of(stiffness.begin(), stiffness.end(), [](double s) { return s == 1.0; });
+    if (!uniform) setup.stiffness = stiffness;
+    volume.resize(static_cast<std::size_t>(full.tetCount()), 0.0);
+    if (std::any_of(volume.begin(), volume.end(), [](double w) { return w > 0.0; })) setup.volume_weights = volume;
+
+    if (std::string e = validateRig(rig); !e.empty()) throw RigBuildError("the built rig is inconsistent: " + e);
+  }
+
+  // Checks that the rig loads: builds its Deformer (Laplacian, factorization).
+  void checkDeformer() {
     auto t0 = Clock::now();
     prog.begin("checking the rig (Deformer: Laplacian, factorization)");
     try {
@@ -998,9 +1152,10 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
     report.check_seconds = since(t0);
     prog.end("factorized in " + formatNumber("%.3f", report.factorize_seconds) + " s");
   }
-  if (inputs.coarse_tet_vertices) {
-    // The coarse level: the same inputs and rest frame (so the same alignment: one rig space) with a
-    // smaller tet-vertex budget.
+
+  // The coarse level: the same inputs and rest frame (so the same alignment: one rig space) with a
+  // smaller tet-vertex budget.
+  void buildCoarseLevel() {
     const std::int32_t n = *inputs.coarse_tet_vertices;
     auto t0 = Clock::now();
     prog.begin("building the coarse level (" + std::to_string(n) + " tet vertices)");
@@ -1021,8 +1176,50 @@ Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress*
     prog.end(std::to_string(rig.coarse->tet_mesh.vertexCount()) + " tet vertices, " + std::to_string(rig.coarse->tet_mesh.tetCount()) +
              " tets");
   }
-  if (report_out) *report_out = std::move(report);
-  return rig;
+};
+
+}  // namespace
+
+Rig buildRig(const BuildRigInputs& inputs, BuildRigReport* report_out, Progress* progress) {
+  Progress quiet("", Progress::Mode::kQuiet);
+  RigBuilder build(inputs, progress ? *progress : quiet);
+  // Budgets first: a bad --tet-vertices stops the build before any heavy work.
+  build.checkTetBudgets();
+  build.rig.builder = "tetrig build-rig " TETRIG_VERSION_STRING;
+  build.rig.name = inputs.description.name.empty() ? inputs.mesh.filename().string() : inputs.description.name;
+  // The mesh exists and something will drive the rig.
+  build.checkInputs();
+  // The body tet mesh, fine mesh and B from a tet mesh; or the fine mesh from a surface.
+  if (isTetMeshPath(inputs.mesh)) {
+    build.readTetInput();
+  } else {
+    build.importSurfaceInput();
+  }
+  // Unit and axes of the rig.
+  build.chooseUnit();
+  // Markers: rest frame, alignment and checks, before the heavy work.
+  if (build.clip || build.given) build.fitMarkers();
+  // Surface input: the coarse tet mesh and B.
+  if (!build.report.tet_input) build.tetrahedralizeSurface();
+  build.recordMeshes();
+  // Pose sensors without markers: device mm -> rig units from the description.
+  if (!build.clip && !build.given && !inputs.description.pose_sensors.empty()) build.alignForPoseSensors();
+  build.ctx.marker_labels = &build.markers.labels;
+  build.ctx.marker_positions = &build.marker_rig;
+  // Selections onto the body tet mesh.
+  build.resolveSelections();
+  // Markers bound by invisible tets.
+  build.bindMarkersToBody();
+  // Regions driven by markers.
+  build.addMarkerRegions();
+  // The rig's meshes, B and weights; validated.
+  build.assembleRig();
+  // Optionally: the rig's Deformer builds.
+  if (inputs.check_deformer) build.checkDeformer();
+  // Optionally: the coarse level.
+  if (inputs.coarse_tet_vertices) build.buildCoarseLevel();
+  if (report_out) *report_out = std::move(build.report);
+  return std::move(build.rig);
 }
 
 }  // namespace tetrig::rigbuild

@@ -118,25 +118,17 @@ SurfaceTopology surfaceTopology(const SurfaceMesh& mesh) {
   return topo;
 }
 
-SurfaceReport validateSurface(SurfaceMesh& mesh, const ValidateOptions& options) {
-  SurfaceReport r;
-  r.input_vertices = mesh.vertexCount();
-  r.input_triangles = mesh.triangleCount();
-  r.vertex_map.resize(static_cast<size_t>(mesh.vertexCount()));
-  std::iota(r.vertex_map.begin(), r.vertex_map.end(), 0);
-  auto finish = [&r, &mesh]() {
-    r.vertices = mesh.vertexCount();
-    r.triangles = mesh.triangleCount();
-    return r;
-  };
+namespace {
 
+// Refuses a mesh with a non-finite coordinate or a corner naming no vertex; true when it did.
+bool refuseCorruptInput(const SurfaceMesh& mesh, SurfaceReport& r) {
   for (std::int32_t v = 0; v < mesh.vertexCount(); ++v) {
     if (!mesh.vertices.row(v).allFinite()) ++r.non_finite_vertices;
   }
   if (r.non_finite_vertices > 0) {
     r.refusals.push_back(std::to_string(r.non_finite_vertices) +
                          " vertices have NaN or infinite coordinates: fix or re-export the mesh");
-    return finish();
+    return true;
   }
   for (std::int32_t f = 0; f < mesh.triangleCount(); ++f) {
     for (int k = 0; k < 3; ++k) {
@@ -144,18 +136,15 @@ SurfaceReport validateSurface(SurfaceMesh& mesh, const ValidateOptions& options)
         r.refusals.push_back("face " + std::to_string(f) + " references vertex " + std::to_string(mesh.triangles(f, k)) +
                              ", which does not exist (" + std::to_string(mesh.vertexCount()) +
                              " vertices): the mesh is corrupt");
-        return finish();
+        return true;
       }
     }
   }
-  r.bbox_diagonal = boundingBoxDiagonal(mesh.vertices);
+  return false;
+}
 
-  // 1. Weld duplicate vertices.
-  const std::int32_t before_weld = mesh.vertexCount();
-  composeMap(r.vertex_map, weldVertices(mesh, options.weld_tolerance * r.bbox_diagonal));
-  r.welded_vertices = before_weld - mesh.vertexCount();
-
-  // 2. Faces with a repeated corner, then duplicate faces (same corner set).
+// The faces to keep: not those with a repeated corner, nor a second face with the same corner set.
+std::vector<char> facesToKeep(const SurfaceMesh& mesh, SurfaceReport& r) {
   std::vector<char> keep(static_cast<size_t>(mesh.triangleCount()), 1);
   for (std::int32_t f = 0; f < mesh.triangleCount(); ++f) {
     const auto t = mesh.triangles.row(f);
@@ -164,78 +153,69 @@ SurfaceReport validateSurface(SurfaceMesh& mesh, const ValidateOptions& options)
       ++r.removed_degenerate_faces;
     }
   }
-  {
-    std::vector<std::pair<std::array<std::int32_t, 3>, std::int32_t>> sorted_faces;
-    sorted_faces.reserve(static_cast<size_t>(mesh.triangleCount()));
-    for (std::int32_t f = 0; f < mesh.triangleCount(); ++f) {
-      if (!keep[static_cast<size_t>(f)]) continue;
-      std::array<std::int32_t, 3> c{mesh.triangles(f, 0), mesh.triangles(f, 1), mesh.triangles(f, 2)};
-      std::sort(c.begin(), c.end());
-      sorted_faces.push_back({c, f});
-    }
-    std::sort(sorted_faces.begin(), sorted_faces.end());
-    for (size_t i = 1; i < sorted_faces.size(); ++i) {
-      if (sorted_faces[i].first == sorted_faces[i - 1].first) {
-        keep[static_cast<size_t>(sorted_faces[i].second)] = 0;
-        ++r.removed_duplicate_faces;
-      }
+  std::vector<std::pair<std::array<std::int32_t, 3>, std::int32_t>> sorted_faces;
+  sorted_faces.reserve(static_cast<size_t>(mesh.triangleCount()));
+  for (std::int32_t f = 0; f < mesh.triangleCount(); ++f) {
+    if (!keep[static_cast<size_t>(f)]) continue;
+    std::array<std::int32_t, 3> c{mesh.triangles(f, 0), mesh.triangles(f, 1), mesh.triangles(f, 2)};
+    std::sort(c.begin(), c.end());
+    sorted_faces.push_back({c, f});
+  }
+  std::sort(sorted_faces.begin(), sorted_faces.end());
+  for (size_t i = 1; i < sorted_faces.size(); ++i) {
+    if (sorted_faces[i].first == sorted_faces[i - 1].first) {
+      keep[static_cast<size_t>(sorted_faces[i].second)] = 0;
+      ++r.removed_duplicate_faces;
     }
   }
-  // 3. Unused vertices go with the compaction.
-  const std::int32_t before_compact = mesh.vertexCount();
-  composeMap(r.vertex_map, compact(mesh, keep));
-  r.removed_unused_vertices = before_compact - mesh.vertexCount();
+  return keep;
+}
 
-  // 4. Connected components (faces sharing a vertex are connected).
-  {
-    UnionFind uf(static_cast<size_t>(mesh.vertexCount()));
-    for (std::int32_t f = 0; f < mesh.triangleCount(); ++f) {
-      uf.unite(static_cast<std::uint32_t>(mesh.triangles(f, 0)), static_cast<std::uint32_t>(mesh.triangles(f, 1)));
-      uf.unite(static_cast<std::uint32_t>(mesh.triangles(f, 0)), static_cast<std::uint32_t>(mesh.triangles(f, 2)));
-    }
-    std::vector<std::int32_t> faces_of_root(static_cast<size_t>(mesh.vertexCount()), 0);
-    for (std::int32_t f = 0; f < mesh.triangleCount(); ++f) {
-      ++faces_of_root[uf.find(static_cast<std::uint32_t>(mesh.triangles(f, 0)))];
-    }
-    std::vector<std::pair<std::int32_t, std::uint32_t>> comps;  // (faces, root)
-    for (std::int32_t v = 0; v < mesh.vertexCount(); ++v) {
-      if (faces_of_root[static_cast<size_t>(v)] > 0) comps.push_back({faces_of_root[static_cast<size_t>(v)], static_cast<std::uint32_t>(v)});
-    }
-    std::sort(comps.begin(), comps.end(), std::greater<>());
-    r.components = static_cast<std::int32_t>(comps.size());
-    if (comps.size() > 1) {
-      if (options.keep_largest_component) {
-        std::vector<char> keep_largest(static_cast<size_t>(mesh.triangleCount()), 1);
-        for (std::int32_t f = 0; f < mesh.triangleCount(); ++f) {
-          if (uf.find(static_cast<std::uint32_t>(mesh.triangles(f, 0))) != comps[0].second) {
-            keep_largest[static_cast<size_t>(f)] = 0;
-            ++r.dropped_component_faces;
-          }
+// Counts the connected components (faces sharing a vertex are connected); keeps the largest or
+// refuses several.
+void checkComponents(SurfaceMesh& mesh, SurfaceReport& r, const ValidateOptions& options) {
+  UnionFind uf(static_cast<size_t>(mesh.vertexCount()));
+  for (std::int32_t f = 0; f < mesh.triangleCount(); ++f) {
+    uf.unite(static_cast<std::uint32_t>(mesh.triangles(f, 0)), static_cast<std::uint32_t>(mesh.triangles(f, 1)));
+    uf.unite(static_cast<std::uint32_t>(mesh.triangles(f, 0)), static_cast<std::uint32_t>(mesh.triangles(f, 2)));
+  }
+  std::vector<std::int32_t> faces_of_root(static_cast<size_t>(mesh.vertexCount()), 0);
+  for (std::int32_t f = 0; f < mesh.triangleCount(); ++f) {
+    ++faces_of_root[uf.find(static_cast<std::uint32_t>(mesh.triangles(f, 0)))];
+  }
+  std::vector<std::pair<std::int32_t, std::uint32_t>> comps;  // (faces, root)
+  for (std::int32_t v = 0; v < mesh.vertexCount(); ++v) {
+    if (faces_of_root[static_cast<size_t>(v)] > 0) comps.push_back({faces_of_root[static_cast<size_t>(v)], static_cast<std::uint32_t>(v)});
+  }
+  std::sort(comps.begin(), comps.end(), std::greater<>());
+  r.components = static_cast<std::int32_t>(comps.size());
+  if (comps.size() > 1) {
+    if (options.keep_largest_component) {
+      std::vector<char> keep_largest(static_cast<size_t>(mesh.triangleCount()), 1);
+      for (std::int32_t f = 0; f < mesh.triangleCount(); ++f) {
+        if (uf.find(static_cast<std::uint32_t>(mesh.triangles(f, 0))) != comps[0].second) {
+          keep_largest[static_cast<size_t>(f)] = 0;
+          ++r.dropped_component_faces;
         }
-        r.dropped_components = r.components - 1;
-        r.components = 1;
-        composeMap(r.vertex_map, compact(mesh, keep_largest));
-      } else {
-        std::ostringstream s;
-        s << "the surface has " << comps.size() << " separate components (faces per component: ";
-        for (size_t i = 0; i < std::min<size_t>(comps.size(), 5); ++i) s << (i ? ", " : "") << comps[i].first;
-        if (comps.size() > 5) s << ", ...";
-        s << "): a rig needs one closed surface; join the parts into one watertight mesh (boolean union) "
-             "or allow dropping all but the largest (keep_largest_component)";
-        r.refusals.push_back(s.str());
       }
+      r.dropped_components = r.components - 1;
+      r.components = 1;
+      composeMap(r.vertex_map, compact(mesh, keep_largest));
+    } else {
+      std::ostringstream s;
+      s << "the surface has " << comps.size() << " separate components (faces per component: ";
+      for (size_t i = 0; i < std::min<size_t>(comps.size(), 5); ++i) s << (i ? ", " : "") << comps[i].first;
+      if (comps.size() > 5) s << ", ...";
+      s << "): a rig needs one closed surface; join the parts into one watertight mesh (boolean union) "
+           "or allow dropping all but the largest (keep_largest_component)";
+      r.refusals.push_back(s.str());
     }
   }
-  if (mesh.vertexCount() < 4 || mesh.triangleCount() < 4) {
-    r.refusals.push_back("only " + std::to_string(mesh.vertexCount()) + " vertices and " +
-                         std::to_string(mesh.triangleCount()) +
-                         " usable triangles remain: a closed surface needs at least 4 and 4");
-    return finish();
-  }
+}
 
-  // 5. Edges: boundary, non-manifold; manifold edges connect faces for orientation and fans.
-  const std::vector<HalfEdge> h = sortedHalfEdges(mesh);
-  std::vector<std::pair<std::int32_t, std::int32_t>> adjacency_pairs;  // (half-edge i, j) of manifold edges
+// Counts the edges, boundary and non-manifold ones; the manifold edges' half-edge pairs go to
+// adjacency_pairs. Returns the edge count.
+std::int64_t classifyEdges(const std::vector<HalfEdge>& h, SurfaceReport& r, std::vector<std::pair<std::int32_t, std::int32_t>>& adjacency_pairs) {
   std::int64_t edge_count = 0;
   for (size_t i = 0; i < h.size();) {
     size_t j = i;
@@ -250,39 +230,46 @@ SurfaceReport validateSurface(SurfaceMesh& mesh, const ValidateOptions& options)
     }
     i = j;
   }
-  // 6. Non-manifold vertices: corners around a vertex joined across manifold edges form fans.
-  {
-    const auto nf = static_cast<size_t>(mesh.triangleCount());
-    UnionFind corners(nf * 3);
-    auto cornerOf = [&mesh](std::int32_t f, std::int32_t v) {
-      for (std::uint32_t k = 0; k < 3; ++k) {
-        if (mesh.triangles(f, k) == v) return static_cast<std::uint32_t>(f) * 3u + k;
-      }
-      return static_cast<std::uint32_t>(f) * 3u;
-    };
-    for (const auto& [i, j] : adjacency_pairs) {
-      const HalfEdge& a = h[static_cast<size_t>(i)];
-      const HalfEdge& b = h[static_cast<size_t>(j)];
-      const auto v0 = static_cast<std::int32_t>(a.key >> 32);
-      const auto v1 = static_cast<std::int32_t>(a.key & 0xffffffffu);
-      corners.unite(cornerOf(a.face, v0), cornerOf(b.face, v0));
-      corners.unite(cornerOf(a.face, v1), cornerOf(b.face, v1));
+  return edge_count;
+}
+
+// Counts the vertices whose corners form more than one fan across manifold edges.
+void countNonManifoldVertices(const SurfaceMesh& mesh, const std::vector<HalfEdge>& h, const std::vector<std::pair<std::int32_t, std::int32_t>>& adjacency_pairs,
+                              SurfaceReport& r) {
+  const auto nf = static_cast<size_t>(mesh.triangleCount());
+  UnionFind corners(nf * 3);
+  auto cornerOf = [&mesh](std::int32_t f, std::int32_t v) {
+    for (std::uint32_t k = 0; k < 3; ++k) {
+      if (mesh.triangles(f, k) == v) return static_cast<std::uint32_t>(f) * 3u + k;
     }
-    std::vector<std::int64_t> root_of_vertex(static_cast<size_t>(mesh.vertexCount()), -1);
-    std::vector<char> counted(static_cast<size_t>(mesh.vertexCount()), 0);
-    for (std::int32_t f = 0; f < mesh.triangleCount(); ++f) {
-      for (std::uint32_t k = 0; k < 3; ++k) {
-        const auto v = static_cast<size_t>(mesh.triangles(f, k));
-        const std::int64_t root = corners.find(static_cast<std::uint32_t>(f) * 3u + k);
-        if (root_of_vertex[v] < 0) {
-          root_of_vertex[v] = root;
-        } else if (root_of_vertex[v] != root && !counted[v]) {
-          counted[v] = 1;
-          ++r.non_manifold_vertices;
-        }
+    return static_cast<std::uint32_t>(f) * 3u;
+  };
+  for (const auto& [i, j] : adjacency_pairs) {
+    const HalfEdge& a = h[static_cast<size_t>(i)];
+    const HalfEdge& b = h[static_cast<size_t>(j)];
+    const auto v0 = static_cast<std::int32_t>(a.key >> 32);
+    const auto v1 = static_cast<std::int32_t>(a.key & 0xffffffffu);
+    corners.unite(cornerOf(a.face, v0), cornerOf(b.face, v0));
+    corners.unite(cornerOf(a.face, v1), cornerOf(b.face, v1));
+  }
+  std::vector<std::int64_t> root_of_vertex(static_cast<size_t>(mesh.vertexCount()), -1);
+  std::vector<char> counted(static_cast<size_t>(mesh.vertexCount()), 0);
+  for (std::int32_t f = 0; f < mesh.triangleCount(); ++f) {
+    for (std::uint32_t k = 0; k < 3; ++k) {
+      const auto v = static_cast<size_t>(mesh.triangles(f, k));
+      const std::int64_t root = corners.find(static_cast<std::uint32_t>(f) * 3u + k);
+      if (root_of_vertex[v] < 0) {
+        root_of_vertex[v] = root;
+      } else if (root_of_vertex[v] != root && !counted[v]) {
+        counted[v] = 1;
+        ++r.non_manifold_vertices;
       }
     }
   }
+}
+
+// Refuses an open surface, non-manifold edges and non-manifold vertices.
+void refuseNonManifold(SurfaceReport& r) {
   if (r.boundary_edges > 0) {
     r.refusals.push_back("the surface is open: " + std::to_string(r.boundary_edges) +
                          " boundary edges (holes); close the holes (e.g. MeshLab 'Close Holes', Blender "
@@ -298,49 +285,50 @@ SurfaceReport validateSurface(SurfaceMesh& mesh, const ValidateOptions& options)
                          " non-manifold vertices (surface parts touching at a single point): separate or merge "
                          "them (e.g. MeshLab 'Repair non Manifold Vertices')");
   }
+}
 
-  // 7. Consistent orientation by flood fill across manifold edges.
-  {
-    const auto nf = static_cast<size_t>(mesh.triangleCount());
-    std::vector<std::vector<std::pair<std::int32_t, bool>>> neighbours(nf);  // (face, same direction)
-    for (const auto& [i, j] : adjacency_pairs) {
-      const HalfEdge& a = h[static_cast<size_t>(i)];
-      const HalfEdge& b = h[static_cast<size_t>(j)];
-      const bool same = a.forward == b.forward;  // consistent neighbours traverse the edge oppositely
-      neighbours[static_cast<size_t>(a.face)].push_back({b.face, same});
-      neighbours[static_cast<size_t>(b.face)].push_back({a.face, same});
-    }
-    std::vector<std::int8_t> flip(nf, -1);
-    std::vector<std::int32_t> component_faces;
-    for (size_t seed = 0; seed < nf; ++seed) {
-      if (flip[seed] >= 0) continue;
-      component_faces.clear();
-      flip[seed] = 0;
-      std::queue<std::int32_t> todo;
-      todo.push(static_cast<std::int32_t>(seed));
-      while (!todo.empty()) {
-        const std::int32_t f = todo.front();
-        todo.pop();
-        component_faces.push_back(f);
-        for (const auto& [g, same] : neighbours[static_cast<size_t>(f)]) {
-          const std::int8_t want = static_cast<std::int8_t>(flip[static_cast<size_t>(f)] ^ (same ? 1 : 0));
-          if (flip[static_cast<size_t>(g)] < 0) {
-            flip[static_cast<size_t>(g)] = want;
-            todo.push(g);
-          } else if (flip[static_cast<size_t>(g)] != want) {
-            r.non_orientable = true;
-          }
+// Orients each edge-connected patch consistently (its minority of faces flipped); refuses a
+// non-orientable surface.
+void orientConsistently(SurfaceMesh& mesh, const std::vector<HalfEdge>& h, const std::vector<std::pair<std::int32_t, std::int32_t>>& adjacency_pairs, SurfaceReport& r) {
+  const auto nf = static_cast<size_t>(mesh.triangleCount());
+  std::vector<std::vector<std::pair<std::int32_t, bool>>> neighbours(nf);  // (face, same direction)
+  for (const auto& [i, j] : adjacency_pairs) {
+    const HalfEdge& a = h[static_cast<size_t>(i)];
+    const HalfEdge& b = h[static_cast<size_t>(j)];
+    const bool same = a.forward == b.forward;  // consistent neighbours traverse the edge oppositely
+    neighbours[static_cast<size_t>(a.face)].push_back({b.face, same});
+    neighbours[static_cast<size_t>(b.face)].push_back({a.face, same});
+  }
+  std::vector<std::int8_t> flip(nf, -1);
+  std::vector<std::int32_t> component_faces;
+  for (size_t seed = 0; seed < nf; ++seed) {
+    if (flip[seed] >= 0) continue;
+    component_faces.clear();
+    flip[seed] = 0;
+    std::queue<std::int32_t> todo;
+    todo.push(static_cast<std::int32_t>(seed));
+    while (!todo.empty()) {
+      const std::int32_t f = todo.front();
+      todo.pop();
+      component_faces.push_back(f);
+      for (const auto& [g, same] : neighbours[static_cast<size_t>(f)]) {
+        const std::int8_t want = static_cast<std::int8_t>(flip[static_cast<size_t>(f)] ^ (same ? 1 : 0));
+        if (flip[static_cast<size_t>(g)] < 0) {
+          flip[static_cast<size_t>(g)] = want;
+          todo.push(g);
+        } else if (flip[static_cast<size_t>(g)] != want) {
+          r.non_orientable = true;
         }
       }
-      // Flip the minority within this edge-connected patch.
-      const auto flips = static_cast<size_t>(std::count_if(component_faces.begin(), component_faces.end(),
-                                                           [&flip](std::int32_t f) { return flip[static_cast<size_t>(f)] == 1; }));
-      const bool invert = flips * 2 > component_faces.size();
-      for (const std::int32_t f : component_faces) {
-        if ((flip[static_cast<size_t>(f)] == 1) != invert) {
-          flipFace(mesh, f);
-          ++r.reoriented_faces;
-        }
+    }
+    // Flip the minority within this edge-connected patch.
+    const auto flips = static_cast<size_t>(std::count_if(component_faces.begin(), component_faces.end(),
+                                                         [&flip](std::int32_t f) { return flip[static_cast<size_t>(f)] == 1; }));
+    const bool invert = flips * 2 > component_faces.size();
+    for (const std::int32_t f : component_faces) {
+      if ((flip[static_cast<size_t>(f)] == 1) != invert) {
+        flipFace(mesh, f);
+        ++r.reoriented_faces;
       }
     }
   }
@@ -348,8 +336,11 @@ SurfaceReport validateSurface(SurfaceMesh& mesh, const ValidateOptions& options)
     r.refusals.push_back("the surface is not orientable (like a Moebius strip or Klein bottle): no consistent "
                          "inside/outside exists; remesh it as a closed solid");
   }
+}
 
-  // 8. Outward orientation and volume.
+// Measures the volume and, for a surface not yet refused, turns it outward (or refuses it when it
+// encloses none) and computes its genus.
+void orientOutward(SurfaceMesh& mesh, SurfaceReport& r, std::int64_t edge_count) {
   r.volume = signedVolume(mesh);
   const double diag3 = r.bbox_diagonal * r.bbox_diagonal * r.bbox_diagonal;
   if (r.ok()) {
@@ -364,8 +355,10 @@ SurfaceReport validateSurface(SurfaceMesh& mesh, const ValidateOptions& options)
     const std::int64_t chi = mesh.vertexCount() - edge_count + mesh.triangleCount();
     r.genus = static_cast<std::int32_t>((2 - chi) / 2);
   }
+}
 
-  // 9. Zero-area faces with distinct corners (reported only).
+// Counts the zero-area faces with distinct corners (reported only).
+void countZeroAreaFaces(const SurfaceMesh& mesh, SurfaceReport& r, const ValidateOptions& options) {
   const double area_eps = options.zero_area_tolerance * r.bbox_diagonal * r.bbox_diagonal;
   for (std::int32_t f = 0; f < mesh.triangleCount(); ++f) {
     const Eigen::Vector3d a = mesh.vertices.row(mesh.triangles(f, 0)).transpose();
@@ -373,6 +366,63 @@ SurfaceReport validateSurface(SurfaceMesh& mesh, const ValidateOptions& options)
     const Eigen::Vector3d c = mesh.vertices.row(mesh.triangles(f, 2)).transpose();
     if (0.5 * (b - a).cross(c - a).norm() <= area_eps) ++r.zero_area_faces;
   }
+}
+
+}  // namespace
+
+SurfaceReport validateSurface(SurfaceMesh& mesh, const ValidateOptions& options) {
+  SurfaceReport r;
+  r.input_vertices = mesh.vertexCount();
+  r.input_triangles = mesh.triangleCount();
+  r.vertex_map.resize(static_cast<size_t>(mesh.vertexCount()));
+  std::iota(r.vertex_map.begin(), r.vertex_map.end(), 0);
+  auto finish = [&r, &mesh]() {
+    r.vertices = mesh.vertexCount();
+    r.triangles = mesh.triangleCount();
+    return r;
+  };
+
+  // A non-finite coordinate or a corner naming no vertex: refused as it is.
+  if (refuseCorruptInput(mesh, r)) return finish();
+  r.bbox_diagonal = boundingBoxDiagonal(mesh.vertices);
+
+  // 1. Weld duplicate vertices.
+  const std::int32_t before_weld = mesh.vertexCount();
+  composeMap(r.vertex_map, weldVertices(mesh, options.weld_tolerance * r.bbox_diagonal));
+  r.welded_vertices = before_weld - mesh.vertexCount();
+
+  // 2. Faces with a repeated corner, then duplicate faces (same corner set).
+  const std::vector<char> keep = facesToKeep(mesh, r);
+  // 3. Unused vertices go with the compaction.
+  const std::int32_t before_compact = mesh.vertexCount();
+  composeMap(r.vertex_map, compact(mesh, keep));
+  r.removed_unused_vertices = before_compact - mesh.vertexCount();
+
+  // 4. Connected components (faces sharing a vertex are connected).
+  checkComponents(mesh, r, options);
+  if (mesh.vertexCount() < 4 || mesh.triangleCount() < 4) {
+    r.refusals.push_back("only " + std::to_string(mesh.vertexCount()) + " vertices and " +
+                         std::to_string(mesh.triangleCount()) +
+                         " usable triangles remain: a closed surface needs at least 4 and 4");
+    return finish();
+  }
+
+  // 5. Edges: boundary, non-manifold; manifold edges connect faces for orientation and fans.
+  const std::vector<HalfEdge> h = sortedHalfEdges(mesh);
+  std::vector<std::pair<std::int32_t, std::int32_t>> adjacency_pairs;  // (half-edge i, j) of manifold edges
+  const std::int64_t edge_count = classifyEdges(h, r, adjacency_pairs);
+  // 6. Non-manifold vertices: corners around a vertex joined across manifold edges form fans.
+  countNonManifoldVertices(mesh, h, adjacency_pairs, r);
+  refuseNonManifold(r);
+
+  // 7. Consistent orientation by flood fill across manifold edges.
+  orientConsistently(mesh, h, adjacency_pairs, r);
+
+  // 8. Outward orientation and volume.
+  orientOutward(mesh, r, edge_count);
+
+  // 9. Zero-area faces with distinct corners (reported only).
+  countZeroAreaFaces(mesh, r, options);
   return finish();
 }
 
