@@ -546,9 +546,8 @@ void printStatus(std::vector<Performer>& performers, const std::vector<SharedSou
   std::fputs(line.c_str(), stderr);
 }
 
-}  // namespace
-
-int runLive(const RunOptions& options, RunOutcome* outcome) {
+// The options' checks across performers, before anything is opened. Returns the performers' specs.
+std::vector<PerformerSpec> checkedStage(const RunOptions& options) {
   if (options.iterations < 1) throw std::invalid_argument("--iterations must be at least 1");
   checkSolverSettings(options.solver);
   std::vector<PerformerSpec> specs = stageOf(options);
@@ -560,21 +559,12 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
     const std::filesystem::path inputs[] = {specs[0].rig_path, specs[0].coarse_rig_path};
     rigbuild::checkOutputPath(options.final_obj, rigbuild::OutputKind::kObj, inputs, false);
   }
+  return specs;
+}
 
-  // 1. Each performer's rig and live rig.
-  std::vector<Performer> performers(specs.size());
-  for (std::size_t i = 0; i < specs.size(); ++i) {
-    performers[i].spec = specs[i];
-    loadPerformer(options, performers[i]);
-    if (performers[i].live->volumeNotKept())
-      std::fprintf(stderr, "tetrig run: note: %sthe rig's fine mesh is not closed, so its volume is not kept (the volume constraint needs "
-                           "a watertight surface)\n", performerPrefix(performers[i], several).c_str());
-  }
-  const int pose_threads = options.pose_threads > 0 ? options.pose_threads : 1;
-
-  // 2. The sources (each opened once), the fan-out of their frames, the bindings.
+// Each source spec once, with the performers it feeds, in order of first use.
+std::vector<SharedSource> groupSources(std::vector<Performer>& performers) {
   std::vector<SharedSource> sources;
-  const SourceStopper stopper{sources};
   for (std::size_t i = 0; i < performers.size(); ++i) {
     auto it = std::find_if(sources.begin(), sources.end(), [&](const SharedSource& s) { return s.spec == performers[i].spec.source; });
     if (it == sources.end()) {
@@ -585,64 +575,43 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
     it->performers.push_back(i);
     performers[i].source = static_cast<std::size_t>(it - sources.begin());
   }
-  for (SharedSource& s : sources) {
-    for (std::size_t k = 0; k + 1 < s.performers.size(); ++k)
-      performers[s.performers[k]].mailbox->forwardTo(performers[s.performers[k + 1]].mailbox.get());
-    openSource(options, *performers[s.performers.front()].rig, s);
-    learnLabels(options, s, *performers[s.performers.front()].mailbox);
-    for (const std::size_t i : s.performers) bindPerformer(performers[i], s, several);
-  }
+  return sources;
+}
 
-  // 3. The segments (a refused segment is one error line, nothing printed before it).
-  for (Performer& p : performers) createSegment(options, p);
-  if (!options.quiet)
-    for (const Performer& p : performers) printBanner(options, p, sources[p.source], several);
-  assignCpus(performers, options.quiet);
+// A performer's solver thread: its budget from the source's rate (or --budget-ms), started.
+void startSolver(const RunOptions& options, Performer& p, double source_rate_hz) {
+  FrameLoopOptions loop_options;
+  loop_options.max_iterations = options.iterations;
+  p.budget_ms = options.budget_ms > 0 ? options.budget_ms : source_rate_hz > 0 ? 0.9 * 1000.0 / source_rate_hz : 8.0;
+  loop_options.budget_ns = static_cast<std::int64_t>(p.budget_ms * 1e6);
+  loop_options.stale_after_ns = static_cast<std::int64_t>(options.stale_ms * 1e6);
+  loop_options.max_frames = options.frames;
+  loop_options.cpu = p.cpu;
+  loop_options.realtime_fifo = options.fifo;
+  loop_options.lock_memory = options.lock_memory;
+  loop_options.frame_log_capacity = options.frame_log_capacity;
+  loop_options.frame_log_markers = options.frame_log_markers;
+  loop_options.frame_log_positions_crc = options.frame_log_positions_crc;
+  p.loop = std::make_unique<FrameLoop>(*p.mailbox, *p.live, *p.publisher, loop_options);
+  p.loop->start();
+}
 
-  // 4. The solver threads, then the sources that start late.
-  const StopSignalScope signals;
-  for (Performer& p : performers) {
-    const double rate = sources[p.source].source->nominalRateHz();
-    FrameLoopOptions loop_options;
-    loop_options.max_iterations = options.iterations;
-    p.budget_ms = options.budget_ms > 0 ? options.budget_ms : rate > 0 ? 0.9 * 1000.0 / rate : 8.0;
-    loop_options.budget_ns = static_cast<std::int64_t>(p.budget_ms * 1e6);
-    loop_options.stale_after_ns = static_cast<std::int64_t>(options.stale_ms * 1e6);
-    loop_options.max_frames = options.frames;
-    loop_options.cpu = p.cpu;
-    loop_options.realtime_fifo = options.fifo;
-    loop_options.lock_memory = options.lock_memory;
-    loop_options.frame_log_capacity = options.frame_log_capacity;
-    loop_options.frame_log_markers = options.frame_log_markers;
-    loop_options.frame_log_positions_crc = options.frame_log_positions_crc;
-    p.loop = std::make_unique<FrameLoop>(*p.mailbox, *p.live, *p.publisher, loop_options);
-    p.loop->start();
-  }
-  // A consumer (tetrig demo's) starts before the frames do, so that it sees the first one: the
-  // source waits (at most 2 s) until the consumer has mapped the segment.
-  pid_t consumer = -1;
-  if (!options.consumer_command.empty()) {
-    consumer = spawnConsumer(options.consumer_command + " " + performers[0].spec.publish);
-    waitUntilMapped(consumer, "/dev/shm" + performers[0].shm_options.name, std::chrono::seconds(2));
-  }
-  for (SharedSource& s : sources)
-    if (s.start_late && !s.source->start(*performers[s.performers.front()].mailbox))
-      throw std::runtime_error("source " + s.spec + " did not start: " + s.source->lastError());
-  if (!options.quiet)
-    for (const Performer& p : performers)
-      std::printf("  %spublishing to shared memory '%s' (%s); budget %.2f ms, %d iterations per frame, pose transfer on %d thread%s%s\n",
-                  several ? (printableText(p.spec.name, 64) + ": ").c_str() : "", p.spec.publish.c_str(),
-                  options.normals ? "positions and normals" : "positions", p.budget_ms, options.iterations, pose_threads, pose_threads > 1 ? "s" : "",
-                  several && p.cpu >= 0 ? (", solver on CPU " + std::to_string(p.cpu)).c_str() : "");
-  if (!options.quiet)
-    for (const Performer& p : performers) p.dds->printBanner();
-  std::fflush(stdout);
+// One line per performer: where it publishes, its budget and threads.
+void printPublishing(const RunOptions& options, const std::vector<Performer>& performers, bool several) {
+  const int pose_threads = options.pose_threads > 0 ? options.pose_threads : 1;
+  for (const Performer& p : performers)
+    std::printf("  %spublishing to shared memory '%s' (%s); budget %.2f ms, %d iterations per frame, pose transfer on %d thread%s%s\n",
+                several ? (printableText(p.spec.name, 64) + ": ").c_str() : "", p.spec.publish.c_str(),
+                options.normals ? "positions and normals" : "positions", p.budget_ms, options.iterations, pose_threads, pose_threads > 1 ? "s" : "",
+                several && p.cpu >= 0 ? (", solver on CPU " + std::to_string(p.cpu)).c_str() : "");
+  for (const Performer& p : performers) p.dds->printBanner();
+}
 
-  // 5. Wait for the end of every performer: its source finished and drained, --frames reached,
-  //    or a signal (which ends them all).
+// Polls until every performer has ended: its source finished and drained, --frames reached, or a
+// signal (which ends them all); the status line meanwhile on a terminal.
+void waitForTheEnd(const RunOptions& options, std::vector<Performer>& performers, const std::vector<SharedSource>& sources) {
   const bool tty = options.status_line && !options.quiet && isatty(STDERR_FILENO);
   auto last_status = std::chrono::steady_clock::now();
-  const std::int64_t start_ns = monotonicNowNs();
   while (true) {
     std::this_thread::sleep_for(std::chrono::milliseconds(50));
     if (const int stop = StopSignalScope::pending(); stop != 0) {
@@ -679,6 +648,85 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
     }
   }
   if (tty) std::fprintf(stderr, "\r\033[2K");
+}
+
+// The stats (--stats-json, and the outcome for tests and tetrig demo): one performer's object, or
+// {performers, totals, seconds}.
+void writeStats(const RunOptions& options, const std::vector<Performer>& performers, const std::vector<SharedSource>& sources,
+                double seconds, bool several, RunOutcome* outcome) {
+  std::vector<nlohmann::json> each;
+  for (const Performer& p : performers) each.push_back(performerJson(options, p, sources[p.source], seconds, several));
+  nlohmann::json j;
+  if (several) {
+    j["performers"] = each;
+    j["totals"] = totalsJson(each);
+    j["seconds"] = seconds;
+  } else {
+    j = each[0];
+  }
+  if (!options.stats_json.empty()) writeJson(options.stats_json, j);
+  if (outcome != nullptr) {
+    fillOutcome(performers[0], j, *outcome);  // several performers: the first one's, with the whole stats
+    if (several) {
+      outcome->performers.resize(performers.size());
+      for (std::size_t i = 0; i < performers.size(); ++i) fillOutcome(performers[i], each[i], outcome->performers[i]);
+    }
+  }
+}
+
+}  // namespace
+
+int runLive(const RunOptions& options, RunOutcome* outcome) {
+  const std::vector<PerformerSpec> specs = checkedStage(options);
+  const bool several = specs.size() > 1;
+
+  // 1. Each performer's rig and live rig.
+  std::vector<Performer> performers(specs.size());
+  for (std::size_t i = 0; i < specs.size(); ++i) {
+    performers[i].spec = specs[i];
+    loadPerformer(options, performers[i]);
+    if (performers[i].live->volumeNotKept())
+      std::fprintf(stderr, "tetrig run: note: %sthe rig's fine mesh is not closed, so its volume is not kept (the volume constraint needs "
+                           "a watertight surface)\n", performerPrefix(performers[i], several).c_str());
+  }
+
+  // 2. The sources (each opened once), the fan-out of their frames, the bindings.
+  std::vector<SharedSource> sources = groupSources(performers);
+  const SourceStopper stopper{sources};
+  for (SharedSource& s : sources) {
+    for (std::size_t k = 0; k + 1 < s.performers.size(); ++k)
+      performers[s.performers[k]].mailbox->forwardTo(performers[s.performers[k + 1]].mailbox.get());
+    openSource(options, *performers[s.performers.front()].rig, s);
+    learnLabels(options, s, *performers[s.performers.front()].mailbox);
+    for (const std::size_t i : s.performers) bindPerformer(performers[i], s, several);
+  }
+
+  // 3. The segments (a refused segment is one error line, nothing printed before it).
+  for (Performer& p : performers) createSegment(options, p);
+  if (!options.quiet)
+    for (const Performer& p : performers) printBanner(options, p, sources[p.source], several);
+  assignCpus(performers, options.quiet);
+
+  // 4. The solver threads, then the sources that start late.
+  const StopSignalScope signals;
+  for (Performer& p : performers) startSolver(options, p, sources[p.source].source->nominalRateHz());
+  // A consumer (tetrig demo's) starts before the frames do, so that it sees the first one: the
+  // source waits (at most 2 s) until the consumer has mapped the segment.
+  pid_t consumer = -1;
+  if (!options.consumer_command.empty()) {
+    consumer = spawnConsumer(options.consumer_command + " " + performers[0].spec.publish);
+    waitUntilMapped(consumer, "/dev/shm" + performers[0].shm_options.name, std::chrono::seconds(2));
+  }
+  for (SharedSource& s : sources)
+    if (s.start_late && !s.source->start(*performers[s.performers.front()].mailbox))
+      throw std::runtime_error("source " + s.spec + " did not start: " + s.source->lastError());
+  if (!options.quiet) printPublishing(options, performers, several);
+  std::fflush(stdout);
+
+  // 5. Wait for the end of every performer, then stop the solvers, the sources, the bridges and
+  //    the segments, in that order.
+  const std::int64_t start_ns = monotonicNowNs();
+  waitForTheEnd(options, performers, sources);
   for (Performer& p : performers) p.loop->requestStop();
   for (Performer& p : performers) p.loop->join();
   for (SharedSource& s : sources) s.source->stop();
@@ -690,29 +738,11 @@ int runLive(const RunOptions& options, RunOutcome* outcome) {
   int consumer_status = 0;
   if (consumer > 0) consumer_status = reapConsumer(consumer, std::chrono::seconds(5));
 
+  // 6. The summary, the final pose and the stats.
   if (!options.quiet)
     for (const Performer& p : performers) printSummary(p, sources[p.source], seconds, several);
   if (!options.final_obj.empty()) writeFinalObj(options, performers[0]);
-  if (!options.stats_json.empty() || outcome != nullptr) {
-    std::vector<nlohmann::json> each;
-    for (const Performer& p : performers) each.push_back(performerJson(options, p, sources[p.source], seconds, several));
-    nlohmann::json j;
-    if (several) {
-      j["performers"] = each;
-      j["totals"] = totalsJson(each);
-      j["seconds"] = seconds;
-    } else {
-      j = each[0];
-    }
-    if (!options.stats_json.empty()) writeJson(options.stats_json, j);
-    if (outcome != nullptr) {
-      fillOutcome(performers[0], j, *outcome);  // several performers: the first one's, with the whole stats
-      if (several) {
-        outcome->performers.resize(performers.size());
-        for (std::size_t i = 0; i < performers.size(); ++i) fillOutcome(performers[i], each[i], outcome->performers[i]);
-      }
-    }
-  }
+  if (!options.stats_json.empty() || outcome != nullptr) writeStats(options, performers, sources, seconds, several, outcome);
   if (consumer > 0 && consumer_status != 0) {
     std::fprintf(stderr, "tetrig run: error: the consumer exited with status %d\n", consumer_status);
     return 1;
