@@ -23,6 +23,7 @@
 #include <cmath>
 #include <csignal>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <memory>
@@ -555,10 +556,17 @@ std::vector<PerformerSpec> checkedStage(const RunOptions& options) {
   const bool several = specs.size() > 1;
   if (several && !options.final_obj.empty()) throw std::invalid_argument("--final-obj writes one performer's pose: not with several performers");
   if (several && !options.consumer_command.empty()) throw std::invalid_argument("a consumer command follows one performer: not with several performers");
-  if (!options.final_obj.empty()) {
-    const std::filesystem::path inputs[] = {specs[0].rig_path, specs[0].coarse_rig_path};
-    rigbuild::checkOutputPath(options.final_obj, rigbuild::OutputKind::kObj, inputs, false);
+  // The outputs replace no input and no file tetrig did not write (unless --force; an input never).
+  std::vector<std::filesystem::path> inputs;
+  for (const PerformerSpec& p : specs) {
+    inputs.push_back(p.rig_path);
+    if (!p.coarse_rig_path.empty()) inputs.push_back(p.coarse_rig_path);
+    for (const char* file_source : {"c3d:", "replay:"})
+      if (p.source.rfind(file_source, 0) == 0) inputs.push_back(p.source.substr(std::strlen(file_source)));
   }
+  if (!options.final_obj.empty()) rigbuild::checkOutputPath(options.final_obj, rigbuild::OutputKind::kObj, inputs, options.force, "--out");
+  if (!options.stats_json.empty())
+    rigbuild::checkOutputPath(options.stats_json, rigbuild::OutputKind::kJson, inputs, options.force, "--stats-json");
   return specs;
 }
 
@@ -664,7 +672,11 @@ void writeStats(const RunOptions& options, const std::vector<Performer>& perform
   } else {
     j = each[0];
   }
-  if (!options.stats_json.empty()) writeJson(options.stats_json, j);
+  if (!options.stats_json.empty()) {
+    nlohmann::json file = j;
+    file["generator"] = "tetrig run";  // tetrig's mark: a later run may replace this file
+    writeJson(options.stats_json, file);
+  }
   if (outcome != nullptr) {
     fillOutcome(performers[0], j, *outcome);  // several performers: the first one's, with the whole stats
     if (several) {

@@ -56,7 +56,8 @@ struct RunOptions {
   int pose_threads = 1;                 // pose transfer threads: 1, or 2 (the solver + one worker; docs/live.md)
   double occlusion_blend_ms = 150;
   double label_timeout_ms = 3000;
-  std::string stats_json;               // write the run's statistics here (atomically)
+  std::string stats_json;               // write the run's statistics here (atomically; a file tetrig did not write is kept)
+  bool force = false;                   // replace an existing stats_json or final_obj that tetrig did not write (an input never)
   int cpu = -1;
   bool fifo = false;
   bool lock_memory = true;

@@ -481,7 +481,8 @@ void addRunCommand(CLI::App& app, RunArgs& r) {
       ->group(kSources);
   run_cmd->add_flag("--normals", run.normals, "Also publish per-vertex normals")->group(kOutput);
   run_cmd->add_flag("--dds", run.dds, "Also publish the frames over DDS: topics tetrig/<publish name>/frame and /static (docs/dds.md)")->group(kOutput);
-  run_cmd->add_option("--stats-json", run.stats_json, "Write the run's statistics (keys: docs/live.md)")->group(kOutput);
+  run_cmd->add_option("--stats-json", run.stats_json, "Write the run's statistics (keys: docs/live.md; a file tetrig did not write is kept unless --force)")->group(kOutput);
+  run_cmd->add_flag("--force", run.force, "Replace an existing --stats-json that tetrig did not write (an input is never replaced)")->group(kOutput);
   run_cmd->add_option("--shm-mode", shm_mode, "Segment permissions in octal (default 600: owner only; read bits for group/others, e.g. 640 or 644, but no write bits)")
       ->group(kOutput);
   run_cmd->add_flag("-q,--quiet", run.quiet, "Only errors")->group(kOutput);

@@ -19,6 +19,7 @@
 
 #include <cstdio>
 #include <fstream>
+#include <iterator>
 // libstdc++'s std::regex (GCC 12, -O1 with ASan: the sanitizer preset) is reported
 // maybe-uninitialized inside std::function in its own headers: silenced for this file.
 #if defined(__GNUC__) && !defined(__clang__)
@@ -411,6 +412,50 @@ TEST(TetrigCli, RunPlaysAClipAndRefusesBadInput) {
   ASSERT_TRUE(std::filesystem::exists(hup_stats));
   const nlohmann::json hup_json = nlohmann::json::parse(std::ifstream(hup_stats));
   EXPECT_EQ(hup_json.value("end", std::string()), "hung up (SIGHUP)");
+}
+
+// tetrig run --stats-json replaces no input and no file tetrig did not write: refused in one line
+// before anything runs, the file unchanged; --force replaces a stranger's file but never an input;
+// a file an earlier run wrote is replaced.
+TEST(TetrigCli, RunStatsJsonNeverReplacesAUsersFile) {
+  const TempDir dir;
+  const std::filesystem::path node = test::writeBlockTetMesh(dir, "block");
+  const std::filesystem::path clip = test::writeSmallClip(dir);
+  const std::filesystem::path json = dir.write("small.json", test::smallRigJson());
+  const std::string rig = (dir.path() / "small.rig").string();
+  ASSERT_EQ(run("build-rig --mesh '" + node.string() + "' --rig '" + json.string() + "' --markers '" + clip.string() + "' --out '" +
+                    rig + "' --quiet",
+                dir)
+                .status,
+            0);
+  const auto bytes = [](const std::filesystem::path& f) {
+    std::ifstream in(f, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), {});
+  };
+  const std::string name = "tetrig-cli-stats-" + std::to_string(getpid());
+  const std::string base = "run --rig '" + rig + "' --source 'c3d:" + clip.string() + "' --publish " + name + " -q --stats-json ";
+  auto refused = [&](const CliRun& r, const std::filesystem::path& kept, const std::string& before) {
+    EXPECT_NE(r.status, 0) << r.out;
+    EXPECT_EQ(r.err.rfind("tetrig run: error: --stats-json", 0), 0u) << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+    EXPECT_EQ(bytes(kept), before) << kept << " was changed";
+  };
+  // A user's own JSON file: kept.
+  const std::filesystem::path users = dir.write("notes.json", "{\"mine\": true}\n");
+  refused(run(base + "'" + users.string() + "'", dir), users, "{\"mine\": true}\n");
+  // An input (the rig, the clip): kept, even with --force.
+  const std::string rig_bytes = bytes(rig), clip_bytes = bytes(clip);
+  refused(run(base + "'" + rig + "' --force", dir), rig, rig_bytes);
+  refused(run(base + "'" + clip.string() + "' --force", dir), clip, clip_bytes);
+  // --force replaces the user's file; then a later run replaces what tetrig wrote without it.
+  const CliRun forced = run(base + "'" + users.string() + "' --force", dir);
+  ASSERT_EQ(forced.status, 0) << forced.err;
+  nlohmann::json j = nlohmann::json::parse(bytes(users));
+  EXPECT_EQ(j["generator"], "tetrig run");
+  EXPECT_FALSE(j.contains("mine"));
+  const CliRun again = run(base + "'" + users.string() + "'", dir);
+  ASSERT_EQ(again.status, 0) << again.err;
+  EXPECT_EQ(nlohmann::json::parse(bytes(users))["generator"], "tetrig run");
 }
 
 // tetrig demo, the README's run command: the whole live path on the project's own data, with a
