@@ -996,6 +996,14 @@ void readPoseTransfer(Cursor c, PoseTransferCsr<double>& b) {
   c.end();
 }
 
+// A section that is a count and that many finite doubles (STIF, VOLW). `count_what` and `item_what`
+// name them in messages.
+void readDoubles(Cursor c, std::vector<double>& out, const char* count_what, const char* item_what) {
+  out.resize(c.count(count_what, 8));
+  for (double& x : out) x = c.f64(item_what);
+  c.end();
+}
+
 // VHND, RHND, PHND, RGRP, STIF: the handles with their names, the rigid groups and the stiffness.
 void readHandleSections(const Sections& sections, Rig& rig) {
   {
@@ -1050,13 +1058,7 @@ void readHandleSections(const Sections& sections, Rig& rig) {
     }
     c.end();
   }
-  {
-    Cursor c = sections.section(kTagStiffness);
-    const std::size_t n = c.count("stiffness values", 8);
-    rig.setup.stiffness.resize(n);
-    for (double& x : rig.setup.stiffness) x = c.f64("stiffness");
-    c.end();
-  }
+  readDoubles(sections.section(kTagStiffness), rig.setup.stiffness, "stiffness values", "stiffness");
 }
 
 // MARK: the markers.
@@ -1131,14 +1133,6 @@ void readMarkerRegions(Cursor c, std::vector<RigMarkerRegion>& marker_regions) {
   c.end();
 }
 
-// The optional volume-weight section.
-void readVolumeWeights(Cursor c, std::vector<double>& volume_weights) {
-  const std::size_t n = c.count("volume weights", 8);
-  volume_weights.resize(n);
-  for (double& x : volume_weights) x = c.f64("volume weight");
-  c.end();
-}
-
 // The optional section of texture coordinates and materials; it may not be empty.
 void readSurface(Cursor c, RigSurfaceAttributes& a) {
   a.asset = c.str("asset path");
@@ -1193,7 +1187,7 @@ Rig parseRigAt(std::span<const std::uint8_t> bytes, std::string_view source_name
   // The optional sections.
   if (sections.has(kTagPoseSensors)) readPoseSensors(sections.section(kTagPoseSensors), rig.pose_sensors);
   if (sections.has(kTagMarkerRegions)) readMarkerRegions(sections.section(kTagMarkerRegions), rig.marker_regions);
-  if (sections.has(kTagVolumeWeights)) readVolumeWeights(sections.section(kTagVolumeWeights), rig.setup.volume_weights);
+  if (sections.has(kTagVolumeWeights)) readDoubles(sections.section(kTagVolumeWeights), rig.setup.volume_weights, "volume weights", "volume weight");
   if (sections.has(kTagSurface)) readSurface(sections.section(kTagSurface), rig.surface);
   // The coarse level: a whole rig in section CRSE, itself without one.
   if (sections.has(kTagCoarse)) {

@@ -1,5 +1,6 @@
 // The `tetrig` command as scripts use it: --help for every subcommand, the flags scripts rely on,
 // one-line errors with a non-zero exit and no partial output file, build-rig then inspect.
+#include "file_checks.hpp"
 #include "run_command.hpp"
 #include "small_rig.hpp"
 #include "t_shape_rig.hpp"
@@ -36,6 +37,26 @@ using test::TempDir;
 using CliRun = test::CommandRun;
 
 CliRun run(const std::string& args, const TempDir& dir) { return test::runCommand(TETRIG_EXE, args, dir.path()); }
+
+// The small rig `tetrig build-rig` makes in `dir` from the block tet mesh, the small rig
+// description and the small clip, with the files it was made from and build-rig's exit status.
+struct SmallRigFiles {
+  std::filesystem::path node, clip, json;
+  std::string rig;
+  int build_status = -1;
+};
+SmallRigFiles buildSmallRigByCommand(const TempDir& dir) {
+  SmallRigFiles f;
+  f.node = test::writeBlockTetMesh(dir, "block");
+  f.clip = test::writeSmallClip(dir);
+  f.json = dir.write("small.json", test::smallRigJson());
+  f.rig = (dir.path() / "small.rig").string();
+  f.build_status = run("build-rig --mesh '" + f.node.string() + "' --rig '" + f.json.string() + "' --markers '" + f.clip.string() +
+                           "' --out '" + f.rig + "' --quiet",
+                       dir)
+                       .status;
+  return f;
+}
 
 #define EXPECT_CONTAINS(haystack, needle) \
   EXPECT_NE(std::string(haystack).find(needle), std::string::npos) << "text: " << (haystack)
@@ -241,15 +262,10 @@ TEST(TetrigCli, BuildThenInspect) {
 // sharing no label with the rig, a segment name in use by a live producer.
 TEST(TetrigCli, RunPlaysAClipAndRefusesBadInput) {
   const TempDir dir;
-  const std::filesystem::path node = test::writeBlockTetMesh(dir, "block");
-  const std::filesystem::path clip = test::writeSmallClip(dir);
-  const std::filesystem::path json = dir.write("small.json", test::smallRigJson());
-  const std::string rig = (dir.path() / "small.rig").string();
-  ASSERT_EQ(run("build-rig --mesh '" + node.string() + "' --rig '" + json.string() + "' --markers '" + clip.string() + "' --out '" +
-                    rig + "' --quiet",
-                dir)
-                .status,
-            0);
+  const SmallRigFiles small = buildSmallRigByCommand(dir);
+  ASSERT_EQ(small.build_status, 0);
+  const std::filesystem::path &node = small.node, &clip = small.clip, &json = small.json;
+  const std::string& rig = small.rig;
   // A ready tet mesh cannot be made coarser: --coarse-tet-vertices is refused in one line, no file.
   const std::string coarse_out = (dir.path() / "coarse.rig").string();
   const CliRun no_coarse = run("build-rig --mesh '" + node.string() + "' --rig '" + json.string() + "' --markers '" + clip.string() +
@@ -419,43 +435,34 @@ TEST(TetrigCli, RunPlaysAClipAndRefusesBadInput) {
 // a file an earlier run wrote is replaced.
 TEST(TetrigCli, RunStatsJsonNeverReplacesAUsersFile) {
   const TempDir dir;
-  const std::filesystem::path node = test::writeBlockTetMesh(dir, "block");
-  const std::filesystem::path clip = test::writeSmallClip(dir);
-  const std::filesystem::path json = dir.write("small.json", test::smallRigJson());
-  const std::string rig = (dir.path() / "small.rig").string();
-  ASSERT_EQ(run("build-rig --mesh '" + node.string() + "' --rig '" + json.string() + "' --markers '" + clip.string() + "' --out '" +
-                    rig + "' --quiet",
-                dir)
-                .status,
-            0);
-  const auto bytes = [](const std::filesystem::path& f) {
-    std::ifstream in(f, std::ios::binary);
-    return std::string(std::istreambuf_iterator<char>(in), {});
-  };
+  const SmallRigFiles small = buildSmallRigByCommand(dir);
+  ASSERT_EQ(small.build_status, 0);
+  const std::filesystem::path& clip = small.clip;
+  const std::string& rig = small.rig;
   const std::string name = "tetrig-cli-stats-" + std::to_string(getpid());
   const std::string base = "run --rig '" + rig + "' --source 'c3d:" + clip.string() + "' --publish " + name + " -q --stats-json ";
   auto refused = [&](const CliRun& r, const std::filesystem::path& kept, const std::string& before) {
     EXPECT_NE(r.status, 0) << r.out;
     EXPECT_EQ(r.err.rfind("tetrig run: error: --stats-json", 0), 0u) << r.err;
     EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
-    EXPECT_EQ(bytes(kept), before) << kept << " was changed";
+    EXPECT_EQ(test::readText(kept), before) << kept << " was changed";
   };
   // A user's own JSON file: kept.
   const std::filesystem::path users = dir.write("notes.json", "{\"mine\": true}\n");
   refused(run(base + "'" + users.string() + "'", dir), users, "{\"mine\": true}\n");
   // An input (the rig, the clip): kept, even with --force.
-  const std::string rig_bytes = bytes(rig), clip_bytes = bytes(clip);
+  const std::string rig_bytes = test::readText(rig), clip_bytes = test::readText(clip);
   refused(run(base + "'" + rig + "' --force", dir), rig, rig_bytes);
   refused(run(base + "'" + clip.string() + "' --force", dir), clip, clip_bytes);
   // --force replaces the user's file; then a later run replaces what tetrig wrote without it.
   const CliRun forced = run(base + "'" + users.string() + "' --force", dir);
   ASSERT_EQ(forced.status, 0) << forced.err;
-  nlohmann::json j = nlohmann::json::parse(bytes(users));
+  nlohmann::json j = nlohmann::json::parse(test::readText(users));
   EXPECT_EQ(j["generator"], "tetrig run");
   EXPECT_FALSE(j.contains("mine"));
   const CliRun again = run(base + "'" + users.string() + "'", dir);
   ASSERT_EQ(again.status, 0) << again.err;
-  EXPECT_EQ(nlohmann::json::parse(bytes(users))["generator"], "tetrig run");
+  EXPECT_EQ(nlohmann::json::parse(test::readText(users))["generator"], "tetrig run");
 }
 
 // tetrig demo, the README's run command: the whole live path on the project's own data, with a

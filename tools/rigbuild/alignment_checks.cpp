@@ -73,6 +73,14 @@ ExtentCoverage coverage(const SurfaceMesh& surface, const Eigen::Vector3d& axis,
 
 }  // namespace
 
+std::string AlignmentCheck::failures() const {
+  std::string what;
+  for (const auto* list : {&scale_failures, &pose_failures}) {
+    for (const std::string& f : *list) what += (what.empty() ? "" : "; ") + f;
+  }
+  return what;
+}
+
 std::string AlignmentCheck::summary() const {
   char buf[512];
   std::snprintf(buf, sizeof buf,

@@ -541,12 +541,17 @@ struct RigBuilder {
     }
   }
 
+  // The fine mesh's extent along the mesh's up axis, in its own units.
+  double meshHeight() const {
+    const Eigen::Vector3d up = axisVector(desc.mesh_up).cwiseAbs();
+    return (fine.vertices.colwise().maxCoeff() - fine.vertices.colwise().minCoeff()).dot(up);
+  }
+
   // The rig's unit (the description's, or guessed from the mesh's height) and its default alignment.
   void chooseUnit() {
     unit = desc.mesh_unit;
     if (unit == "auto") {
-      const Eigen::Vector3d up = axisVector(desc.mesh_up).cwiseAbs();
-      const double height = (fine.vertices.colwise().maxCoeff() - fine.vertices.colwise().minCoeff()).dot(up);
+      const double height = meshHeight();
       const double performer_mm = clip ? medianMarkerHeightMm(openMarkerClip(*clip, mopt), axisVector(mopt.device_up).cwiseAbs()) : 0.0;
       if (performer_mm > 0.0) {
         // The unit that makes the mesh about as tall as the performer's markers (a factor of 10
@@ -639,14 +644,10 @@ struct RigBuilder {
 
   // The error for an alignment the deciding checks reject: what failed and what to do.
   RigBuildError implausibleAlignment(const AlignmentCheck& decided, const std::string& origin, const std::string& frame_text) const {
-    std::string what;
-    for (const auto* list : {&decided.scale_failures, &decided.pose_failures}) {
-      for (const std::string& f : *list) what += (what.empty() ? "" : "; ") + f;
-    }
+    const std::string what = decided.failures();
     std::string todo;
     if (!decided.scale_failures.empty()) {
-      const Eigen::Vector3d up = axisVector(desc.mesh_up).cwiseAbs();
-      const double height = (fine.vertices.colwise().maxCoeff() - fine.vertices.colwise().minCoeff()).dot(up);
+      const double height = meshHeight();
       const Eigen::Vector3d device_up = axisVector(mopt.device_up).cwiseAbs();
       double lo = std::numeric_limits<double>::infinity(), hi = -lo;
       for (const Eigen::Vector3d& m : markers.device_mm) {
@@ -677,13 +678,7 @@ struct RigBuilder {
     report.alignment_check = measured;
     if (automatic) report.notes.push_back("alignment checks: " + measured.summary());
     if (!decided.ok()) throw implausibleAlignment(decided, origin, frame_text);
-    if (!measured.ok()) {
-      std::string what;
-      for (const auto* list : {&measured.scale_failures, &measured.pose_failures}) {
-        for (const std::string& f : *list) what += (what.empty() ? "" : "; ") + f;
-      }
-      report.notes.push_back("implausible alignment accepted as asked: " + what);
-    }
+    if (!measured.ok()) report.notes.push_back("implausible alignment accepted as asked: " + measured.failures());
   }
 
   // Distance limit: explicit (absolute) or a fraction of the mesh's size; a marker beyond it stops
@@ -821,6 +816,17 @@ struct RigBuilder {
                                      " " + unit + " per mm)");
   }
 
+  // The body vertices of `tets`, each once, ascending.
+  std::vector<std::int32_t> cornersOf(const std::vector<std::int32_t>& tets) const {
+    std::vector<std::int32_t> corners;
+    for (const std::int32_t t : tets) {
+      for (int k = 0; k < 4; ++k) corners.push_back(body.tets(t, k));
+    }
+    std::sort(corners.begin(), corners.end());
+    corners.erase(std::unique(corners.begin(), corners.end()), corners.end());
+    return corners;
+  }
+
   // Gives tet vertex v to the handle `who`; a vertex of another handle is an error.
   void claim(std::int32_t v, const std::string& who) {
     std::string& owner = vertex_owner[static_cast<std::size_t>(v)];
@@ -855,13 +861,7 @@ struct RigBuilder {
       RegionHandle region;
       region.tets = resolveTets(ctx, n.select, who);
       region.oriented = n.oriented;
-      std::vector<std::int32_t> corners;
-      for (const std::int32_t t : region.tets) {
-        for (int k = 0; k < 4; ++k) corners.push_back(body.tets(t, k));
-      }
-      std::sort(corners.begin(), corners.end());
-      corners.erase(std::unique(corners.begin(), corners.end()), corners.end());
-      for (const std::int32_t v : corners) claim(v, who);
+      for (const std::int32_t v : cornersOf(region.tets)) claim(v, who);
       setup.region_handles.push_back(std::move(region));
       rig.region_handle_names.push_back(n.name);
     }
@@ -925,12 +925,7 @@ struct RigBuilder {
       for (const std::int32_t m : g.markers) name += (name.empty() ? "" : "+") + markers.labels[static_cast<std::size_t>(m)];
       const std::string who = "markers:" + name;
       RegionHandle region = rigidGroupRegion(g, who);
-      std::vector<std::int32_t> corners;
-      for (const std::int32_t t : region.tets) {
-        for (int c = 0; c < 4; ++c) corners.push_back(body.tets(t, c));
-      }
-      std::sort(corners.begin(), corners.end());
-      corners.erase(std::unique(corners.begin(), corners.end()), corners.end());
+      const std::vector<std::int32_t> corners = cornersOf(region.tets);
       report.rigid_groups.push_back({name, g.spread_mm, static_cast<std::int32_t>(corners.size())});
       if (!region.tets.empty() && !inputs.coarse_level) {
         report.notes.push_back("markers " + name + " move as one rigid body over the clip (their distances within " + formatNumber("%.1f", g.spread_mm) +

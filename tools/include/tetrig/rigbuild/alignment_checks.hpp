@@ -60,6 +60,8 @@ struct AlignmentCheck {
   bool ok() const { return scale_failures.empty() && pose_failures.empty(); }
   // The measured numbers in one line (scale, extents, distances).
   std::string summary() const;
+  // Every failure, scale then pose, joined by "; " ("" when ok()).
+  std::string failures() const;
 };
 
 // positions / distances / labels: one per marker, rig space, after alignment. up_axis: the mesh's
