@@ -176,14 +176,23 @@ TEST(RigidMarkerGroups, CollinearMarkersGiveNoGroupAndGapsAreSkipped) {
   EXPECT_EQ(gap_spread[0 * 3 + 1], 0.0);
 }
 
-TEST(RigidMarkerGroups, TheSkinOfAGroupIsNearerItsMarkersThanAnyOther) {
-  // Markers 0, 1 (the group) at x = 0 and 10, marker 2 at x = 30; vertices along x.
+TEST(RigidMarkerGroups, TheSkinOfAGroupStaysNearItsMarkersAndShortOfTheNextMarker) {
+  // Markers 0, 1 (the group) at x = 0 and 10, marker 2 (the next body part) at x = 30; vertices
+  // along x at -8 -2 4 10 16 22 28.
   const std::vector<Eigen::Vector3d> markers = {{0, 0, 0}, {10, 0, 0}, {30, 0, 0}};
   Vertices v(7, 3);
-  for (int i = 0; i < 7; ++i) v.row(i) = Eigen::Vector3d(-8.0 + 6.0 * i, 1.0, 0.0).transpose();  // -8 -2 4 10 16 22 28
-  const std::vector<std::uint8_t> mask = groupSkinMask(v, markers, {0, 1}, 10.0, 0.7);  // radius 7
-  const std::vector<std::uint8_t> expected = {0, 1, 1, 1, 1, 0, 0};  // -8: beyond 7 of marker 0; 22: nearer marker 2
-  EXPECT_EQ(mask, expected);
+  for (int i = 0; i < 7; ++i) v.row(i) = Eigen::Vector3d(-8.0 + 6.0 * i, 0.0, 0.0).transpose();
+  // Radius 7 (0.7 x extent 10), the next-marker bound at the halfway point (fraction 1): -8 is
+  // beyond 7 of marker 0, 22 nearer marker 2.
+  EXPECT_EQ(groupSkinMask(v, markers, {0, 1}, 10.0, {.radius_fraction = 0.7, .next_marker_fraction = 1.0}),
+            (std::vector<std::uint8_t>{0, 1, 1, 1, 1, 0, 0}));
+  // The default fraction 0.25: 16 (6 from marker 1, 14 from marker 2) is more than a quarter of
+  // the way; 4 (4 from marker 0, 26 from marker 2) is not.
+  EXPECT_EQ(groupSkinMask(v, markers, {0, 1}, 10.0, {.radius_fraction = 0.7}), (std::vector<std::uint8_t>{0, 1, 1, 1, 0, 0, 0}));
+  // The next-marker bound alone: -8 (8 from marker 0, 38 from marker 2) is within a quarter.
+  EXPECT_EQ(groupSkinMask(v, markers, {0, 1}, 10.0, {.radius_fraction = 100.0}), (std::vector<std::uint8_t>{1, 1, 1, 1, 0, 0, 0}));
+  // The defaults: radius 2 (0.2 x 10) around the markers holds -2 and 10, not 4.
+  EXPECT_EQ(groupSkinMask(v, markers, {0, 1}, 10.0), (std::vector<std::uint8_t>{0, 1, 0, 1, 0, 0, 0}));
 }
 
 }  // namespace

@@ -868,9 +868,9 @@ struct RigBuilder {
   }
 
   // The region of a rigid marker group (claimed for `who`): the tets wholly in the group's skin
-  // (the coarse level: with a corner in it); where none is, those with fewer corners in it, then
-  // the tet nearest the markers' centre: every group drives a region, and both levels have the
-  // same regions. No tet when every candidate belongs to another handle.
+  // (the coarse level, whose tets are larger: with a corner in it); where none is, the one tet
+  // nearest the markers' centre: every group drives a region, and both levels have the same
+  // regions. No tet when every candidate belongs to another handle.
   RegionHandle rigidGroupRegion(const RigidMarkerGroup& g, const std::string& who) {
     double extent = 0.0;
     for (const std::int32_t ga : g.markers) {
@@ -886,14 +886,13 @@ struct RigBuilder {
     };
     RegionHandle region;
     region.oriented = true;
-    for (int needed = inputs.coarse_level ? 1 : 4; needed >= 1 && region.tets.empty(); --needed) {
-      for (std::int32_t t = 0; t < body.tetCount(); ++t) {
-        int in = 0;
-        for (int c = 0; c < 4; ++c) in += mask[static_cast<std::size_t>(body.tets(t, c))];
-        if (in >= needed && free_of_others(t)) {
-          region.tets.push_back(t);
-          for (int c = 0; c < 4; ++c) claim(body.tets(t, c), who);
-        }
+    const int needed = inputs.coarse_level ? 1 : 4;
+    for (std::int32_t t = 0; t < body.tetCount(); ++t) {
+      int in = 0;
+      for (int c = 0; c < 4; ++c) in += mask[static_cast<std::size_t>(body.tets(t, c))];
+      if (in >= needed && free_of_others(t)) {
+        region.tets.push_back(t);
+        for (int c = 0; c < 4; ++c) claim(body.tets(t, c), who);
       }
     }
     if (region.tets.empty()) {

@@ -138,23 +138,21 @@ std::vector<RigidMarkerGroup> findRigidMarkerGroups(std::int64_t frame_count, st
 }
 
 std::vector<std::uint8_t> groupSkinMask(const Vertices& vertices, const std::vector<Eigen::Vector3d>& markers,
-                                        const std::vector<std::int32_t>& group, double extent, double radius_fraction) {
+                                        const std::vector<std::int32_t>& group, double extent, const GroupSkinOptions& options) {
   std::vector<std::uint8_t> in_group(markers.size(), 0);
   for (const std::int32_t m : group) in_group[static_cast<std::size_t>(m)] = 1;
-  const double radius2 = std::pow(radius_fraction * extent, 2);
+  const double radius2 = std::pow(options.radius_fraction * extent, 2);
+  const double next2 = options.next_marker_fraction * options.next_marker_fraction;
   std::vector<std::uint8_t> mask(static_cast<std::size_t>(vertices.rows()), 0);
   for (Eigen::Index v = 0; v < vertices.rows(); ++v) {
     const Eigen::Vector3d p = vertices.row(v).transpose();
-    std::size_t nearest = 0;
-    double best = std::numeric_limits<double>::infinity();
+    double inside2 = std::numeric_limits<double>::infinity();   // squared distance to the group's nearest marker
+    double outside2 = std::numeric_limits<double>::infinity();  // ... to the nearest marker of the rest of the rig
     for (std::size_t m = 0; m < markers.size(); ++m) {
-      const double d2 = (markers[m] - p).squaredNorm();
-      if (d2 < best) {
-        best = d2;
-        nearest = m;
-      }
+      double& d2 = in_group[m] ? inside2 : outside2;
+      d2 = std::min(d2, (markers[m] - p).squaredNorm());
     }
-    mask[static_cast<std::size_t>(v)] = in_group[nearest] && best <= radius2;
+    mask[static_cast<std::size_t>(v)] = inside2 <= radius2 && inside2 <= next2 * outside2;
   }
   return mask;
 }

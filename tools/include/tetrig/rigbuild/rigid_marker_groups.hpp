@@ -16,10 +16,14 @@
 // max_extent_fraction of the whole marker set's (the largest median distance of any pair) is not
 // a body part the clip has told apart: it is left out (returned in `too_large`, for the report).
 //
-// The skin a group drives (groupSkinMask): the tet vertices whose nearest marker at rest (over
-// every marker of the rig, not only the group's) is one of the group's, within
-// radius_fraction times the group's largest marker distance of it. The nearest-marker rule keeps
-// two groups' skin apart and leaves skin nearer an ungrouped marker (a joint) to the solve.
+// The skin a group drives (groupSkinMask): the tet vertices p, at rest, with
+//   d_in(p) <= radius_fraction * extent   and   d_in(p) <= next_marker_fraction * d_out(p),
+// d_in the distance to the group's nearest marker, d_out to the nearest marker of the rest of the
+// rig, extent the group's largest marker distance. The first bound keeps the region near its
+// markers; the second stops it well short of where the next body part's markers are (with 0.25, at
+// most a fifth of the way from a group marker towards another marker), so the skin of the joint
+// between two parts (the hip crease between the pelvis and the thigh markers) stays with the solve,
+// and two groups' skin never meet.
 //
 // Offline, any thread, allocates.
 #pragma once
@@ -67,7 +71,11 @@ std::vector<double> markerDistanceSpreads(std::int64_t frame_count, std::size_t 
 // The tet vertices (rows of `vertices`, rig units) a group drives: see above. markers: every rig
 // marker's rest position (rig units), group: indices into it, extent: the group's largest marker
 // distance (rig units).
+struct GroupSkinOptions {
+  double radius_fraction = 0.2;        // of the group's extent
+  double next_marker_fraction = 0.25;  // of the distance to the nearest marker outside the group
+};
 std::vector<std::uint8_t> groupSkinMask(const Vertices& vertices, const std::vector<Eigen::Vector3d>& markers,
-                                        const std::vector<std::int32_t>& group, double extent, double radius_fraction = 0.2);
+                                        const std::vector<std::int32_t>& group, double extent, const GroupSkinOptions& options = {});
 
 }  // namespace tetrig::rigbuild
