@@ -400,5 +400,46 @@ TEST(RealRig, FrameAutoSaysWhenNoFrameFits) {
   }
 }
 
+// The coarse level is an accelerator: a body whose surface cannot be tetrahedralized to its budget
+// still gets a rig. CGAL's man.off stands with its arms close to its sides; decimated to 150
+// vertices the arms merge with the torso (the decimated surface intersects itself), so the
+// default level is built at twice the budget, with a note; where no budget up to half the rig's
+// gives one, the rig has none, with a note, and loads.
+TEST(RealRig, ABodyThatCannotBeCoarsenedToTheBudgetStillGetsARig) {
+  TETRIG_REQUIRE_DATA(mesh, "meshes/cgal-data/man.off");
+  TETRIG_REQUIRE_DATA(clip, kClip);
+  rigbuild::BuildRigInputs in;
+  in.mesh = mesh;
+  in.description.mesh_up = "z";
+  in.clip = clip;
+  in.frame = 1933;  // arms down, the frame --frame auto finds for this mesh
+  in.min_fit_scale = 0.4;  // the mesh is 1 unit tall: a character smaller than the performer
+  in.accept_implausible_alignment = true;  // its stance is wider than the performer's at any frame
+  in.check_deformer = false;
+  in.tet_vertices = 1000;
+  in.coarse_tet_vertices = rigbuild::kDefaultCoarseTetVertices;
+  rigbuild::BuildRigReport report;
+  const Rig rig = rigbuild::buildRig(in, &report);
+  ASSERT_NE(rig.coarse, nullptr);
+  EXPECT_GT(rig.coarse->body_vertex_count, 250);  // about 300: the budget doubled once
+  EXPECT_LT(rig.coarse->body_vertex_count, 400);
+  const auto noted = [](const rigbuild::BuildRigReport& r, const std::string& start) {
+    return std::any_of(r.notes.begin(), r.notes.end(), [&](const std::string& n) { return n.starts_with(start); });
+  };
+  EXPECT_TRUE(noted(report, "the coarse level has 300 tet vertices, not 150")) << ::testing::PrintToString(report.notes);
+  EXPECT_TRUE(validateRig(rig).empty());
+
+  // A rig of 500 tet vertices: 300 would not be below half of it, so there is no coarse level.
+  in.tet_vertices = 500;
+  rigbuild::BuildRigReport small_report;
+  const Rig small = rigbuild::buildRig(in, &small_report);
+  EXPECT_EQ(small.coarse, nullptr);
+  EXPECT_TRUE(noted(small_report, "the rig has no coarse level")) << ::testing::PrintToString(small_report.notes);
+  const TempDir dir;
+  const Rig loaded = loadRigFile(dir.writeBytes("small.rig", serializeRig(small)));
+  EXPECT_EQ(loaded.coarse, nullptr);
+  EXPECT_EQ(Deformer(loaded.tet_mesh, loaded.setup).vertexCount(), loaded.tet_mesh.vertexCount());
+}
+
 }  // namespace
 }  // namespace tetrig

@@ -1148,27 +1148,47 @@ struct RigBuilder {
   }
 
   // The coarse level: the same inputs and rest frame (so the same alignment: one rig space) with a
-  // smaller tet-vertex budget.
+  // smaller tet-vertex budget. A surface that cannot be tetrahedralized that coarsely (arms close
+  // to the body merge once decimated) gets the level at twice the budget, and so on while the
+  // level stays below half the rig's budget; past that, the rig has none, with a note: the coarse
+  // level only speeds the frame's convergence, the rig is whole without it.
   void buildCoarseLevel() {
-    const std::int32_t n = *inputs.coarse_tet_vertices;
-    auto t0 = Clock::now();
-    prog.begin("building the coarse level (" + std::to_string(n) + " tet vertices)");
-    BuildRigInputs coarse_inputs = inputs;
-    coarse_inputs.tet_vertices = n;
-    coarse_inputs.coarse_tet_vertices.reset();
-    coarse_inputs.coarse_level = true;
-    coarse_inputs.frame_auto = false;
-    if (report.rest_frame >= 0) coarse_inputs.frame = report.rest_frame;
-    BuildRigReport coarse_report;
-    Rig coarse = buildRig(coarse_inputs, &coarse_report);
-    for (const std::string& note : coarse_report.notes) {
-      if (note.starts_with("volume '")) report.notes.push_back("coarse level: " + note);
+    const std::int32_t asked = *inputs.coarse_tet_vertices;
+    const std::string why = "the surface, decimated that far, intersects itself or has parts thinner than its triangles";
+    for (std::int32_t n = asked; n == asked || 2 * n <= target; n *= 2) {
+      auto t0 = Clock::now();
+      prog.begin("building the coarse level (" + std::to_string(n) + " tet vertices)");
+      BuildRigInputs coarse_inputs = inputs;
+      coarse_inputs.tet_vertices = n;
+      coarse_inputs.coarse_tet_vertices.reset();
+      coarse_inputs.coarse_level = true;
+      coarse_inputs.frame_auto = false;
+      if (report.rest_frame >= 0) coarse_inputs.frame = report.rest_frame;
+      BuildRigReport coarse_report;
+      Rig coarse;
+      try {
+        coarse = buildRig(coarse_inputs, &coarse_report);
+      } catch (const TetBudgetError&) {
+        prog.end("no tet mesh at this budget");
+        continue;
+      }
+      for (const std::string& note : coarse_report.notes) {
+        if (note.starts_with("volume '")) report.notes.push_back("coarse level: " + note);
+      }
+      if (n != asked) {
+        report.notes.push_back("the coarse level has " + std::to_string(n) + " tet vertices, not " + std::to_string(asked) +
+                               ": there is no tet mesh of " + std::to_string(asked) + " (" + why + ")");
+      }
+      rig.coarse = std::make_shared<const Rig>(std::move(coarse));
+      if (std::string e = validateRig(rig); !e.empty()) throw RigBuildError("the coarse level does not fit the rig: " + e);
+      report.coarse_seconds = since(t0);
+      prog.end(std::to_string(rig.coarse->tet_mesh.vertexCount()) + " tet vertices, " + std::to_string(rig.coarse->tet_mesh.tetCount()) +
+               " tets");
+      return;
     }
-    rig.coarse = std::make_shared<const Rig>(std::move(coarse));
-    if (std::string e = validateRig(rig); !e.empty()) throw RigBuildError("the coarse level does not fit the rig: " + e);
-    report.coarse_seconds = since(t0);
-    prog.end(std::to_string(rig.coarse->tet_mesh.vertexCount()) + " tet vertices, " + std::to_string(rig.coarse->tet_mesh.tetCount()) +
-             " tets");
+    report.notes.push_back("the rig has no coarse level: there is no tet mesh of " + std::to_string(asked) +
+                           " tet vertices or of twice that up to half the rig's budget (" + why +
+                           "); the frame solves the rig alone, which lands farther from its converged pose within a frame's iterations");
   }
 };
 

@@ -377,7 +377,7 @@ CoarseRig buildCoarseTetMesh(const SurfaceMesh& fine, const DecimateOptions& dec
   for (size_t i = 0; i < rig.failed_attempts.size(); ++i) msg << (i ? " | " : "") << rig.failed_attempts[i];
   msg << "); the surface probably intersects itself or has parts thinner than the decimated triangles: repair "
          "self-intersections in a mesh editor or choose a larger vertex budget";
-  throw RigBuildError(msg.str());
+  throw TetBudgetError(msg.str());
 }
 
 }  // namespace tetrig::rigbuild

@@ -30,6 +30,14 @@ class RigBuildError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+// The tetrahedralization found no tet mesh of the budget it was given (the surface intersects
+// itself once decimated that far, or has parts thinner than its triangles); a larger budget may
+// succeed.
+class TetBudgetError : public RigBuildError {
+ public:
+  using RigBuildError::RigBuildError;
+};
+
 // Signed volume enclosed by a closed surface (divergence theorem); negative when the faces point
 // inward. Meaningless for open surfaces.
 double signedVolume(const SurfaceMesh& mesh);
