@@ -288,7 +288,7 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
   std::vector<double> constraint_g, constraint_fine;
   if (keep_volume) {
     constraint = std::make_unique<tetrig::FineVolumeConstraint>(
-        rig.pose_transfer.view(),
+        rig.tet_mesh.vertices, rig.tet_mesh.tets, rig.body_tet_count,
         std::span<const std::int32_t>(rig.fine_triangles.data(), static_cast<std::size_t>(rig.fine_triangles.size())),
         std::span<const double>(rig.fine_vertices.data(), static_cast<std::size_t>(rig.fine_vertices.size())));
     constraint_g.resize(3 * static_cast<std::size_t>(rig.tet_mesh.vertexCount()));
@@ -567,10 +567,6 @@ int main(int argc, char** argv) {
                  "Volume constraint: frames between linearizations of its gradient (default 1: every frame)")
       ->check(CLI::Range(1, 1000))
       ->group(kExperiments);
-  app.add_option("--volume-constraint-gradient-entries", cfg.live.volume_constraint_gradient_entries,
-                 "Volume constraint: entries of each row of B its gradient uses (the largest, rescaled; default 0: all)")
-      ->check(CLI::Range(0, 100000))
-      ->group(kExperiments);
   app.add_option("--reference-guard-solves", cfg.reference_guard_solves,
                  "Implicit inversion guard: the reference's conjugate-gradient steps per iteration (default: the live "
                  "rig's --inversion-guard-solves). The same energy, its global steps solved further")
@@ -605,7 +601,6 @@ int main(int argc, char** argv) {
                           {"volume_weight", solver.volume_weight},
                           {"volume_constraint", solver.volume_constraint},
                           {"volume_constraint_refresh_frames", solver.volume_constraint_refresh_frames},
-                          {"volume_constraint_gradient_entries", cfg.live.volume_constraint_gradient_entries},
                           {"after_publish_iterations", solver.after_publish_iterations},
                           {"inversion_guard", solver.inversion_guard},
                           {"inversion_guard_threshold", solver.inversion_guard_threshold},

@@ -91,9 +91,6 @@ struct LiveRigOptions {
   // constraint (solver.volume_constraint) is skipped on a rig whose fine mesh is not closed
   // (volumeNotKept()).
   SolverSettings solver;
-  // Entries of each row of B the volume constraint's gradient B^T dV/dx_fine uses (the largest,
-  // rescaled to the row's sum; FineVolumeConstraint): 0 = all.
-  int volume_constraint_gradient_entries = 0;
   // Plausible samples only (docs/live.md, "Implausible marker samples"): a measured sample farther
   // from its marker's expected position than a human marker can move is treated as occluded for that
   // frame and counted (LiveFrameStats::rejected_marker_samples). D = the fine mesh's rest diagonal,

@@ -2,20 +2,26 @@
 // Deformer::setLinearConstraint (docs/deformation.md, "Volume constraint").
 //
 // The fine mesh is x_fine = B x (the pose transfer, Stoll et al. 2007, eq. 2.12) and encloses
-//   V(x_fine) = 1/6 sum_{triangles (a, b, c)} a . (b x c),   dV/da = 1/6 (b x c) (and cyclically).
-// Linearized at a pose x0 (x_fine0 = B x0), with g = B^T dV/dx_fine (x_fine0), keeping V at its
-// rest value reads
-//   g . x = V_rest - V(x_fine0) + g . x0.
+//   V(x_fine) = 1/6 sum_{triangles (a, b, c)} a . (b x c).
+// Keeping V at its rest value, linearized at a pose x0, reads
+//   g . x = V_rest - V(x_fine0) + g . x0,
+// with g a direction along which the volume grows. g is the gradient of the volume the body tet
+// mesh's boundary encloses, W(x) = 1/6 sum_{boundary triangles} a . (b x c), at x0: the boundary's
+// vertices are fine vertices (the decimated surface), and W and V move together, so g is near
+// B^T dV/dx_fine and far cheaper: one pass over the boundary's few thousand triangles instead of a
+// gather through B^T. The constraint's value comes from the measured fine volume, so each frame
+// restores V itself to first order in the frame's motion, and the converged pose holds V exactly.
+// (Keeping W itself instead lets V drift 5 % in HDM05's squats: the fine surface is not the
+// boundary's.)
 // The rotation term ||F - R||^2 has Poisson's ratio 0: it lets flexion creases lose volume, and a
 // volume term per tet converges too slowly to fix that in a frame's few iterations
 // (docs/fidelity.md); one constraint with a Lagrange multiplier costs one solve per frame.
 //
-// Threads: construct at load (allocates; B is copied, transposed); linearize() from one thread at a
-// time, no allocation, lock or exception. `triangles` must outlive this object.
+// Threads: construct at load (allocates); linearize() from one thread at a time, no allocation,
+// lock or exception. `fine_triangles` must outlive this object.
 #pragma once
 
-#include "tetrig/pose_transfer.hpp"
-#include "tetrig/pose_transfer_blocked.hpp"
+#include "tetrig/tet_mesh.hpp"
 
 #include <cstdint>
 #include <span>
@@ -34,15 +40,13 @@ bool closedOrientedSurface(std::span<const std::int32_t> triangles);
 
 class FineVolumeConstraint {
  public:
-  // b: #fine x #tetV; triangles: #F*3 fine-vertex indices, outward; rest_fine: #fine*3 rest positions.
-  // gradient_entries > 0 builds g from B with each row cut to its gradient_entries largest weights,
-  // rescaled to the row's sum (g is then a direction near the exact one, far cheaper to gather: the
-  // constraint's value c still comes from the measured volume, so it holds the volume to first
-  // order in the frame's own motion; docs/deformation.md). 0: the exact B^T.
-  // Throws std::invalid_argument on sizes that do not match, an index out of range, or triangles that
-  // do not close (each edge walked once each way: a watertight, consistently oriented surface).
-  FineVolumeConstraint(const PoseTransferView<double>& b, std::span<const std::int32_t> triangles,
-                       std::span<const double> rest_fine, std::int32_t gradient_entries = 0);
+  // tet_rest, tets: the rig's tet mesh at rest, whose first body_tets tets are the body's (the
+  // boundary is theirs: marker tets take no part); fine_triangles: #F*3 fine-vertex indices,
+  // outward; rest_fine: #fine*3 rest positions. Throws std::invalid_argument on sizes that do not
+  // match, an index out of range, or fine triangles that do not close (each edge walked once each
+  // way: a watertight, consistently oriented surface).
+  FineVolumeConstraint(const Vertices& tet_rest, const Tets& tets, std::int32_t body_tets, std::span<const std::int32_t> fine_triangles,
+                       std::span<const double> rest_fine);
 
   // Enclosed volume of a fine pose (#fine*3).
   template <typename T>
@@ -64,23 +68,15 @@ class FineVolumeConstraint {
   double restVolume() const noexcept { return rest_volume_; }
   std::int32_t tetVertexCount() const noexcept { return tet_vertices_; }
   std::int32_t fineVertexCount() const noexcept { return fine_vertices_; }
+  // The body tets' boundary: the faces of one body tet only, outward (#*3 tet-vertex indices).
+  std::span<const std::int32_t> boundaryTriangles() const noexcept { return boundary_; }
 
  private:
-  std::int32_t tet_vertices_ = 0, fine_vertices_ = 0;  // B's columns and rows
-  // B^T (a row per tet vertex: the fine vertices it moves), built at load, so that g = B^T dV/dx_fine
-  // gathers instead of scattering (the scatter over B's rows took about four times the forward pose
-  // transfer), with the pose transfer's own kernels: in blocks of 8 nearby tet vertices (each placed
-  // at the |B|-weighted mean of the fine vertices it moves), half-precision weights (BlockedPoseTransfer::
-  // toHalfWeights: g is a direction, 2^-11 of each weight tilts it by as little) and float sums, when there are
-  // at most 65536 fine vertices (bt_blocked_), else row by row with float weights and double sums
-  // (bt_wide_); the other is empty.
-  BlockedPoseTransfer bt_blocked_;
-  PoseTransferCsr<float> bt_wide_;
-  std::span<const std::int32_t> triangles_;
-  double rest_volume_ = 0.0;
-  std::vector<double> fine_gradient4_;  // #fine*4 scratch: 6 dV/dx_fine, padded (x, y, z, 0), in double
-  std::vector<float> fine_gradient4f_;  // #fine*4 scratch: the same in float (bt_blocked_ gathers it)
-  std::vector<float> tet_gradient3f_;   // #tetV*3 scratch for bt_blocked_: B^T of it
+  std::int32_t tet_vertices_ = 0, fine_vertices_ = 0;
+  std::span<const std::int32_t> triangles_;  // the fine mesh's
+  std::vector<std::int32_t> boundary_;       // the body tets' boundary
+  double rest_volume_ = 0.0;                 // the fine mesh's
+  std::vector<double> gradient4_;            // #tetV*4 scratch: 6 dW/dx, padded (x, y, z, 0)
 };
 
 }  // namespace tetrig
