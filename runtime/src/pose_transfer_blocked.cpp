@@ -15,52 +15,11 @@
 
 #include "multiversion.hpp"
 
-#if defined(TETRIG_MULTIVERSION_ENABLED)
-#include <immintrin.h>
-#endif
-
 namespace tetrig {
 namespace {
 
 using Lanes8f = float __attribute__((vector_size(kPoseBlockRows * sizeof(float))));
 static_assert(sizeof(Lanes8f) == kPoseBlockRows * sizeof(float));
-
-// IEEE binary16 bits of a float, rounded to nearest (ties to even); |f| <= 65504 (checked by the caller).
-std::uint16_t floatToHalf(float f) {
-  std::uint32_t x;
-  std::memcpy(&x, &f, sizeof x);
-  const std::uint32_t sign = (x >> 16) & 0x8000u, a = x & 0x7fffffffu;
-  if (a < 0x38800000u)  // below 2^-14, half's smallest normal: subnormal steps of 2^-24 (1024 rounds to that normal)
-    return static_cast<std::uint16_t>(sign | static_cast<std::uint32_t>(std::lrint(std::abs(f) * 0x1p24f)));
-  // Rebias the exponent (127 -> 15) and round the 13 dropped mantissa bits to nearest even; a carry
-  // into the exponent is the correct rounding up.
-  return static_cast<std::uint16_t>(sign | ((a - 0x38000000u + 0xfffu + ((a >> 13) & 1u)) >> 13));
-}
-
-using Half8 = std::uint16_t __attribute__((vector_size(kPoseBlockRows * sizeof(std::uint16_t))));
-using Bits8 = std::uint32_t __attribute__((vector_size(kPoseBlockRows * sizeof(std::uint32_t))));
-
-// Widening without F16C: the magnitude's bits moved to float's places and scaled by 2^112 (the
-// exponent bias 15 -> 127; exact, subnormal halves included), the sign put back.
-__attribute__((always_inline)) inline void widenPortable(const std::uint16_t* half, float* out, std::int32_t entries) noexcept {
-  for (std::int32_t k = 0; k < entries; ++k) {
-    Half8 h;
-    std::memcpy(&h, half + static_cast<std::ptrdiff_t>(k) * kPoseBlockRows, sizeof h);
-    const Bits8 w = __builtin_convertvector(h, Bits8);
-    const Bits8 magnitude = (w & 0x7fffu) << 13, sign = (w & 0x8000u) << 16;
-    Lanes8f f;
-    std::memcpy(&f, &magnitude, sizeof f);
-    f *= 0x1p112f;
-    Bits8 bits;
-    std::memcpy(&bits, &f, sizeof bits);
-    bits |= sign;
-    std::memcpy(out + static_cast<std::ptrdiff_t>(k) * kPoseBlockRows, &bits, sizeof bits);
-  }
-}
-
-}  // namespace
-
-namespace {
 
 // 21 bits of each coordinate interleaved: x in bits 0, 3, 6, ..., y in 1, 4, ..., z in 2, 5, ...
 std::uint64_t spreadBits(std::uint64_t v) {
@@ -154,8 +113,7 @@ BlockedPoseTransfer blockPoseTransfer(const PoseTransferCsr<double>& b, std::spa
 
 namespace {
 
-// A column entry's kPoseBlockRows weights as float lanes: stored as floats, or as IEEE binary16
-// widened by F16C's vcvtph2ps (callable from x86-64-v3 code only; see applyHalfWeights).
+// A column entry's kPoseBlockRows weights as float lanes.
 struct FloatWeights {
   const float* w;
   __attribute__((always_inline)) Lanes8f operator()(std::int32_t k) const noexcept {
@@ -164,19 +122,6 @@ struct FloatWeights {
     return lanes;
   }
 };
-#if defined(TETRIG_MULTIVERSION_ENABLED)
-struct F16cWeights {
-  const std::uint16_t* half;
-  // Not always_inline: GCC inlines it only into x86-64-v3 code, which the flatten of the caller gives.
-  __attribute__((target("arch=x86-64-v3"))) Lanes8f operator()(std::int32_t k) const noexcept {
-    static_assert(kPoseBlockRows == 8, "one vcvtph2ps per entry");
-    const __m256 f = _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(half + static_cast<std::ptrdiff_t>(k) * kPoseBlockRows)));
-    Lanes8f lanes;
-    std::memcpy(&lanes, &f, sizeof lanes);
-    return lanes;
-  }
-};
-#endif
 
 // Sums W(c, l) x_tet[c] over `count` column entries of a block (weights(k): entry k's kPoseBlockRows
 // weights, columns cols) into two partial sums per coordinate (even and odd entries): the FMA chains'
@@ -240,68 +185,12 @@ TETRIG_MULTIVERSION void applyFloatWeights(const BlockedPoseTransferView& b, con
       x_tet4, x_fine, block_begin, block_end);
 }
 
-// Half weights. Without F16C each block's weights are widened into a float scratch kHalfChunk
-// entries at a time (exactly: every binary16 value is a float), then summed as above.
-constexpr std::int32_t kHalfChunk = 128;
-
-void applyHalfWeightsPortable(const BlockedPoseTransferView& b, const float* x_tet4, float* x_fine, std::int32_t block_begin,
-                              std::int32_t block_end) noexcept {
-  alignas(32) float scratch[kHalfChunk * kPoseBlockRows];
-  for (std::int32_t block = block_begin; block < block_end; ++block) {
-    BlockSums sums;
-    const std::int32_t end = b.block_offsets[block + 1];
-    for (std::int32_t begin = b.block_offsets[block]; begin < end; begin += kHalfChunk) {
-      const std::int32_t count = std::min(kHalfChunk, end - begin);
-      widenPortable(b.half_weights + static_cast<std::ptrdiff_t>(begin) * kPoseBlockRows, scratch, count);
-      accumulate(FloatWeights{scratch}, b.columns + begin, count, x_tet4, sums);
-    }
-    storeBlock(sums, b.lane_rows + static_cast<std::ptrdiff_t>(block) * kPoseBlockRows, x_fine);
-  }
-}
-
-// With F16C (x86-64-v3 and up; GCC function multiversioning, the loader picks) each entry's weights
-// are widened as they are loaded: 0.7-0.8x the time of widening a chunk into scratch and summing
-// it (measured on the shipped asset's B^T).
-// flatten inlines F16cWeights into this v3 code.
-#if defined(TETRIG_MULTIVERSION_ENABLED)
-__attribute__((target("arch=x86-64-v3"), flatten)) void applyHalfWeights(const BlockedPoseTransferView& b, const float* x_tet4,
-                                                                         float* x_fine, std::int32_t block_begin,
-                                                                         std::int32_t block_end) noexcept {
-  sumBlocks(
-      b, [&b](std::int32_t entry) { return F16cWeights{b.half_weights + static_cast<std::ptrdiff_t>(entry) * kPoseBlockRows}; },
-      x_tet4, x_fine, block_begin, block_end);
-}
-__attribute__((target("default"))) void applyHalfWeights(const BlockedPoseTransferView& b, const float* x_tet4, float* x_fine,
-                                                         std::int32_t block_begin, std::int32_t block_end) noexcept {
-  applyHalfWeightsPortable(b, x_tet4, x_fine, block_begin, block_end);
-}
-#else
-void applyHalfWeights(const BlockedPoseTransferView& b, const float* x_tet4, float* x_fine, std::int32_t block_begin,
-                      std::int32_t block_end) noexcept {
-  applyHalfWeightsPortable(b, x_tet4, x_fine, block_begin, block_end);
-}
-#endif
-
 }  // namespace
 
 void applyPoseTransferBlocked(const BlockedPoseTransferView& b, const float* x_tet4, float* x_fine, std::int32_t block_begin,
                               std::int32_t block_end) noexcept {
-  if (b.weights != nullptr)
-    applyFloatWeights(b, x_tet4, x_fine, block_begin, block_end);
-  else
-    applyHalfWeights(b, x_tet4, x_fine, block_begin, block_end);
+  applyFloatWeights(b, x_tet4, x_fine, block_begin, block_end);
 }
 
-void BlockedPoseTransfer::toHalfWeights() {
-  if (weights.empty()) return;
-  AlignedVector<std::uint16_t> half(weights.size());
-  for (std::size_t i = 0; i < weights.size(); ++i) {
-    if (!(std::abs(weights[i]) <= 65504.0f))
-      throw std::invalid_argument("pose transfer: weight " + std::to_string(weights[i]) + " is beyond half precision's range");
-    half[i] = floatToHalf(weights[i]);
-  }
-  half_weights = std::move(half);
-  weights = AlignedVector<float>();
-}
 
 }  // namespace tetrig

@@ -36,7 +36,6 @@ struct BlockedPoseTransferView {
   const std::int32_t* block_offsets = nullptr;  // blocks + 1 entries into columns, [0] == 0
   const std::uint16_t* columns = nullptr;       // the union of each block's columns, ascending within a block
   const float* weights = nullptr;               // kPoseBlockRows per column entry (row lane l at [l]), 32-byte aligned
-  const std::uint16_t* half_weights = nullptr;  // instead of weights (which is then null): the same in IEEE binary16 bits
   const std::int32_t* lane_rows = nullptr;      // kPoseBlockRows per block: the fine vertex of each lane, -1 if none
   std::int32_t blocks = 0;
   std::int32_t rows = 0;                        // fine vertices
@@ -46,8 +45,7 @@ struct BlockedPoseTransferView {
 struct BlockedPoseTransfer {
   std::vector<std::int32_t> block_offsets;
   std::vector<std::uint16_t> columns;
-  AlignedVector<float> weights;             // empty after toHalfWeights()
-  AlignedVector<std::uint16_t> half_weights;  // toHalfWeights(): weights in IEEE binary16, else empty
+  AlignedVector<float> weights;
   std::vector<std::int32_t> lane_rows;
   std::int32_t blocks = 0;
   std::int32_t rows = 0;
@@ -55,24 +53,17 @@ struct BlockedPoseTransfer {
 
   using view_type = BlockedPoseTransferView;
   view_type view() const noexcept {
-    return {block_offsets.data(), columns.data(), weights.empty() ? nullptr : weights.data(),
-            half_weights.empty() ? nullptr : half_weights.data(), lane_rows.data(), blocks, rows, cols};
+    return {block_offsets.data(), columns.data(), weights.data(), lane_rows.data(), blocks, rows, cols};
   }
-  // Rounds the weights to IEEE half precision (binary16, 11 significant bits: |error| <= 2^-11 |w|,
-  // or 2^-25 below 2^-14) and drops the float ones: half the bytes the product streams, for products
-  // that give a direction rather than a position (the volume constraint's B^T dV/dx_fine: a
-  // relative error of 2^-11 in each weight tilts the constraint's plane by as little). Load time;
-  // throws std::invalid_argument if a weight is beyond half's range (|w| > 65504).
-  void toHalfWeights();
   // Bytes the product streams: offsets, columns, weights and lane rows.
   std::int64_t bytes() const noexcept {
     return static_cast<std::int64_t>(block_offsets.size() * sizeof(std::int32_t) + columns.size() * sizeof(std::uint16_t) +
-                                     weights.size() * sizeof(float) + half_weights.size() * sizeof(std::uint16_t) +
+                                     weights.size() * sizeof(float) +
                                      lane_rows.size() * sizeof(std::int32_t));
   }
   // Stored weights (zeros included) per entry of B: how much the blocking adds.
   double fill(std::int64_t b_nonzeros) const noexcept {
-    return b_nonzeros > 0 ? static_cast<double>(weights.size() + half_weights.size()) / static_cast<double>(b_nonzeros) : 0.0;
+    return b_nonzeros > 0 ? static_cast<double>(weights.size()) / static_cast<double>(b_nonzeros) : 0.0;
   }
 };
 
@@ -89,9 +80,6 @@ BlockedPoseTransfer blockPoseTransfer(const PoseTransferCsr<double>& b, std::spa
 // 3 floats, written for those blocks' rows only. Summed in float, two partial sums per lane (even and
 // odd columns of the block; a zero weight adds exactly 0): |error| <= (n + 4) 2^-24 sum_k |B_rk| |x_k|
 // for a row of n entries. Frame path: no allocation, noexcept; the buffers hold cols*4 and rows*3 floats.
-// With half weights (toHalfWeights) each is widened to float exactly (F16C's vcvtph2ps on x86-64-v3
-// and up, integer lane arithmetic elsewhere), and the bound adds their rounding,
-// 2^-11 sum_k |B_rk| |x_k| + 2^-25 sum_k |x_k|.
 void applyPoseTransferBlocked(const BlockedPoseTransferView& b, const float* x_tet4, float* x_fine, std::int32_t block_begin,
                               std::int32_t block_end) noexcept;
 inline void applyPoseTransferBlocked(const BlockedPoseTransferView& b, const float* x_tet4, float* x_fine) noexcept {
