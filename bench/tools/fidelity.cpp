@@ -288,7 +288,7 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
   std::vector<double> constraint_g, constraint_fine;
   if (keep_volume) {
     constraint = std::make_unique<tetrig::FineVolumeConstraint>(
-        rig.tet_mesh.vertices, rig.tet_mesh.tets, rig.body_tet_count,
+        rig.tet_mesh, rig.body_tet_count,
         std::span<const std::int32_t>(rig.fine_triangles.data(), static_cast<std::size_t>(rig.fine_triangles.size())),
         std::span<const double>(rig.fine_vertices.data(), static_cast<std::size_t>(rig.fine_vertices.size())));
     constraint_g.resize(3 * static_cast<std::size_t>(rig.tet_mesh.vertexCount()));

@@ -163,7 +163,7 @@ LiveRigImpl::LiveRigImpl(const Rig& rig, const LiveRigOptions& options, const Ri
   }
   if (keepsVolume(rig, options)) {
     volume_constraint_ = std::make_unique<FineVolumeConstraint>(
-        rig.tet_mesh.vertices, rig.tet_mesh.tets, rig.body_tet_count,
+        rig.tet_mesh, rig.body_tet_count,
         std::span<const std::int32_t>(rig.fine_triangles.data(), static_cast<std::size_t>(rig.fine_triangles.size())),
         std::span<const double>(rig.fine_vertices.data(), static_cast<std::size_t>(rig.fine_vertices.size())));
     constraint_gradient_.assign(3 * static_cast<std::size_t>(rig.tet_mesh.vertexCount()), 0.0);

@@ -3,8 +3,10 @@
 #include <Eigen/Dense>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <sstream>
+#include <vector>
 
 namespace tetrig {
 
@@ -16,6 +18,39 @@ double signedVolume(const TetMesh& mesh, std::int32_t t) {
   e.col(1) = mesh.vertices.row(tet[2]).transpose() - a;
   e.col(2) = mesh.vertices.row(tet[3]).transpose() - a;
   return e.determinant() / 6.0;
+}
+
+Triangles boundaryFaces(const TetMesh& mesh, std::int32_t tet_count) {
+  const std::int32_t n = tet_count < 0 ? mesh.tetCount() : tet_count;
+  // Face k of a positively oriented tet (the one opposite corner k), outward.
+  static constexpr int kFace[4][3] = {{1, 2, 3}, {0, 3, 2}, {0, 1, 3}, {0, 2, 1}};
+  struct Face {
+    std::array<std::int32_t, 3> key, corners;  // sorted, and in outward order
+  };
+  std::vector<Face> faces;
+  faces.reserve(4 * static_cast<std::size_t>(n));
+  for (std::int32_t t = 0; t < n; ++t) {
+    const bool positive = signedVolume(mesh, t) >= 0.0;
+    for (const auto& f : kFace) {
+      Face face{{}, {mesh.tets(t, f[0]), mesh.tets(t, f[1]), mesh.tets(t, f[2])}};
+      if (!positive) std::swap(face.corners[1], face.corners[2]);
+      face.key = face.corners;
+      std::sort(face.key.begin(), face.key.end());
+      faces.push_back(face);
+    }
+  }
+  std::sort(faces.begin(), faces.end(), [](const Face& x, const Face& y) { return x.key < y.key; });
+  std::vector<std::array<std::int32_t, 3>> once;
+  for (std::size_t i = 0; i < faces.size();) {
+    std::size_t j = i + 1;
+    while (j < faces.size() && faces[j].key == faces[i].key) ++j;
+    if (j == i + 1) once.push_back(faces[i].corners);
+    i = j;
+  }
+  Triangles out(static_cast<Eigen::Index>(once.size()), 3);
+  for (std::size_t f = 0; f < once.size(); ++f)
+    for (int k = 0; k < 3; ++k) out(static_cast<Eigen::Index>(f), k) = once[f][static_cast<std::size_t>(k)];
+  return out;
 }
 
 double boundingBoxDiagonal(const Vertices& vertices) {

@@ -9,7 +9,6 @@
 #include <Eigen/Geometry>
 
 #include <algorithm>
-#include <array>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -57,48 +56,12 @@ bool closedOrientedSurface(std::span<const std::int32_t> triangles) {
   return forward == backward;
 }
 
-namespace {
-
-// The faces of exactly one body tet, each outward (away from its tet's fourth corner).
-std::vector<std::int32_t> bodyBoundary(const Vertices& rest, const Tets& tets, std::int32_t body_tets) {
-  // Face k of a positively oriented tet (the one opposite corner k), outward.
-  static constexpr int kFace[4][3] = {{1, 2, 3}, {0, 3, 2}, {0, 1, 3}, {0, 2, 1}};
-  struct Face {
-    std::array<std::int32_t, 3> key, corners;  // sorted, and in outward order
-  };
-  std::vector<Face> faces;
-  faces.reserve(4 * static_cast<std::size_t>(body_tets));
-  for (std::int32_t t = 0; t < body_tets; ++t) {
-    const Eigen::Vector3d p0 = rest.row(tets(t, 0)).transpose();
-    const Eigen::Vector3d e1 = rest.row(tets(t, 1)).transpose() - p0, e2 = rest.row(tets(t, 2)).transpose() - p0,
-                          e3 = rest.row(tets(t, 3)).transpose() - p0;
-    const bool positive = e1.dot(e2.cross(e3)) >= 0.0;
-    for (const auto& f : kFace) {
-      Face face{{}, {tets(t, f[0]), tets(t, f[1]), tets(t, f[2])}};
-      if (!positive) std::swap(face.corners[1], face.corners[2]);
-      face.key = face.corners;
-      std::sort(face.key.begin(), face.key.end());
-      faces.push_back(face);
-    }
-  }
-  std::sort(faces.begin(), faces.end(), [](const Face& x, const Face& y) { return x.key < y.key; });
-  std::vector<std::int32_t> boundary;
-  for (std::size_t i = 0; i < faces.size();) {
-    std::size_t j = i + 1;
-    while (j < faces.size() && faces[j].key == faces[i].key) ++j;
-    if (j == i + 1) boundary.insert(boundary.end(), faces[i].corners.begin(), faces[i].corners.end());
-    i = j;
-  }
-  return boundary;
-}
-
-}  // namespace
-
-FineVolumeConstraint::FineVolumeConstraint(const Vertices& tet_rest, const Tets& tets, std::int32_t body_tets,
-                                           std::span<const std::int32_t> fine_triangles, std::span<const double> rest_fine)
-    : tet_vertices_(static_cast<std::int32_t>(tet_rest.rows())),
+FineVolumeConstraint::FineVolumeConstraint(const TetMesh& tet_mesh, std::int32_t body_tets, std::span<const std::int32_t> fine_triangles,
+                                           std::span<const double> rest_fine)
+    : tet_vertices_(tet_mesh.vertexCount()),
       fine_vertices_(static_cast<std::int32_t>(rest_fine.size() / 3)),
       triangles_(fine_triangles) {
+  const Tets& tets = tet_mesh.tets;
   if (tet_vertices_ <= 0 || tets.rows() <= 0) throw std::invalid_argument("volume constraint: empty tet mesh");
   if (body_tets <= 0 || body_tets > tets.rows())
     throw std::invalid_argument("volume constraint: " + std::to_string(body_tets) + " body tets of " + std::to_string(tets.rows()));
@@ -112,7 +75,7 @@ FineVolumeConstraint::FineVolumeConstraint(const Vertices& tet_rest, const Tets&
   for (const std::int32_t v : fine_triangles)
     if (v < 0 || v >= fine_vertices_) throw std::invalid_argument("volume constraint: triangle corner " + std::to_string(v) + " out of range");
   requireClosedOriented(fine_triangles);
-  boundary_ = bodyBoundary(tet_rest, tets, body_tets);
+  boundary_ = boundaryFaces(tet_mesh, body_tets);
   gradient4_.assign(4 * static_cast<std::size_t>(tet_vertices_), 0.0);
   rest_volume_ = volume(rest_fine.data());
 }
@@ -146,7 +109,7 @@ template <typename T>
 double FineVolumeConstraint::linearize(std::span<const double> x_tet, const T* x_fine, std::span<double> g,
                                        double* volume_now) noexcept {
   // g = dW/dx: 6 dW/dx in one pass over the boundary's triangles (volume_gradient.hpp).
-  volumeGradientPass(boundary_, x_tet.data(), gradient4_.data(), tet_vertices_);
+  volumeGradientPass(boundaryTriangles(), x_tet.data(), gradient4_.data(), tet_vertices_);
   for (std::size_t v = 0; v < static_cast<std::size_t>(tet_vertices_); ++v)
     for (std::size_t c = 0; c < 3; ++c) g[3 * v + c] = gradient4_[4 * v + c] * (1.0 / 6.0);
   const double now = volume(x_fine);

@@ -33,28 +33,12 @@ struct Face {
   std::array<std::int32_t, 3> v{};  // outward (counter-clockwise seen from outside)
 };
 
-// Boundary faces of a tet mesh, oriented away from the tet they bound.
-std::vector<Face> boundaryFaces(const TetMesh& mesh) {
-  std::map<std::array<std::int32_t, 3>, std::pair<int, Face>> faces;
-  for (std::int32_t t = 0; t < mesh.tetCount(); ++t) {
-    for (int skip = 0; skip < 4; ++skip) {
-      Face f;
-      int n = 0;
-      for (int c = 0; c < 4; ++c)
-        if (c != skip) f.v[static_cast<std::size_t>(n++)] = mesh.tets(t, c);
-      const Eigen::Vector3d a = mesh.vertices.row(f.v[0]).transpose(), b = mesh.vertices.row(f.v[1]).transpose(),
-                            c = mesh.vertices.row(f.v[2]).transpose(), opposite = mesh.vertices.row(mesh.tets(t, skip)).transpose();
-      if ((b - a).cross(c - a).dot(opposite - a) > 0.0) std::swap(f.v[1], f.v[2]);
-      std::array<std::int32_t, 3> key = f.v;
-      std::sort(key.begin(), key.end());
-      auto& entry = faces[key];
-      ++entry.first;
-      entry.second = f;
-    }
-  }
-  std::vector<Face> out;
-  for (const auto& [key, entry] : faces)
-    if (entry.first == 1) out.push_back(entry.second);
+// The boundary faces of a tet mesh (tetrig::boundaryFaces: outward), as arrays.
+std::vector<Face> boundaryFacesOf(const TetMesh& mesh) {
+  const Triangles faces = boundaryFaces(mesh);
+  std::vector<Face> out(static_cast<std::size_t>(faces.rows()));
+  for (Eigen::Index f = 0; f < faces.rows(); ++f)
+    for (int k = 0; k < 3; ++k) out[static_cast<std::size_t>(f)].v[static_cast<std::size_t>(k)] = faces(f, k);
   return out;
 }
 
@@ -74,7 +58,7 @@ std::vector<Eigen::Vector3d> barMarkerPositions() {
 // (zero-area) triangle of their own.
 Rig makeBarRig(bool extra_degenerate_triangle = false, bool far_region = false) {
   const TetMesh body = scenes::makeBar(2, 2, 8);
-  const std::vector<Face> faces = boundaryFaces(body);
+  const std::vector<Face> faces = boundaryFacesOf(body);
   const std::vector<Eigen::Vector3d> markers = barMarkerPositions();
   Rig rig;
   rig.name = "bar 2x2x8";

@@ -33,17 +33,12 @@ std::vector<double> cube(double side) {
 // The tet mesh: the cube of side 2 cut into 6 tets around its diagonal 0-7 (Kuhn), their corners
 // in both orientations, and a "marker" vertex 8 outside joined to face 1-3-7 by a seventh tet that
 // is not the body's.
-struct CubeTets {
-  Vertices rest;
-  Tets tets;
-};
-
-CubeTets cubeTets() {
-  CubeTets m;
-  m.rest.resize(9, 3);
+TetMesh cubeTets() {
+  TetMesh m;
+  m.vertices.resize(9, 3);
   const std::vector<double> x = cube(2.0);
-  for (int v = 0; v < 8; ++v) m.rest.row(v) = Eigen::Vector3d(x[3 * v], x[3 * v + 1], x[3 * v + 2]).transpose();
-  m.rest.row(8) = Eigen::Vector3d(3.0, 1.0, 1.0).transpose();
+  for (int v = 0; v < 8; ++v) m.vertices.row(v) = Eigen::Vector3d(x[3 * v], x[3 * v + 1], x[3 * v + 2]).transpose();
+  m.vertices.row(8) = Eigen::Vector3d(3.0, 1.0, 1.0).transpose();
   m.tets.resize(7, 4);
   m.tets << 0, 1, 3, 7,  0, 3, 2, 7,  0, 2, 6, 7,  0, 6, 4, 7,  0, 4, 5, 7,  0, 5, 1, 7,  1, 3, 7, 8;
   m.tets.row(2) << 0, 6, 2, 7;  // the other orientation: the boundary must still face out
@@ -86,18 +81,18 @@ std::vector<double> fineOf(const Blend& b, const std::vector<double>& x_tet) {
 }
 
 TEST(FineVolumeConstraint, TheBoundaryIsTheBodysOutwardFaces) {
-  const CubeTets m = cubeTets();
-  const FineVolumeConstraint constraint(m.rest, m.tets, 6, kCubeTriangles, cube(2.0));
+  const TetMesh m = cubeTets();
+  const FineVolumeConstraint constraint(m, 6, kCubeTriangles, cube(2.0));
   const std::span<const std::int32_t> boundary = constraint.boundaryTriangles();
   // The 12 faces of the cube (the 12 inner faces are shared by two tets), none with vertex 8.
   ASSERT_EQ(boundary.size(), 36u);
   EXPECT_TRUE(std::none_of(boundary.begin(), boundary.end(), [](std::int32_t v) { return v == 8; }));
   EXPECT_TRUE(closedOrientedSurface(boundary));
   // Outward, so the volume it encloses is the cube's.
-  const std::vector<double> x = positionsOf(m.rest);
+  const std::vector<double> x = positionsOf(m.vertices);
   EXPECT_NEAR(enclosedVolume(boundary, x.data()), 8.0, 1e-12);
   // With the marker's tet counted as the body's, its three outer faces replace face 1-3-7.
-  const FineVolumeConstraint with_marker(m.rest, m.tets, 7, kCubeTriangles, cube(2.0));
+  const FineVolumeConstraint with_marker(m, 7, kCubeTriangles, cube(2.0));
   EXPECT_EQ(with_marker.boundaryTriangles().size(), 42u);
   EXPECT_NEAR(enclosedVolume(with_marker.boundaryTriangles(), x.data()), 8.0 + 2.0 / 3.0, 1e-12);
 }
@@ -105,13 +100,13 @@ TEST(FineVolumeConstraint, TheBoundaryIsTheBodysOutwardFaces) {
 TEST(FineVolumeConstraint, TheFineVolumeAndTheBoundarysGradient) {
   std::mt19937 rng(7);
   const Blend b = randomBlend(rng);
-  const CubeTets m = cubeTets();
-  FineVolumeConstraint constraint(m.rest, m.tets, 6, kCubeTriangles, cube(2.0));
+  const TetMesh m = cubeTets();
+  FineVolumeConstraint constraint(m, 6, kCubeTriangles, cube(2.0));
   EXPECT_NEAR(constraint.restVolume(), 8.0, 1e-12);  // the fine mesh's, outward triangles: positive
   EXPECT_NEAR(constraint.volume(cube(3.0).data()), 27.0, 1e-12);
 
   std::uniform_real_distribution<double> u(-0.3, 0.3);
-  std::vector<double> x = positionsOf(m.rest);
+  std::vector<double> x = positionsOf(m.vertices);
   for (double& v : x) v += u(rng);
   const std::vector<double> fine = fineOf(b, x);
   std::vector<double> g(27);
@@ -144,37 +139,37 @@ TEST(FineVolumeConstraint, TheFineVolumeAndTheBoundarysGradient) {
 }
 
 TEST(FineVolumeConstraint, RefusesWhatDoesNotMatch) {
-  const CubeTets m = cubeTets();
-  EXPECT_THROW(FineVolumeConstraint(m.rest, m.tets, 6, kCubeTriangles, std::vector<double>(23, 0.0)), std::invalid_argument);
-  EXPECT_THROW(FineVolumeConstraint(m.rest, m.tets, 6, kCubeTriangles, std::vector<double>(21, 0.0)), std::invalid_argument);
+  const TetMesh m = cubeTets();
+  EXPECT_THROW(FineVolumeConstraint(m, 6, kCubeTriangles, std::vector<double>(23, 0.0)), std::invalid_argument);
+  EXPECT_THROW(FineVolumeConstraint(m, 6, kCubeTriangles, std::vector<double>(21, 0.0)), std::invalid_argument);
   std::vector<std::int32_t> out_of_range = kCubeTriangles;
   out_of_range[4] = 8;
-  EXPECT_THROW(FineVolumeConstraint(m.rest, m.tets, 6, out_of_range, cube(1.0)), std::invalid_argument);
-  EXPECT_THROW(FineVolumeConstraint(m.rest, m.tets, 6, std::vector<std::int32_t>{0, 1}, cube(1.0)), std::invalid_argument);
-  EXPECT_THROW(FineVolumeConstraint(m.rest, m.tets, 0, kCubeTriangles, cube(1.0)), std::invalid_argument);
-  EXPECT_THROW(FineVolumeConstraint(m.rest, m.tets, 8, kCubeTriangles, cube(1.0)), std::invalid_argument);
-  Tets bad = m.tets;
-  bad(1, 2) = 9;
-  EXPECT_THROW(FineVolumeConstraint(m.rest, bad, 6, kCubeTriangles, cube(1.0)), std::invalid_argument);
+  EXPECT_THROW(FineVolumeConstraint(m, 6, out_of_range, cube(1.0)), std::invalid_argument);
+  EXPECT_THROW(FineVolumeConstraint(m, 6, std::vector<std::int32_t>{0, 1}, cube(1.0)), std::invalid_argument);
+  EXPECT_THROW(FineVolumeConstraint(m, 0, kCubeTriangles, cube(1.0)), std::invalid_argument);
+  EXPECT_THROW(FineVolumeConstraint(m, 8, kCubeTriangles, cube(1.0)), std::invalid_argument);
+  TetMesh bad = m;
+  bad.tets(1, 2) = 9;
+  EXPECT_THROW(FineVolumeConstraint(bad, 6, kCubeTriangles, cube(1.0)), std::invalid_argument);
 }
 
 // The fine volume is measured on a closed, consistently oriented surface only (else it is not the
 // volume the mesh encloses and depends on the origin): an open or misoriented fine mesh is refused
 // when the constraint is built.
 TEST(FineVolumeConstraint, RefusesAnOpenOrMisorientedMesh) {
-  const CubeTets m = cubeTets();
+  const TetMesh m = cubeTets();
   std::vector<std::int32_t> open(kCubeTriangles.begin(), kCubeTriangles.end() - 3);
   std::vector<std::int32_t> flipped = kCubeTriangles;
   std::swap(flipped[7], flipped[8]);
   for (const auto& triangles : {open, flipped}) {
     try {
-      FineVolumeConstraint constraint(m.rest, m.tets, 6, triangles, cube(1.0));
+      FineVolumeConstraint constraint(m, 6, triangles, cube(1.0));
       ADD_FAILURE() << "accepted a mesh that does not close";
     } catch (const std::invalid_argument& e) {
       EXPECT_NE(std::string(e.what()).find("not closed and consistently oriented"), std::string::npos) << e.what();
     }
   }
-  EXPECT_NO_THROW(FineVolumeConstraint(m.rest, m.tets, 6, kCubeTriangles, cube(1.0)));
+  EXPECT_NO_THROW(FineVolumeConstraint(m, 6, kCubeTriangles, cube(1.0)));
 }
 
 // A small closed mesh far from the origin (an icosahedron of radius 0.05 at 500 units), the fine
@@ -200,12 +195,13 @@ TEST(FineVolumeConstraint, TheVolumeAndItsDirectionHoldFarFromTheOrigin) {
       local[3 * v + c] = fine[3 * v + c] - centre[c];
     }
   // The tet mesh: the 12 fine vertices and the centre (vertex 12), a tet per face.
-  Vertices rest(13, 3);
-  for (int v = 0; v < 12; ++v) rest.row(v) = Eigen::Vector3d(local[3 * v], local[3 * v + 1], local[3 * v + 2]).transpose();
-  rest.row(12).setZero();
-  Tets tets(20, 4);
-  for (int f = 0; f < 20; ++f) tets.row(f) << faces[3 * f], faces[3 * f + 1], faces[3 * f + 2], 12;
-  FineVolumeConstraint constraint(rest, tets, 20, faces, local);
+  TetMesh ball;
+  ball.vertices.resize(13, 3);
+  for (int v = 0; v < 12; ++v) ball.vertices.row(v) = Eigen::Vector3d(local[3 * v], local[3 * v + 1], local[3 * v + 2]).transpose();
+  ball.vertices.row(12).setZero();
+  ball.tets.resize(20, 4);
+  for (int f = 0; f < 20; ++f) ball.tets.row(f) << faces[3 * f], faces[3 * f + 1], faces[3 * f + 2], 12;
+  FineVolumeConstraint constraint(ball, 20, faces, local);
   const double volume = constraint.volume(local.data());
   ASSERT_GT(volume, 1e-4);  // outward faces: about 2.5e-4 * 2.18
   std::vector<double> x_tet(fine);

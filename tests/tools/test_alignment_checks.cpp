@@ -7,7 +7,7 @@
 // alignment for a rig without markers. The real-data counterparts are in test_rig_markers_real.cpp.
 #include "t_shape_rig.hpp"
 #include "tetrig/rigbuild/alignment_checks.hpp"
-#include "tetrig/rigbuild/boundary_surface.hpp"
+#include "tetrig/tet_mesh.hpp"
 #include "tetrig/rigbuild/build_rig.hpp"
 #include "tetrig/rigbuild/closest_point.hpp"
 #include "tetrig/rigbuild/describe_rig.hpp"
@@ -68,7 +68,7 @@ rigbuild::SurfaceMesh tSurface(const TempDir& dir) {
   }
   rigbuild::SurfaceMesh s;
   s.vertices = tets.vertices;
-  s.triangles = rigbuild::boundaryFaces(tets);
+  s.triangles = boundaryFaces(tets);
   return s;
 }
 

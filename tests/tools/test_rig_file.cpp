@@ -12,7 +12,7 @@
 #include "tetrig/deformer.hpp"
 #include "tetrig/printable_text.hpp"
 #include "tetrig/rig_file.hpp"
-#include "tetrig/rigbuild/boundary_surface.hpp"
+#include "tetrig/tet_mesh.hpp"
 #include "tetrig/rigbuild/describe_rig.hpp"
 #include "tetrig/rigbuild/rig_description.hpp"
 #include "tetrig/rigbuild/write_file_atomic.hpp"

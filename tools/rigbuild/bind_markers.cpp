@@ -1,7 +1,7 @@
 // Invisible tets joining markers to the closest boundary faces (Stoll et al. 2007, section 3.2).
 #include "tetrig/rigbuild/bind_markers.hpp"
 
-#include "tetrig/rigbuild/boundary_surface.hpp"
+#include "tetrig/tet_mesh.hpp"
 #include "tetrig/rigbuild/closest_point.hpp"
 
 #include <Eigen/Geometry>

@@ -4,7 +4,7 @@
 
 #include "tetrig/drivers/c3d_reader.hpp"
 #include "tetrig/rigbuild/bind_markers.hpp"
-#include "tetrig/rigbuild/boundary_surface.hpp"
+#include "tetrig/tet_mesh.hpp"
 #include "tetrig/rigbuild/import_surface.hpp"
 #include "tetrig/rigbuild/obj_surface_attributes.hpp"
 #include "tetrig/rigbuild/rigid_marker_groups.hpp"

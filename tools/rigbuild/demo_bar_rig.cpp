@@ -2,7 +2,7 @@
 #include "tetrig/rigbuild/demo_bar_rig.hpp"
 
 #include "tetrig/rigbuild/bind_markers.hpp"
-#include "tetrig/rigbuild/boundary_surface.hpp"
+#include "tetrig/tet_mesh.hpp"
 #include "tetrig/rigbuild/pose_transfer_weights.hpp"
 #include "tetrig/version.h"
 

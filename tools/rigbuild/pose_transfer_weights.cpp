@@ -27,7 +27,7 @@ struct BoundaryFace {
 };
 
 // Faces of the tet mesh that belong to exactly one tet.
-std::vector<BoundaryFace> boundaryFaces(const TetMesh& mesh) {
+std::vector<BoundaryFace> boundaryFacesWithTheirTet(const TetMesh& mesh) {
   std::vector<BoundaryFace> all;
   all.reserve(static_cast<size_t>(mesh.tetCount()) * 4);
   for (std::int32_t t = 0; t < mesh.tetCount(); ++t) {
@@ -99,7 +99,7 @@ Eigen::SparseMatrix<double, Eigen::RowMajor> poseTransferWeights(const Vertices&
     return Eigen::Vector4d(l[0], l[1], l[2], 1.0 - l.sum());
   };
 
-  const std::vector<BoundaryFace> faces = boundaryFaces(tets);
+  const std::vector<BoundaryFace> faces = boundaryFacesWithTheirTet(tets);
   if (faces.empty()) throw RigBuildError("pose-transfer weights: the tet mesh has no boundary faces");
   st.boundary_faces = static_cast<std::int32_t>(faces.size());
   std::vector<double> centres(faces.size() * 3);

@@ -47,6 +47,12 @@ struct TetMeshReport {
 
 TetMeshReport checkTetMesh(const TetMesh& mesh, double degenerate_eps = 1e-12);
 
+// The boundary of the first tet_count tets (all of them with -1): the faces that belong to exactly
+// one of them, each oriented away from its tet's fourth corner (counter-clockwise seen from outside,
+// whichever the tet's own orientation), in order of their sorted corners. #B by 3. Load time;
+// allocates; the tets' indices must be in range.
+Triangles boundaryFaces(const TetMesh& mesh, std::int32_t tet_count = -1);
+
 // Axis-aligned bounding box diagonal length (0 for an empty mesh).
 double boundingBoxDiagonal(const Vertices& vertices);
 

@@ -40,12 +40,12 @@ bool closedOrientedSurface(std::span<const std::int32_t> triangles);
 
 class FineVolumeConstraint {
  public:
-  // tet_rest, tets: the rig's tet mesh at rest, whose first body_tets tets are the body's (the
-  // boundary is theirs: marker tets take no part); fine_triangles: #F*3 fine-vertex indices,
+  // tet_mesh: the rig's tet mesh at rest, whose first body_tets tets are the body's (the boundary,
+  // boundaryFaces, is theirs: marker tets take no part); fine_triangles: #F*3 fine-vertex indices,
   // outward; rest_fine: #fine*3 rest positions. Throws std::invalid_argument on sizes that do not
   // match, an index out of range, or fine triangles that do not close (each edge walked once each
   // way: a watertight, consistently oriented surface).
-  FineVolumeConstraint(const Vertices& tet_rest, const Tets& tets, std::int32_t body_tets, std::span<const std::int32_t> fine_triangles,
+  FineVolumeConstraint(const TetMesh& tet_mesh, std::int32_t body_tets, std::span<const std::int32_t> fine_triangles,
                        std::span<const double> rest_fine);
 
   // Enclosed volume of a fine pose (#fine*3).
@@ -69,12 +69,14 @@ class FineVolumeConstraint {
   std::int32_t tetVertexCount() const noexcept { return tet_vertices_; }
   std::int32_t fineVertexCount() const noexcept { return fine_vertices_; }
   // The body tets' boundary: the faces of one body tet only, outward (#*3 tet-vertex indices).
-  std::span<const std::int32_t> boundaryTriangles() const noexcept { return boundary_; }
+  std::span<const std::int32_t> boundaryTriangles() const noexcept {
+    return {boundary_.data(), static_cast<std::size_t>(boundary_.size())};
+  }
 
  private:
   std::int32_t tet_vertices_ = 0, fine_vertices_ = 0;
   std::span<const std::int32_t> triangles_;  // the fine mesh's
-  std::vector<std::int32_t> boundary_;       // the body tets' boundary
+  Triangles boundary_;                       // the body tets' boundary (row-major: #*3 in a row)
   double rest_volume_ = 0.0;                 // the fine mesh's
   std::vector<double> gradient4_;            // #tetV*4 scratch: 6 dW/dx, padded (x, y, z, 0)
 };
