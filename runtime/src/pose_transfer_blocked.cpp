@@ -113,28 +113,24 @@ BlockedPoseTransfer blockPoseTransfer(const PoseTransferCsr<double>& b, std::spa
 
 namespace {
 
-// A column entry's kPoseBlockRows weights as float lanes.
-struct FloatWeights {
-  const float* w;
-  __attribute__((always_inline)) Lanes8f operator()(std::int32_t k) const noexcept {
-    Lanes8f lanes;
-    std::memcpy(&lanes, w + static_cast<std::ptrdiff_t>(k) * kPoseBlockRows, sizeof lanes);
-    return lanes;
-  }
-};
+// Column entry k's kPoseBlockRows weights (from w) as float lanes.
+__attribute__((always_inline)) inline Lanes8f weightsOf(const float* w, std::int32_t k) noexcept {
+  Lanes8f lanes;
+  std::memcpy(&lanes, w + static_cast<std::ptrdiff_t>(k) * kPoseBlockRows, sizeof lanes);
+  return lanes;
+}
 
-// Sums W(c, l) x_tet[c] over `count` column entries of a block (weights(k): entry k's kPoseBlockRows
-// weights, columns cols) into two partial sums per coordinate (even and odd entries): the FMA chains'
-// latency, not the loads, would set the pace with one.
+// Sums W(c, l) x_tet[c] over `count` column entries of a block (weights w, columns cols) into two
+// partial sums per coordinate (even and odd entries): the FMA chains' latency, not the loads, would
+// set the pace with one.
 struct BlockSums {
   Lanes8f x0{}, y0{}, z0{}, x1{}, y1{}, z1{};
 };
-template <typename Weights>
-__attribute__((always_inline)) inline void accumulate(const Weights& weights, const std::uint16_t* cols, std::int32_t count,
+__attribute__((always_inline)) inline void accumulate(const float* w, const std::uint16_t* cols, std::int32_t count,
                                                       const float* x_tet4, BlockSums& s) noexcept {
   std::int32_t k = 0;
   for (; k + 2 <= count; k += 2) {
-    const Lanes8f w0 = weights(k), w1 = weights(k + 1);
+    const Lanes8f w0 = weightsOf(w, k), w1 = weightsOf(w, k + 1);
     const float* p = x_tet4 + 4 * static_cast<std::ptrdiff_t>(cols[k]);
     const float* q = x_tet4 + 4 * static_cast<std::ptrdiff_t>(cols[k + 1]);
     s.x0 += w0 * p[0];
@@ -145,7 +141,7 @@ __attribute__((always_inline)) inline void accumulate(const Weights& weights, co
     s.z1 += w1 * q[2];
   }
   if (k < count) {
-    const Lanes8f w0 = weights(k);
+    const Lanes8f w0 = weightsOf(w, k);
     const float* p = x_tet4 + 4 * static_cast<std::ptrdiff_t>(cols[k]);
     s.x0 += w0 * p[0];
     s.y0 += w0 * p[1];
@@ -165,24 +161,16 @@ __attribute__((always_inline)) inline void storeBlock(const BlockSums& s, const 
   }
 }
 
-// Blocks [block_begin, block_end), each summed whole; weights_at(e): the weights from entry e on.
-template <typename WeightsAt>
-__attribute__((always_inline)) inline void sumBlocks(const BlockedPoseTransferView& b, const WeightsAt& weights_at,
-                                                     const float* x_tet4, float* x_fine, std::int32_t block_begin,
-                                                     std::int32_t block_end) noexcept {
+// Blocks [block_begin, block_end), each summed whole.
+TETRIG_MULTIVERSION void applyFloatWeights(const BlockedPoseTransferView& b, const float* x_tet4, float* x_fine,
+                                           std::int32_t block_begin, std::int32_t block_end) noexcept {
   for (std::int32_t block = block_begin; block < block_end; ++block) {
     BlockSums sums;
     const std::int32_t begin = b.block_offsets[block];
-    accumulate(weights_at(begin), b.columns + begin, b.block_offsets[block + 1] - begin, x_tet4, sums);
+    accumulate(b.weights + static_cast<std::ptrdiff_t>(begin) * kPoseBlockRows, b.columns + begin, b.block_offsets[block + 1] - begin,
+               x_tet4, sums);
     storeBlock(sums, b.lane_rows + static_cast<std::ptrdiff_t>(block) * kPoseBlockRows, x_fine);
   }
-}
-
-TETRIG_MULTIVERSION void applyFloatWeights(const BlockedPoseTransferView& b, const float* x_tet4, float* x_fine,
-                                           std::int32_t block_begin, std::int32_t block_end) noexcept {
-  sumBlocks(
-      b, [&b](std::int32_t entry) { return FloatWeights{b.weights + static_cast<std::ptrdiff_t>(entry) * kPoseBlockRows}; },
-      x_tet4, x_fine, block_begin, block_end);
 }
 
 }  // namespace
@@ -191,6 +179,5 @@ void applyPoseTransferBlocked(const BlockedPoseTransferView& b, const float* x_t
                               std::int32_t block_end) noexcept {
   applyFloatWeights(b, x_tet4, x_fine, block_begin, block_end);
 }
-
 
 }  // namespace tetrig

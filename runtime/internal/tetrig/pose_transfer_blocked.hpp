@@ -58,8 +58,7 @@ struct BlockedPoseTransfer {
   // Bytes the product streams: offsets, columns, weights and lane rows.
   std::int64_t bytes() const noexcept {
     return static_cast<std::int64_t>(block_offsets.size() * sizeof(std::int32_t) + columns.size() * sizeof(std::uint16_t) +
-                                     weights.size() * sizeof(float) +
-                                     lane_rows.size() * sizeof(std::int32_t));
+                                     weights.size() * sizeof(float) + lane_rows.size() * sizeof(std::int32_t));
   }
   // Stored weights (zeros included) per entry of B: how much the blocking adds.
   double fill(std::int64_t b_nonzeros) const noexcept {
