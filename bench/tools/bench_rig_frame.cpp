@@ -309,7 +309,7 @@ void liveRigFrame(benchmark::State& state, bool feet, bool volume_constraint = f
   const std::size_t frames = scene->clip.frameCount();
   std::size_t f = 0;
   std::uint64_t counter = 0;
-  std::int64_t step_ns = 0, pose_ns = 0, prepare_ns = 0, iterations = 0, guarded_solves = 0;
+  std::int64_t step_ns = 0, pose_ns = 0, prepare_ns = 0, iterations = 0, guarded_solves = 0, guarded_tets = 0;
   for (auto _ : state) {
     playback.fillFrame(f, counter++, *frame);
     const tetrig::LiveFrameStats s = live.processFrame(*frame, tetrig::StepBudget{3}, fine.data(), nullptr);
@@ -320,6 +320,7 @@ void liveRigFrame(benchmark::State& state, bool feet, bool volume_constraint = f
     prepare_ns += s.prepare_ns;
     iterations += s.step.iterations;
     guarded_solves += s.step.guarded_solves;
+    guarded_tets += s.step.guarded_tets;
     f = (f + 1) % frames;
   }
   const auto n = static_cast<double>(state.iterations());
@@ -327,7 +328,10 @@ void liveRigFrame(benchmark::State& state, bool feet, bool volume_constraint = f
   state.counters["pose_transfer_us"] = static_cast<double>(pose_ns) / n * 1e-3;
   if (volume_constraint || after_publish || landing || settings != Settings::kVariant) state.counters["prepare_us"] = static_cast<double>(prepare_ns) / n * 1e-3;
   state.counters["iterations"] = static_cast<double>(iterations) / n;
-  if (implicit_guard || settings == Settings::kDefaults) state.counters["guarded_solves"] = static_cast<double>(guarded_solves) / n;  // global steps that held tets
+  if (implicit_guard || settings == Settings::kDefaults) {
+    state.counters["guarded_solves"] = static_cast<double>(guarded_solves) / n;  // global steps that held tets
+    state.counters["guarded_tets"] = static_cast<double>(guarded_tets) / n;      // tets held at the frame's last rotation pass
+  }
 }
 void BM_LiveRigFrame(benchmark::State& state) { liveRigFrame(state, false); }
 void BM_LiveRigFrameFeet(benchmark::State& state) { liveRigFrame(state, true); }

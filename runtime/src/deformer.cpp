@@ -402,8 +402,7 @@ void DeformerImpl::buildRigidGroupsAndCoefficients(const DeformerSetup& setup) {
             setup.guarded_tet_count < 0 ? tet_count_ : std::min(setup.guarded_tet_count, tet_count_));
     if (options_.inversion_guard_solves > 0) {
       const auto guarded = static_cast<size_t>(std::count_if(guard_.begin(), guard_.end(), [](float k) { return k > 0.0f; }));
-      guarded_slot_.assign(guarded, 0);
-      guarded_coef_.assign(guarded, 0.0);
+      guarded_.assign(guarded, GuardedTet{});
       guard_det_.assign(guard_.size(), 1.0f);
       for (AlignedVector<double>* v : {&cg_r_, &cg_z_, &cg_p_, &cg_lp_})
         v->assign(static_cast<size_t>(vertex_count_) * kVectorStride, 0.0);
@@ -599,7 +598,8 @@ bool DeformerImpl::setLinearConstraint(std::span<const double> g, double c) noex
   const double rest_dot = dot(constraint_g_.data(), rest_solver_.data(), constraint_g_.size());
   const size_t free4 = static_cast<size_t>(free_count_) * kVectorStride;
   std::copy_n(constraint_g_.data(), free4, constraint_z_.data());
-  if (free_count_ > 0) factor_.solveInPlace(constraint_z_.data());
+  // g is zero but at the body boundary's vertices: the forward pass skips the supernodes it does not reach.
+  if (free_count_ > 0) factor_.solveInPlace(constraint_z_.data(), /*skip_zero_nodes=*/true);
   const double gz = dot(constraint_g_.data(), constraint_z_.data(), free4);
   // L_ff is positive definite: g_f . z > 0 unless g_f = 0 (nothing free to move), or not finite.
   if (!(gz > 0.0) || !std::isfinite(gz) || !std::isfinite(rest_dot)) return false;
@@ -671,9 +671,9 @@ StepStats DeformerImpl::step(const HandleTargets& targets, const StepBudget& bud
           rotationPass(blocks_.data(), block_count, u_.data(), has_groups ? nullptr : delta_.data(),
                        options_.rotation_steps, exact_lanes_.data(), static_cast<float>(options_.rotation_relaxation - 1.0),
                        volumeWeights(), guard(), static_cast<float>(options_.inversion_guard_threshold),
-                       guarded_slot_.empty() ? nullptr : guard_det_.data());
+                       guarded_.empty() ? nullptr : guard_det_.data());
       stats.energy = pass.energy;
-      if (!guarded_slot_.empty()) collectGuardedTets();
+      if (!guarded_.empty()) collectGuardedTets();
       stats.exact_rotations += pass.exact_fallbacks;
       std::int64_t rigid_ns = 0;
       if (has_groups) {

@@ -29,22 +29,10 @@
 
 #include <algorithm>
 #include <array>
+#include <span>
 
 namespace tetrig {
 namespace {
-
-// A tet's corner offsets and rest edge inverse E^-1, from its block and lane.
-struct GuardedTet {
-  std::array<std::int32_t, 4> corner;
-  Eigen::Matrix3d einv;
-};
-
-GuardedTet guardedTet(const TetBlock& block, int l) {
-  GuardedTet t;
-  for (int c = 0; c < 4; ++c) t.corner[static_cast<size_t>(c)] = block.corner_offset[c][l];
-  for (int i = 0; i < 9; ++i) t.einv(i / 3, i % 3) = block.edge_inverse[i][l];
-  return t;
-}
 
 // H = [v_0 - v_3, v_1 - v_3, v_2 - v_3] E^-1 of the displacements v (solver order, stride 4).
 Eigen::Matrix3d gradientOf(const GuardedTet& t, const double* v) {
@@ -75,32 +63,44 @@ void scatterGradient(const GuardedTet& t, const Eigen::Matrix3d& x, double* out)
 void DeformerImpl::collectGuardedTets() {
   // det F of every slot from the rotation pass (float, as the explicit guard's); most tets are
   // above tau, so this is a scan of two float arrays. alpha as the explicit guard's scalar form
-  // (inversionGuardTerm), without its push cap.
+  // (inversionGuardTerm), without its push cap. Each held tet's corners and E^-1 are gathered here
+  // once (16 lanes apart in its block), for the two or more passes over them in the solve.
   const double tau = options_.inversion_guard_threshold;
+  const auto tau_f = static_cast<float>(tau);
   std::size_t n = 0;
-  for (size_t s = 0; s < guard_.size(); ++s) {
-    if (!(guard_det_[s] < tau) || guard_[s] <= 0.0f) continue;  // J >= tau, unguarded, padding; NaN too
-    const double alpha = inversionGuardTerm(guard_[s], tau, guard_det_[s], 0.0, /*push_cap=*/false).alpha;
-    guarded_slot_[n] = static_cast<std::int32_t>(s);
-    guarded_coef_[n] = alpha * blocks_[s / kTetBlockWidth].weight[s % kTetBlockWidth];
-    ++n;
+  for (size_t b = 0; b < blocks_.size(); ++b) {
+    const float* det = &guard_det_[b * kTetBlockWidth];
+    // A block at a time: most hold no squashed tet, and this test of 16 lanes is one vector compare.
+    bool any = false;
+    for (size_t l = 0; l < kTetBlockWidth; ++l) any |= det[l] <= tau_f;  // <=: every float below tau
+    if (!any) continue;
+    const TetBlock& block = blocks_[b];
+    for (size_t l = 0; l < kTetBlockWidth; ++l) {
+      const size_t s = b * kTetBlockWidth + l;
+      if (!(guard_det_[s] < tau) || guard_[s] <= 0.0f) continue;  // J >= tau, unguarded, padding; NaN too
+      const double alpha = inversionGuardTerm(guard_[s], tau, guard_det_[s], 0.0, /*push_cap=*/false).alpha;
+      GuardedTet& t = guarded_[n++];
+      t.slot = static_cast<std::int32_t>(s);
+      for (size_t c = 0; c < 4; ++c) t.corner[c] = block.corner_offset[c][l];
+      for (int i = 0; i < 9; ++i) t.einv(i / 3, i % 3) = block.edge_inverse[i][l];
+      t.coef = alpha * block.weight[l];
+    }
   }
   guarded_count_ = n;
 }
 
 void DeformerImpl::implicitGuardSolve() {
   const size_t free4 = static_cast<size_t>(free_count_) * kVectorStride;
-  const auto tetOf = [this](std::int32_t s) { return guardedTet(blocks_[static_cast<size_t>(s / kTetBlockWidth)], s % kTetBlockWidth); };
-  // r_0 = sum_j alpha_j a_j G_j^T (R_j - I - H_j(u_0)), free components only.
+  const std::span<const GuardedTet> held(guarded_.data(), guarded_count_);
+  // r_0 = sum_j alpha_j a_j G_j^T (R_j - I - H_j(u_0)), free components only. R_j is read here, not
+  // when the tet was gathered: the frame's prediction and guide may have turned it since.
   std::fill(cg_r_.begin(), cg_r_.end(), 0.0);
-  for (size_t i = 0; i < guarded_count_; ++i) {
-    const std::int32_t s = guarded_slot_[i];
-    const TetBlock& block = blocks_[static_cast<size_t>(s / kTetBlockWidth)];
-    const int l = s % kTetBlockWidth;
-    const GuardedTet t = guardedTet(block, l);
+  for (const GuardedTet& t : held) {
+    const TetBlock& block = blocks_[static_cast<size_t>(t.slot / kTetBlockWidth)];
+    const int l = t.slot % kTetBlockWidth;
     const Eigen::Quaternionf q(block.rotation[0][l], block.rotation[1][l], block.rotation[2][l], block.rotation[3][l]);
     const Eigen::Matrix3d target = q.cast<double>().normalized().toRotationMatrix() - Eigen::Matrix3d::Identity();
-    scatterGradient(t, guarded_coef_[i] * (target - gradientOf(t, u_.data())), cg_r_.data());
+    scatterGradient(t, t.coef * (target - gradientOf(t, u_.data())), cg_r_.data());
   }
   std::fill(cg_r_.begin() + static_cast<std::ptrdiff_t>(free4), cg_r_.end(), 0.0);
   const auto dot3 = [free4](const double* a, const double* b) {
@@ -112,17 +112,17 @@ void DeformerImpl::implicitGuardSolve() {
   std::copy(cg_r_.begin(), cg_r_.end(), cg_z_.begin());
   factor_.solveInPlace(cg_z_.data(), /*skip_zero_nodes=*/true);
   std::array<double, 3> rz = dot3(cg_r_.data(), cg_z_.data());
-  // p_0 = z_0 and L p_0 = L z_0 = r_0: the first step reads them where they are; they are copied
-  // out only when a further step follows (then z and r change).
+  // p_0 = z_0 and L p_0 = L z_0 = r_0: the first step reads them where they are (and p_0^T L p_0 is
+  // r_0 . z_0); they are copied out only when a further step follows (then z and r change).
   const double* p = cg_z_.data();
   const double* lp = cg_r_.data();
   for (int step = 0; step < options_.inversion_guard_solves; ++step) {
     // p^T A p = p^T L p + sum_j alpha_j a_j ||G_j p||^2, per coordinate (row c of G_j p). A p is
     // never stored: its dense part is L p, its guarded part is local.
-    std::array<double, 3> pap = dot3(p, lp);
-    for (size_t i = 0; i < guarded_count_; ++i) {
-      const Eigen::Matrix3d x = gradientOf(tetOf(guarded_slot_[i]), p);
-      for (int c = 0; c < 3; ++c) pap[static_cast<size_t>(c)] += guarded_coef_[i] * x.row(c).squaredNorm();
+    std::array<double, 3> pap = step == 0 ? rz : dot3(p, lp);
+    for (const GuardedTet& t : held) {
+      const Eigen::Matrix3d x = gradientOf(t, p);
+      for (int c = 0; c < 3; ++c) pap[static_cast<size_t>(c)] += t.coef * x.row(c).squaredNorm();
     }
     std::array<double, 3> gamma{};
     for (size_t c = 0; c < 3; ++c) gamma[c] = pap[c] > 0.0 && rz[c] > 0.0 ? rz[c] / pap[c] : 0.0;
@@ -140,10 +140,7 @@ void DeformerImpl::implicitGuardSolve() {
     for (size_t i = 0; i < free4; i += kVectorStride)
       for (size_t c = 0; c < 3; ++c) cg_r_[i + c] -= gamma[c] * lp[i + c];
     const Eigen::DiagonalMatrix<double, 3> minus_gamma(-gamma[0], -gamma[1], -gamma[2]);
-    for (size_t i = 0; i < guarded_count_; ++i) {
-      const GuardedTet t = tetOf(guarded_slot_[i]);
-      scatterGradient(t, guarded_coef_[i] * (minus_gamma * gradientOf(t, p)), cg_r_.data());
-    }
+    for (const GuardedTet& t : held) scatterGradient(t, t.coef * (minus_gamma * gradientOf(t, p)), cg_r_.data());
     std::fill(cg_r_.begin() + static_cast<std::ptrdiff_t>(free4), cg_r_.end(), 0.0);
     std::copy(cg_r_.begin(), cg_r_.end(), cg_z_.begin());
     factor_.solveInPlace(cg_z_.data());

@@ -82,20 +82,14 @@ FineVolumeConstraint::FineVolumeConstraint(const TetMesh& tet_mesh, std::int32_t
 
 template <typename T>
 double enclosedVolume(std::span<const std::int32_t> triangles, const T* x) noexcept {
-  // 6 V = sum (a - o) . ((b - a) x (c - a)) about o, a vertex of the mesh (the same sum for any o on a
-  // closed mesh): short vectors, so no digits are lost far from the origin.
+  // 6 V = sum (a - o) . ((b - a) x (c - a)) about o, a vertex of the mesh (volume_gradient.hpp).
   if (triangles.size() < 3) return 0.0;
-  const auto p = [&](std::int32_t v) {
-    const T* q = x + 3 * static_cast<std::size_t>(v);
-    return Eigen::Vector3d(q[0], q[1], q[2]);
-  };
-  const Eigen::Vector3d o = p(triangles[0]);
-  double six = 0.0;
-  for (std::size_t f = 0; f + 2 < triangles.size(); f += 3) {
-    const Eigen::Vector3d a = p(triangles[f]);
-    six += (a - o).dot((p(triangles[f + 1]) - a).cross(p(triangles[f + 2]) - a));
-  }
-  return six / 6.0;
+  return volumePass(triangles, x, *std::max_element(triangles.begin(), triangles.end()) + 1) / 6.0;
+}
+
+template <typename T>
+double FineVolumeConstraint::volume(const T* x_fine) const noexcept {
+  return volumePass(triangles_, x_fine, fine_vertices_) / 6.0;
 }
 
 template <typename T>
@@ -119,6 +113,8 @@ double FineVolumeConstraint::linearize(std::span<const double> x_tet, const T* x
 
 template double enclosedVolume(std::span<const std::int32_t>, const float*) noexcept;
 template double enclosedVolume(std::span<const std::int32_t>, const double*) noexcept;
+template double FineVolumeConstraint::volume(const float*) const noexcept;
+template double FineVolumeConstraint::volume(const double*) const noexcept;
 template double FineVolumeConstraint::value(std::span<const double>, const float*, std::span<const double>) const noexcept;
 template double FineVolumeConstraint::value(std::span<const double>, const double*, std::span<const double>) const noexcept;
 template double FineVolumeConstraint::linearize(std::span<const double>, const float*, std::span<double>, double*) noexcept;

@@ -1,4 +1,5 @@
-// The fine mesh's volume and its gradient in one pass over the triangles (volume_gradient.hpp):
+// The fine mesh's volume and its gradient in one pass over the triangles, or the volume alone
+// (volume_gradient.hpp):
 //
 //   n_t = (b - a) x (c - a),   6 dV/dv = sum_{t of v} n_t,   6 V = sum_t (a - o) . n_t  (o: any point).
 //
@@ -78,6 +79,24 @@ TETRIG_INLINE double pass(std::span<const std::int32_t> triangles, const T* x, T
   return six[0] + six[1] + six[2];
 }
 
+// 6 V alone, every product in double (a float pose's points widened as loaded): the volume to
+// ~1e-15 of each term, as the constraint's value and the fidelity measures read it.
+template <typename T>
+TETRIG_INLINE double volumeOnly(std::span<const std::int32_t> triangles, const T* x, std::int32_t vertex_count) {
+  if (triangles.size() < 3) return 0.0;
+  const std::size_t last_vertex = static_cast<std::size_t>(vertex_count) - 1;
+  const auto point = [&](std::int32_t i) {
+    return __builtin_convertvector(loadPoint(x, static_cast<std::size_t>(i), last_vertex), lanes::Vec4);
+  };
+  const lanes::Vec4 o = point(triangles[0]);
+  lanes::Vec4 six = {0, 0, 0, 0};
+  for (std::size_t f = 0; f + 2 < triangles.size(); f += 3) {
+    const lanes::Vec4 a = point(triangles[f]);
+    six += (a - o) * cross(point(triangles[f + 1]) - a, point(triangles[f + 2]) - a);
+  }
+  return six[0] + six[1] + six[2];
+}
+
 }  // namespace
 
 TETRIG_MULTIVERSION double volumeGradientPass(std::span<const std::int32_t> triangles, const float* x, float* gradient4,
@@ -88,6 +107,14 @@ TETRIG_MULTIVERSION double volumeGradientPass(std::span<const std::int32_t> tria
 TETRIG_MULTIVERSION double volumeGradientPass(std::span<const std::int32_t> triangles, const double* x, double* gradient4,
                                               std::int32_t vertex_count) noexcept {
   return pass(triangles, x, gradient4, vertex_count);
+}
+
+TETRIG_MULTIVERSION double volumePass(std::span<const std::int32_t> triangles, const float* x, std::int32_t vertex_count) noexcept {
+  return volumeOnly(triangles, x, vertex_count);
+}
+
+TETRIG_MULTIVERSION double volumePass(std::span<const std::int32_t> triangles, const double* x, std::int32_t vertex_count) noexcept {
+  return volumeOnly(triangles, x, vertex_count);
 }
 
 }  // namespace tetrig

@@ -24,5 +24,8 @@ double volumeGradientPass(std::span<const std::int32_t> triangles, const float* 
                           std::int32_t vertex_count) noexcept;
 double volumeGradientPass(std::span<const std::int32_t> triangles, const double* x, double* gradient4,
                           std::int32_t vertex_count) noexcept;
+// The same 6 V without the gradient (enclosedVolume's kernel).
+double volumePass(std::span<const std::int32_t> triangles, const float* x, std::int32_t vertex_count) noexcept;
+double volumePass(std::span<const std::int32_t> triangles, const double* x, std::int32_t vertex_count) noexcept;
 
 }  // namespace tetrig

@@ -16,11 +16,21 @@
 #include <Eigen/Geometry>
 #include <Eigen/SparseCore>
 
+#include <array>
 #include <cstdint>
 #include <span>
 #include <vector>
 
 namespace tetrig {
+
+// A tet the implicit inversion guard holds, gathered once from its block (inversion_guard.cpp): its
+// slot, corner offsets (solver order, stride 4), rest edge inverse E^-1 and alpha_j a_j.
+struct GuardedTet {
+  std::int32_t slot = 0;
+  std::array<std::int32_t, 4> corner{};
+  Eigen::Matrix3d einv;
+  double coef = 0.0;
+};
 
 class DeformerImpl {
  public:
@@ -134,9 +144,8 @@ class DeformerImpl {
   // The kernels' (explicit) guard; nullptr when the guard is implicit.
   const float* guard() const { return guard_.empty() || options_.inversion_guard_solves > 0 ? nullptr : guard_.data(); }
   // Implicit guard (options_.inversion_guard_solves > 0; inversion_guard.cpp): the tets squashed
-  // below tau at the last rotation pass, with alpha_j a_j, and the conjugate-gradient vectors.
-  std::vector<std::int32_t> guarded_slot_;
-  std::vector<double> guarded_coef_;
+  // below tau at the last rotation pass, and the conjugate-gradient vectors.
+  std::vector<GuardedTet> guarded_;
   AlignedVector<float> guard_det_;  // det F per slot at the last rotation pass (written by it)
   std::size_t guarded_count_ = 0;
   AlignedVector<double> cg_r_, cg_z_, cg_p_, cg_lp_;

@@ -50,9 +50,7 @@ class FineVolumeConstraint {
 
   // Enclosed volume of a fine pose (#fine*3).
   template <typename T>
-  double volume(const T* x_fine) const noexcept {
-    return enclosedVolume(triangles_, x_fine);
-  }
+  double volume(const T* x_fine) const noexcept;
 
   // At the pose x_tet (#tetV*3, mesh order) whose fine pose is x_fine (= B x_tet, #fine*3): writes
   // g (#tetV*3) and returns c, so that g . x = c keeps the rest volume to first order. Returns the
