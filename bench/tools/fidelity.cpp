@@ -252,9 +252,16 @@ struct Config {
   int frame_count = 0;  // 0: to the end
   bool quiet = false;
   tetrig::LiveRigOptions live;  // its solver: the shared flags (tools/solver_flags.hpp); the rest: this tool's experiments
-  int reference_guard_solves = 0;  // --reference-guard-solves: the reference's CG steps (set to the live rig's when not given)
+  // --reference-guard-solves: the reference's CG steps per iteration (0 until parsed: then
+  // kReferenceGuardSolves, or the live rig's when it takes more).
+  int reference_guard_solves = 0;
   const Rig* coarse = nullptr;  // --coarse-rig
 };
+
+// The reference's conjugate-gradient steps per iteration of the implicit guard, unless
+// --reference-guard-solves says otherwise: each global step of the guarded energy solved further than
+// the live rig's one step, so that the reference converges in its iteration cap.
+constexpr int kReferenceGuardSolves = 4;
 
 nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::drivers::C3DClip& clip,
                       const std::string& clip_name, int k, const Config& cfg) {
@@ -282,7 +289,7 @@ nlohmann::json runOne(const Rig& rig, const Measurer& measurer, const tetrig::dr
   const bool keep_volume = solver.volume_constraint && !live.volumeNotKept();
   reference_setup.options.linear_constraint = keep_volume;
   tetrig::Deformer reference(rig.tet_mesh, reference_setup);
-  // With --volume-constraint the reference keeps the fine volume too, linearized again every 25
+  // Keeping the volume (the default), the reference keeps the fine volume too, linearized again every 25
   // iterations (so it converges to the constrained minimum).
   std::unique_ptr<tetrig::FineVolumeConstraint> constraint;
   std::vector<double> constraint_g, constraint_fine;
@@ -559,17 +566,13 @@ int main(int argc, char** argv) {
                  "Volume term's share w of each tet's energy, live rig and reference alike (docs/deformation.md; default 0)")
       ->check(CLI::Range(0.0, 0.99))
       ->group(kExperiments);
-  app.add_flag_callback(
-         "--volume-constraint", [&cfg] { cfg.live.solver.volume_constraint = true; },
-         "The same as --keep-volume: the fine mesh's enclosed volume kept at rest, live rig and reference alike")
-      ->group(kExperiments);
   app.add_option("--volume-constraint-refresh", cfg.live.solver.volume_constraint_refresh_frames,
                  "Volume constraint: frames between linearizations of its gradient (default 1: every frame)")
       ->check(CLI::Range(1, 1000))
       ->group(kExperiments);
   app.add_option("--reference-guard-solves", cfg.reference_guard_solves,
-                 "Implicit inversion guard: the reference's conjugate-gradient steps per iteration (default: the live "
-                 "rig's --inversion-guard-solves). The same energy, its global steps solved further")
+                 "Implicit inversion guard: the reference's conjugate-gradient steps per iteration (default 4, or the "
+                 "live rig's --inversion-guard-solves when more). The same energy, its global steps solved further")
       ->check(CLI::Range(1, 64));
   CLI11_PARSE(app, argc, argv);
   try {
@@ -577,7 +580,8 @@ int main(int argc, char** argv) {
     const tetrig::SolverSettings& solver = cfg.live.solver;
     if (cfg.reference_guard_solves > 0 && solver.inversion_guard_solves == 0)
       throw std::invalid_argument("--reference-guard-solves needs the implicit inversion guard: give --inversion-guard-solves too");
-    if (cfg.reference_guard_solves == 0) cfg.reference_guard_solves = solver.inversion_guard_solves;
+    if (cfg.reference_guard_solves == 0 && solver.inversion_guard_solves > 0)
+      cfg.reference_guard_solves = std::max(kReferenceGuardSolves, solver.inversion_guard_solves);
     const std::vector<int> ks = parseIterations(iterations);
     const Rig rig = tetrig::loadRigFile(cfg.rig_path);
     if (solver.volume_constraint &&
@@ -597,16 +601,7 @@ int main(int argc, char** argv) {
                           {"body_tets", rig.body_tet_count},
                           {"reference_every", cfg.reference_every},
                           {"solver", tetrig::tools::solverJson(solver)},
-                          {"relax", solver.rotation_relaxation},
-                          {"volume_weight", solver.volume_weight},
-                          {"volume_constraint", solver.volume_constraint},
-                          {"volume_constraint_refresh_frames", solver.volume_constraint_refresh_frames},
-                          {"after_publish_iterations", solver.after_publish_iterations},
-                          {"inversion_guard", solver.inversion_guard},
-                          {"inversion_guard_threshold", solver.inversion_guard_threshold},
-                          {"inversion_guard_solves", solver.inversion_guard_solves},
                           {"reference_guard_solves", cfg.reference_guard_solves},
-                          {"extrapolate", solver.rotation_extrapolation},
                           {"runs", nlohmann::json::array()}};
     // The coarse level the live rig will use: --coarse-rig, else the rig's own unless --no-coarse.
     const Rig* coarse = cfg.coarse != nullptr ? cfg.coarse : solver.use_coarse_level ? rig.coarse.get() : nullptr;

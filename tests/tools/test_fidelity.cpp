@@ -2,7 +2,7 @@
 // the HDM05 clip for a few hundred frames. What a user of the tool relies on: the JSON holds one run
 // per iteration count with the documented keys; more iterations per frame land nearer the converged
 // pose; the converged reference is never above the budgeted result's energy; the temporal prediction
-// of the warm start (--extrapolate 1) lands nearer than the plain warm start (the default); bad
+// of the warm start (the default) lands nearer than the plain warm start (--no-predict); bad
 // arguments exit non-zero with one line naming the problem.
 #include "run_command.hpp"
 #include "small_rig.hpp"
@@ -33,6 +33,7 @@
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <string_view>
 
 namespace tetrig {
 namespace {
@@ -42,9 +43,17 @@ using test::TempDir;
 using ToolRun = test::CommandRun;
 
 // The tests measure each mechanism against the plain chain: every run starts from
-// SolverSettings::plain() by flags (a later flag overrides these).
-ToolRun fidelity(const std::string& args, const TempDir& dir) {
-  const std::string plain = "--no-predict --no-keep-volume --inversion-guard 0 --inversion-guard-solves 0 --inversion-guard-threshold 0.5 ";
+// SolverSettings::plain() by flags (a later numeric flag overrides these). `keep` leaves one switch
+// of the plain chain out, so the tool's default turns that mechanism on: "prediction" (no
+// --no-predict), "volume" (no --no-keep-volume), or "defaults" (no plain flags at all: the tool's
+// defaults, the accurate settings every tool shares).
+ToolRun fidelity(const std::string& args, const TempDir& dir, std::string_view keep = {}) {
+  std::string plain;
+  if (keep != "defaults") {
+    if (keep != "prediction") plain += "--no-predict ";
+    if (keep != "volume") plain += "--no-keep-volume ";
+    plain += "--inversion-guard 0 --inversion-guard-solves 0 --inversion-guard-threshold 0.5 ";
+  }
   return test::runCommand(TETRIG_FIDELITY_EXE, plain + args, dir.path());
 }
 
@@ -372,7 +381,7 @@ TEST_F(FidelityTool, TheRigidPelvisLeavesTheHipCreaseToTheSolve) {
   const auto json = dir.path() / "squats.json";
   const ToolRun run = test::runCommand(TETRIG_FIDELITY_EXE,
                                        "--rig '" + rig_path.string() + "' --c3d '" + clip_->string() +
-                                           "' --frames 3071 --reference-every 1000 --iterations 3 --reference-guard-solves 4 -q --json '" +
+                                           "' --frames 3071 --reference-every 1000 --iterations 3 -q --json '" +
                                            json.string() + "'",
                                        dir.path());
   ASSERT_EQ(run.status, 0) << run.err;
@@ -454,7 +463,7 @@ TEST_F(FidelityTool, TemporalPredictionLandsNearerThanThePlainWarmStart) {
   const TempDir dir;
   const auto plain = dir.path() / "plain.json", predicted = dir.path() / "predicted.json";
   ASSERT_EQ(fidelity(common() + "--iterations 3 --json '" + plain.string() + "'", dir).status, 0);
-  ASSERT_EQ(fidelity(common() + "--iterations 3 --extrapolate 1 --json '" + predicted.string() + "'", dir).status, 0);
+  ASSERT_EQ(fidelity(common() + "--iterations 3 --json '" + predicted.string() + "'", dir, "prediction").status, 0);
   const double p = readJson(plain)["runs"][0]["rms_error_mm"]["median"].get<double>();
   const double q = readJson(predicted)["runs"][0]["rms_error_mm"]["median"].get<double>();
   std::printf("SMPL (800 tet vertices) + HDM05, frames 0-239, 3 iterations: median body RMS error to converged %.2f mm plain, "
@@ -471,7 +480,7 @@ TEST_F(FidelityTool, TheCoarseLevelLandsNearerThanTheLiveDefault) {
   ASSERT_EQ(fidelity(common() + "--iterations 3 --json '" + plain.string() + "'", dir).status, 0);
   const ToolRun rc = fidelity(common() + with_coarse + "--iterations 3 --json '" + coarse.string() + "'", dir);
   ASSERT_EQ(rc.status, 0) << rc.err;
-  ASSERT_EQ(fidelity(common() + with_coarse + "--iterations 3 --extrapolate 1 --json '" + both.string() + "'", dir).status, 0);
+  ASSERT_EQ(fidelity(common() + with_coarse + "--iterations 3 --json '" + both.string() + "'", dir, "prediction").status, 0);
   const nlohmann::json jc = readJson(coarse);
   EXPECT_EQ(jc["coarse_iterations"], 5);
   EXPECT_GT(jc["coarse_tets"].get<int>(), 0);
@@ -512,9 +521,9 @@ TEST_F(FidelityTool, TheVolumeTermKeepsTheVolume) {
   const ToolRun r = fidelity(args + "--volume-weight 0.9 --json '" + kept.string() + "'", dir);
   ASSERT_EQ(r.status, 0) << r.err;
   const nlohmann::json jp = readJson(plain), jk = readJson(kept);
-  EXPECT_EQ(jp["volume_weight"].get<double>(), 0.0);
-  EXPECT_EQ(jk["volume_weight"].get<double>(), 0.9);
-  EXPECT_EQ(jk["inversion_guard"].get<double>(), 0.0);
+  EXPECT_EQ(jp["solver"]["volume_weight"].get<double>(), 0.0);
+  EXPECT_EQ(jk["solver"]["volume_weight"].get<double>(), 0.9);
+  EXPECT_EQ(jk["solver"]["inversion_guard"].get<double>(), 0.0);
   const auto value = [](const nlohmann::json& j, const char* key) { return j["runs"][0][key].get<double>(); };
   const double plain_conv = value(jp, "volume_change_converged_max"), kept_conv = value(jk, "volume_change_converged_max");
   const double plain_budget = value(jp, "volume_change_max"), kept_budget = value(jk, "volume_change_max");
@@ -541,10 +550,13 @@ TEST_F(FidelityTool, TheReferenceMaySolveTheImplicitGuardFurther) {
   const std::string args = common_all() + "--frames 3 --reference-every 2 --iterations 1 --inversion-guard 2 --inversion-guard-solves 1 ";
   const ToolRun r = fidelity(args + "--reference-guard-solves 3 --json '" + out.string() + "'", dir);
   ASSERT_EQ(r.status, 0) << r.err;
-  EXPECT_EQ(readJson(out)["inversion_guard_solves"].get<int>(), 1);
+  EXPECT_EQ(readJson(out)["solver"]["inversion_guard_solves"].get<int>(), 1);
   EXPECT_EQ(readJson(out)["reference_guard_solves"].get<int>(), 3);
   ASSERT_EQ(fidelity(args + "--json '" + same.string() + "'", dir).status, 0);
-  EXPECT_EQ(readJson(same)["reference_guard_solves"].get<int>(), 1);  // the live rig's, by default
+  EXPECT_EQ(readJson(same)["reference_guard_solves"].get<int>(), 4);  // by default
+  const auto more = dir.path() / "more.json";
+  ASSERT_EQ(fidelity(args + "--inversion-guard-solves 6 --json '" + more.string() + "'", dir).status, 0);
+  EXPECT_EQ(readJson(more)["reference_guard_solves"].get<int>(), 6);  // never fewer than the live rig's
   const ToolRun explicit_guard = fidelity(common_all() + "--frames 3 --inversion-guard 1 --reference-guard-solves 3", dir);
   EXPECT_NE(explicit_guard.status, 0);
   EXPECT_NE(explicit_guard.err.find("--reference-guard-solves needs the implicit inversion guard"), std::string::npos)
@@ -554,7 +566,7 @@ TEST_F(FidelityTool, TheReferenceMaySolveTheImplicitGuardFurther) {
   EXPECT_NE(zero.err.find("--reference-guard-solves"), std::string::npos) << zero.err;
 }
 
-// --volume-constraint (LiveRigOptions::volume_constraint, tetrig/volume_constraint.hpp): the live
+// The volume constraint (--keep-volume, the default; tetrig/volume_constraint.hpp): the live
 // rig keeps the fine mesh's enclosed volume in every frame, and the reference converges to the
 // constrained minimum. Frames 0-1700 of HDM05 (the arms swing down, the performer bends) on the
 // 800-tet-vertex rig, 3 iterations: measured 4.2 % plain and 0.20 % with the constraint; converged
@@ -564,11 +576,11 @@ TEST_F(FidelityTool, TheVolumeConstraintKeepsTheFineVolumeInEveryFrame) {
   const auto plain = dir.path() / "plain.json", kept = dir.path() / "kept.json";
   const std::string args = common_all() + "--frames 1701 --reference-every 850 --iterations 3 ";
   ASSERT_EQ(fidelity(args + "--json '" + plain.string() + "'", dir).status, 0);
-  const ToolRun r = fidelity(args + "--volume-constraint --json '" + kept.string() + "'", dir);
+  const ToolRun r = fidelity(args + "--json '" + kept.string() + "'", dir, "volume");
   ASSERT_EQ(r.status, 0) << r.err;
   const nlohmann::json jp = readJson(plain), jk = readJson(kept);
-  EXPECT_EQ(jp["volume_constraint"].get<bool>(), false);
-  EXPECT_EQ(jk["volume_constraint"].get<bool>(), true);
+  EXPECT_EQ(jp["solver"]["keep_volume"].get<bool>(), false);
+  EXPECT_EQ(jk["solver"]["keep_volume"].get<bool>(), true);
   const auto value = [](const nlohmann::json& j, const char* key) { return j["runs"][0][key].get<double>(); };
   std::printf("HDM05 frames 0-1700, 800 tet vertices, 3 iterations: fine volume change max %.2f %% (converged %.2f %%) plain, "
               "%.2f %% (%.4f %%) with the constraint\n",
@@ -591,7 +603,7 @@ TEST_F(FidelityTool, TheVolumeConstraintHoldsFromTheFirstFrame) {
   const auto plain = dir.path() / "plain.json", kept = dir.path() / "kept.json";
   const std::string args = common_all() + "--first-frame 1600 --frames 1 --iterations 3 ";
   ASSERT_EQ(fidelity(args + "--json '" + plain.string() + "'", dir).status, 0);
-  const ToolRun r = fidelity(args + "--volume-constraint --json '" + kept.string() + "'", dir);
+  const ToolRun r = fidelity(args + "--json '" + kept.string() + "'", dir, "volume");
   ASSERT_EQ(r.status, 0) << r.err;
   const auto first = [](const std::filesystem::path& f) { return readJson(f)["runs"][0]["reference"][0]["volume_change"].get<double>(); };
   const double lost_plain = first(plain), lost_kept = first(kept);
@@ -650,11 +662,10 @@ TEST_F(FidelityTool, WithTheVolumeKeptTheKneesLandNearerWithoutTheirTerm) {
   const auto asset_rig = dir.writeBytes("asset.rig", serializeRig(asset));
   const auto knees_rig = dir.writeBytes("knees.rig", serializeRig(knees));
   const std::string args = "' --c3d '" + clip_->string() +
-                           "' --first-frame 2100 --frames 201 --reference-every 20 --iterations 3 -q --extrapolate 1 --relax 1.8 "
-                           "--inversion-guard 3 --inversion-guard-solves 1 --inversion-guard-threshold 0.7 --volume-constraint --json '";
+                           "' --first-frame 2100 --frames 201 --reference-every 20 --iterations 3 -q --reference-guard-solves 1 --json '";
   const auto a = dir.path() / "asset.json", k = dir.path() / "knees.json";
-  ASSERT_EQ(fidelity("--rig '" + asset_rig.string() + args + a.string() + "'", dir).status, 0);
-  ASSERT_EQ(fidelity("--rig '" + knees_rig.string() + args + k.string() + "'", dir).status, 0);
+  ASSERT_EQ(fidelity("--rig '" + asset_rig.string() + args + a.string() + "'", dir, "defaults").status, 0);
+  ASSERT_EQ(fidelity("--rig '" + knees_rig.string() + args + k.string() + "'", dir, "defaults").status, 0);
   const nlohmann::json ja = readJson(a)["runs"][0], jk = readJson(k)["runs"][0];
   const auto q = [](const nlohmann::json& r, const char* key, const char* p) { return r[key][p].get<double>(); };
   std::printf("HDM05 frames 2100-2300, 800 tet vertices, the volume kept: RMS median %.2f mm, worst median %.2f mm without the knees' "
