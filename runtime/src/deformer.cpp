@@ -620,8 +620,7 @@ void DeformerImpl::applyLinearConstraint() {
   // g . x = g . x_rest + g . u: the displacement part over every slot (free and handles).
   const double gu = dot(constraint_g_.data(), u_.data(), u_.size());
   const double mu = (constraint_rhs_ - gu) / constraint_gz_;
-  const size_t free4 = static_cast<size_t>(free_count_) * kVectorStride;
-  for (size_t i = 0; i < free4; ++i) u_[i] += mu * constraint_z_[i];
+  addScaled(u_.data(), mu, constraint_z_.data(), static_cast<size_t>(free_count_) * kVectorStride);
 }
 
 StepStats DeformerImpl::step(const HandleTargets& targets, const StepBudget& budget) {

@@ -128,8 +128,7 @@ void DeformerImpl::implicitGuardSolve() {
     for (size_t c = 0; c < 3; ++c) gamma[c] = pap[c] > 0.0 && rz[c] > 0.0 ? rz[c] / pap[c] : 0.0;
     // u += gamma p; then, unless this was the last step (the live setting S = 1 ends here), r -= gamma
     // A p (the dense part here, the guarded part below).
-    for (size_t i = 0; i < free4; i += kVectorStride)
-      for (size_t c = 0; c < 3; ++c) u_[i + c] += gamma[c] * p[i + c];
+    addScaledByLane(u_.data(), gamma, p, free4);
     if (step + 1 == options_.inversion_guard_solves) break;
     if (step == 0) {
       std::copy(cg_z_.begin(), cg_z_.end(), cg_p_.begin());
@@ -137,8 +136,7 @@ void DeformerImpl::implicitGuardSolve() {
       p = cg_p_.data();
       lp = cg_lp_.data();
     }
-    for (size_t i = 0; i < free4; i += kVectorStride)
-      for (size_t c = 0; c < 3; ++c) cg_r_[i + c] -= gamma[c] * lp[i + c];
+    addScaledByLane(cg_r_.data(), {-gamma[0], -gamma[1], -gamma[2]}, lp, free4);
     const Eigen::DiagonalMatrix<double, 3> minus_gamma(-gamma[0], -gamma[1], -gamma[2]);
     for (const GuardedTet& t : held) scatterGradient(t, t.coef * (minus_gamma * gradientOf(t, p)), cg_r_.data());
     std::fill(cg_r_.begin() + static_cast<std::ptrdiff_t>(free4), cg_r_.end(), 0.0);
