@@ -23,6 +23,7 @@
 // needed. Handles do not move: their components of r, z, p are kept 0.
 #include "tetrig/deformer_impl.hpp"
 #include "tetrig/rotation_kernel.hpp"
+#include "multiversion.hpp"
 #include "padded_dot.hpp"
 
 #include <Eigen/Dense>
@@ -35,7 +36,8 @@ namespace tetrig {
 namespace {
 
 // H = [v_0 - v_3, v_1 - v_3, v_2 - v_3] E^-1 of the displacements v (solver order, stride 4).
-Eigen::Matrix3d gradientOf(const GuardedTet& t, const double* v) {
+// (Forced inline, as the kernels' helpers: a call would leave the multiversioned loop's instruction set.)
+__attribute__((always_inline)) inline Eigen::Matrix3d gradientOf(const GuardedTet& t, const double* v) {
   Eigen::Matrix3d edges;
   const double* p3 = v + t.corner[3];
   for (int k = 0; k < 3; ++k) {
@@ -46,7 +48,7 @@ Eigen::Matrix3d gradientOf(const GuardedTet& t, const double* v) {
 }
 
 // out += G^T X for a per-tet 3x3 X: corner k (0..2) takes column k of X E^-T, corner 3 minus their sum.
-void scatterGradient(const GuardedTet& t, const Eigen::Matrix3d& x, double* out) {
+__attribute__((always_inline)) inline void scatterGradient(const GuardedTet& t, const Eigen::Matrix3d& x, double* out) {
   const Eigen::Matrix3d m = x * t.einv.transpose();
   double* o3 = out + t.corner[3];
   for (int k = 0; k < 3; ++k) {
@@ -55,6 +57,27 @@ void scatterGradient(const GuardedTet& t, const Eigen::Matrix3d& x, double* out)
       ok[c] += m(c, k);
       o3[c] -= m(c, k);
     }
+  }
+}
+
+// The per-tet passes over the held tets, compiled for the widest instruction set (3x3 products with
+// FMA):
+// out += sum_j alpha_j a_j G_j^T (R_j - I - H_j(u)) (out's handle components are cleared by the caller).
+TETRIG_MULTIVERSION void addGuardResidual(std::span<const GuardedTet> held, const TetBlock* blocks, const double* u, double* out) {
+  for (const GuardedTet& t : held) {
+    const TetBlock& block = blocks[t.slot / kTetBlockWidth];
+    const int l = t.slot % kTetBlockWidth;
+    const Eigen::Quaternionf q(block.rotation[0][l], block.rotation[1][l], block.rotation[2][l], block.rotation[3][l]);
+    const Eigen::Matrix3d target = q.cast<double>().normalized().toRotationMatrix() - Eigen::Matrix3d::Identity();
+    scatterGradient(t, t.coef * (target - gradientOf(t, u)), out);
+  }
+}
+
+// sum_j alpha_j a_j ||row c of G_j p||^2 for c = x, y, z, added into pap.
+TETRIG_MULTIVERSION void addGuardCurvature(std::span<const GuardedTet> held, const double* p, std::array<double, 3>& pap) {
+  for (const GuardedTet& t : held) {
+    const Eigen::Matrix3d x = gradientOf(t, p);
+    for (int c = 0; c < 3; ++c) pap[static_cast<size_t>(c)] += t.coef * x.row(c).squaredNorm();
   }
 }
 
@@ -95,13 +118,7 @@ void DeformerImpl::implicitGuardSolve() {
   // r_0 = sum_j alpha_j a_j G_j^T (R_j - I - H_j(u_0)), free components only. R_j is read here, not
   // when the tet was gathered: the frame's prediction and guide may have turned it since.
   std::fill(cg_r_.begin(), cg_r_.end(), 0.0);
-  for (const GuardedTet& t : held) {
-    const TetBlock& block = blocks_[static_cast<size_t>(t.slot / kTetBlockWidth)];
-    const int l = t.slot % kTetBlockWidth;
-    const Eigen::Quaternionf q(block.rotation[0][l], block.rotation[1][l], block.rotation[2][l], block.rotation[3][l]);
-    const Eigen::Matrix3d target = q.cast<double>().normalized().toRotationMatrix() - Eigen::Matrix3d::Identity();
-    scatterGradient(t, t.coef * (target - gradientOf(t, u_.data())), cg_r_.data());
-  }
+  addGuardResidual(held, blocks_.data(), u_.data(), cg_r_.data());
   std::fill(cg_r_.begin() + static_cast<std::ptrdiff_t>(free4), cg_r_.end(), 0.0);
   const auto dot3 = [free4](const double* a, const double* b) {
     const std::array<double, kVectorStride> d = paddedDotByLane(a, b, free4);
@@ -120,10 +137,7 @@ void DeformerImpl::implicitGuardSolve() {
     // p^T A p = p^T L p + sum_j alpha_j a_j ||G_j p||^2, per coordinate (row c of G_j p). A p is
     // never stored: its dense part is L p, its guarded part is local.
     std::array<double, 3> pap = step == 0 ? rz : dot3(p, lp);
-    for (const GuardedTet& t : held) {
-      const Eigen::Matrix3d x = gradientOf(t, p);
-      for (int c = 0; c < 3; ++c) pap[static_cast<size_t>(c)] += t.coef * x.row(c).squaredNorm();
-    }
+    addGuardCurvature(held, p, pap);
     std::array<double, 3> gamma{};
     for (size_t c = 0; c < 3; ++c) gamma[c] = pap[c] > 0.0 && rz[c] > 0.0 ? rz[c] / pap[c] : 0.0;
     // u += gamma p; then, unless this was the last step (the live setting S = 1 ends here), r -= gamma
