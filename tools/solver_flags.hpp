@@ -104,6 +104,7 @@ inline nlohmann::json solverJson(const SolverSettings& s) {
           {"inversion_guard", s.inversion_guard},
           {"inversion_guard_threshold", s.inversion_guard_threshold},
           {"inversion_guard_solves", s.inversion_guard_solves},
+          {"untangle", s.untangle},
           {"keep_volume", s.volume_constraint},
           {"volume_constraint_refresh_frames", s.volume_constraint_refresh_frames},
           {"after_publish_iterations", s.after_publish_iterations},

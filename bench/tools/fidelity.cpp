@@ -566,6 +566,10 @@ int main(int argc, char** argv) {
                  "Volume term's share w of each tet's energy, live rig and reference alike (docs/deformation.md; default 0)")
       ->check(CLI::Range(0.0, 0.99))
       ->group(kExperiments);
+  app.add_flag_callback(
+         "--no-untangle", [&cfg] { cfg.live.solver.untangle = false; },
+         "Publish each pose as the frame's iterations leave it: no relaxing of nearly inverted body tets' corners")
+      ->group(kExperiments);
   app.add_option("--volume-constraint-refresh", cfg.live.solver.volume_constraint_refresh_frames,
                  "Volume constraint: frames between linearizations of its gradient (default 1: every frame)")
       ->check(CLI::Range(1, 1000))

@@ -404,6 +404,7 @@ void DeformerImpl::buildRigidGroupsAndCoefficients(const DeformerSetup& setup) {
       const auto guarded = static_cast<size_t>(std::count_if(guard_.begin(), guard_.end(), [](float k) { return k > 0.0f; }));
       guarded_.assign(guarded, GuardedTet{});
       guard_det_.assign(guard_.size(), 1.0f);
+      if (options_.untangle) buildUntangleAdjacency();
       for (AlignedVector<double>* v : {&cg_r_, &cg_z_, &cg_p_, &cg_lp_})
         v->assign(static_cast<size_t>(vertex_count_) * kVectorStride, 0.0);
     }
@@ -692,6 +693,7 @@ StepStats DeformerImpl::step(const HandleTargets& targets, const StepBudget& bud
   }
   if (stats.exact_rotations > 0) stats.flags |= kStepExactRotations;
   stats.guarded_tets = static_cast<std::int32_t>(guarded_count_);
+  if (!guarded_.empty() && stats.iterations > 0 && !untangle_start_.empty()) (void)untangle();
   writePositions();
   stats.total_ns = nanosecondsBetween(start, Clock::now());
   return stats;

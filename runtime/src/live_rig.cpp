@@ -47,6 +47,7 @@ DeformerSetup liveSetup(const Rig& rig, const LiveRigOptions& options, bool fram
   setup.options.inversion_guard = solver.inversion_guard;
   setup.options.inversion_guard_threshold = solver.inversion_guard_threshold;
   setup.options.inversion_guard_solves = solver.inversion_guard_solves;
+  setup.options.untangle = solver.untangle;
   setup.options.linear_constraint = keepsVolume(rig, options);
   setup.guarded_tet_count = rig.body_tet_count;
   return setup;

@@ -97,6 +97,10 @@ struct DeformerOptions {
                                    // kImplicitGuardMaxK, and no push cap. 0: the explicit guard (k <= 1)
   bool linear_constraint = false;  // accept one linear equality constraint on the positions
                                    // (setLinearConstraint); 64 bytes per vertex more state
+  bool untangle = false;  // with the implicit guard: after each step's last iteration, relax the free corners of
+                          // the guarded tets whose volume ratio is below 0.1 on the same guarded energy, the
+                          // rotations held (untangle.cpp; docs/deformation.md, "Untangling the published
+                          // pose"). Only the positions the step writes change
 };
 
 // The largest k of the implicit inversion guard (DeformerOptions::inversion_guard_solves > 0).

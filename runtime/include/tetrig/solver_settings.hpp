@@ -22,6 +22,8 @@ struct SolverSettings {
   double inversion_guard = 3.0;                 // k: extra stiffness of squashed body tets, rig and coarse level
   double inversion_guard_threshold = 0.7;       // tau: the volume ratio below which the guard holds a tet
   int inversion_guard_solves = 1;               // > 0: the implicit guard (conjugate-gradient steps per iteration)
+  bool untangle = true;                         // with the implicit guard: relax the corners of nearly inverted
+                                                // body tets in each published pose (DeformerOptions::untangle)
   // Keep the fine mesh's enclosed volume at rest (FineVolumeConstraint, a Lagrange multiplier on the
   // fine rig, linearized at each frame's published pose by LiveRig::prepareNextFrame). Needs a closed
   // fine mesh: on an open one the live rig skips it (LiveRig::volumeNotKept()).
@@ -40,7 +42,7 @@ struct SolverSettings {
     s.rotation_relaxation = 1.8;
     s.inversion_guard = 0.0;
     s.inversion_guard_solves = 0;
-    s.inversion_guard_threshold = 0.5;
+    s.inversion_guard_threshold = 0.5;  // (untangle stays: without the implicit guard it does nothing)
     s.volume_constraint = false;
     return s;
   }

@@ -151,6 +151,12 @@ class DeformerImpl {
   AlignedVector<double> cg_r_, cg_z_, cg_p_, cg_lp_;
   void collectGuardedTets();
   void implicitGuardSolve();
+  // Untangling the published pose (untangle.cpp; with the implicit guard): the free vertex -> tet
+  // slot adjacency (CSR), the corners being relaxed and their marks.
+  std::vector<std::int32_t> untangle_start_, untangle_tet_, untangle_vertex_;
+  std::vector<std::uint8_t> untangle_mark_;
+  void buildUntangleAdjacency();
+  std::int32_t untangle();  // returns the body tets found below the untangling threshold
 
   // Rigid groups: CSR over tet slots.
   std::vector<std::int32_t> group_start_, group_slot_;
