@@ -94,6 +94,16 @@ class FidelityTool : public ::testing::Test {
     TETRIG_REQUIRE_DATA(clip, "mocap/hdm05/HDM_mm_01-02_03_120.c3d");
     ASSERT_NE(rig_, nullptr);
   }
+  // The rig `tetrig build-rig --mesh human_man.obj --clip HDM05 --max-marker-distance 0.15` builds
+  // (its default 2505 tet vertices, rigid marker groups, coarse level).
+  static Rig defaultRig() {
+    rigbuild::BuildRigInputs in;
+    in.mesh = test::dataPath("meshes/odedstein-meshes/human_man.obj");
+    in.clip = *clip_;
+    in.max_marker_distance = 0.15;
+    in.check_deformer = false;
+    return rigbuild::buildRig(in);
+  }
   // The fixture's 800-tet-vertex SMPL rig built with a rig description from assets/.
   static Rig withAsset(const char* description) {
     return withDescription(rigbuild::readRigDescription(std::filesystem::path(TETRIG_SOURCE_DIR) / "assets" / description));
@@ -367,12 +377,7 @@ TEST_F(FidelityTool, FeetDrivenByTheirMarkersTurnWithThem) {
 // frames 0-3070.
 TEST_F(FidelityTool, TheRigidPelvisLeavesTheHipCreaseToTheSolve) {
   const TempDir dir;
-  rigbuild::BuildRigInputs in;
-  in.mesh = test::dataPath("meshes/odedstein-meshes/human_man.obj");
-  in.clip = *clip_;
-  in.max_marker_distance = 0.15;
-  in.check_deformer = false;
-  const Rig rig = rigbuild::buildRig(in);
+  const Rig rig = defaultRig();
   const std::string pelvis = "markers:LFWT+RFWT+LBWT+RBWT";
   const auto named = std::find(rig.region_handle_names.begin(), rig.region_handle_names.end(), pelvis);
   ASSERT_NE(named, rig.region_handle_names.end()) << "the pelvis markers drive no region";
@@ -405,12 +410,7 @@ TEST_F(FidelityTool, TheRigidPelvisLeavesTheHipCreaseToTheSolve) {
 // pose, so it lands within its tolerance, not to the bit).
 TEST_F(FidelityTool, UntanglingLeavesFewerInvertedTetsAndTheConvergedPoseAlone) {
   const TempDir dir;
-  rigbuild::BuildRigInputs in;
-  in.mesh = test::dataPath("meshes/odedstein-meshes/human_man.obj");
-  in.clip = *clip_;
-  in.max_marker_distance = 0.15;
-  in.check_deformer = false;
-  const auto rig_path = dir.writeBytes("default.rig", serializeRig(rigbuild::buildRig(in)));
+  const auto rig_path = dir.writeBytes("default.rig", serializeRig(defaultRig()));
   const std::string args = "--rig '" + rig_path.string() + "' --c3d '" + clip_->string() +
                            "' --frames 1000 --reference-every 250 --iterations 3 -q ";
   const auto on = dir.path() / "on.json", off = dir.path() / "off.json";
