@@ -4,7 +4,8 @@
 // After a frame's last iteration a few body tets may still be nearly or wholly inside out (the
 // guard stiffens them, but one conjugate-gradient step per iteration does not carry them all the
 // way). Their free corners are relaxed by Gauss-Seidel on the same guarded energy with the
-// rotations of the last rotation pass held: for a vertex v,
+// rotations of the last rotation pass held, and where a tet is still inside out after that, its
+// corners and their neighbours (one ring) once more: for a vertex v,
 //
 //     E(x_v) = sum_{t of v} a_t (1 + alpha_t) ||F_t - R_t||^2,   F_t = sum_k x_k g_{t,k}^T,
 //
@@ -29,11 +30,11 @@ namespace {
 
 // Below this volume ratio (det F) a body tet's corners are relaxed after the frame's last iteration.
 constexpr float kUntangleBelow = 0.1f;
-// Gauss-Seidel sweeps over those corners. Their neighbours stay: a ring of them too (about ten times
-// the corners) left 28 frames of HDM05 with an inverted body tet instead of 49, but a frame that
-// untangles (a quarter of HDM05's) then relaxes ten times the vertices: 14 us on average became
-// over 100.
+// Gauss-Seidel sweeps over those corners.
 constexpr int kUntangleSweeps = 8;
+// Then, only where a tet is still inside out, sweeps over its corners and their neighbours (about ten
+// times the vertices: in every untangling frame, a quarter of HDM05's, that cost over 100 us).
+constexpr int kUntangleRingSweeps = 6;
 
 }  // namespace
 
@@ -57,14 +58,26 @@ void DeformerImpl::buildUntangleAdjacency() {
   forEachFreeCorner([&](size_t v, std::int32_t s) { untangle_tet_[static_cast<size_t>(fill[v]++)] = s; });
   untangle_vertex_.clear();
   untangle_vertex_.reserve(free);
+  untangle_tangled_.clear();
+  untangle_tangled_.reserve(static_cast<size_t>(tet_count_));
   untangle_mark_.assign(free, 0);
 }
 
 std::int32_t DeformerImpl::untangle() {
-  // The free corners of the body tets below kUntangleBelow at the last rotation pass.
+  // The body tets below kUntangleBelow at the last rotation pass, and their free corners.
   untangle_vertex_.clear();
-  std::int32_t tangled = 0;
+  untangle_tangled_.clear();
   const auto free = static_cast<size_t>(free_count_);
+  const auto addCorners = [&](std::int32_t s) {
+    const TetBlock& block = blocks_[static_cast<size_t>(s / kTetBlockWidth)];
+    for (int c = 0; c < 4; ++c) {
+      const auto v = static_cast<size_t>(block.corner_offset[c][s % kTetBlockWidth] / kVectorStride);
+      if (v < free && !untangle_mark_[v]) {
+        untangle_mark_[v] = 1;
+        untangle_vertex_.push_back(static_cast<std::int32_t>(v));
+      }
+    }
+  };
   for (size_t b = 0; b < blocks_.size(); ++b) {
     const float* det = &guard_det_[b * kTetBlockWidth];
     bool any = false;
@@ -73,54 +86,71 @@ std::int32_t DeformerImpl::untangle() {
     for (size_t l = 0; l < kTetBlockWidth; ++l) {
       const size_t s = b * kTetBlockWidth + l;
       if (!(guard_det_[s] < kUntangleBelow) || guard_[s] <= 0.0f) continue;  // not squashed, not a body tet, padding
-      ++tangled;
-      for (int c = 0; c < 4; ++c) {
-        const auto v = static_cast<size_t>(blocks_[b].corner_offset[c][l] / kVectorStride);
-        if (v < free && !untangle_mark_[v]) {
-          untangle_mark_[v] = 1;
-          untangle_vertex_.push_back(static_cast<std::int32_t>(v));
-        }
-      }
+      untangle_tangled_.push_back(static_cast<std::int32_t>(s));
+      addCorners(static_cast<std::int32_t>(s));
     }
   }
-  if (tangled == 0) return 0;
-  const double tau = options_.inversion_guard_threshold;
-  for (int sweep = 0; sweep < kUntangleSweeps; ++sweep) {
-    for (const std::int32_t v : untangle_vertex_) {
-      const auto offset = static_cast<std::int32_t>(kVectorStride) * v;
-      Eigen::Vector3d gradient = Eigen::Vector3d::Zero();
-      double curvature = 0.0;
-      for (std::int32_t i = untangle_start_[static_cast<size_t>(v)]; i < untangle_start_[static_cast<size_t>(v) + 1]; ++i) {
-        const std::int32_t s = untangle_tet_[static_cast<size_t>(i)];
-        const TetBlock& block = blocks_[static_cast<size_t>(s / kTetBlockWidth)];
-        const int l = s % kTetBlockWidth;
-        Eigen::Matrix3d einv, edges;
-        for (int k = 0; k < 9; ++k) einv(k / 3, k % 3) = block.edge_inverse[k][l];
-        const double* p3 = &u_[static_cast<size_t>(block.corner_offset[3][l])];
-        int corner = 3;
-        for (int k = 0; k < 3; ++k) {
-          const double* pk = &u_[static_cast<size_t>(block.corner_offset[k][l])];
-          for (int c = 0; c < 3; ++c) edges(c, k) = pk[c] - p3[c];
-          if (block.corner_offset[k][l] == offset) corner = k;
-        }
-        const Eigen::Matrix3d f = Eigen::Matrix3d::Identity() + edges * einv;  // F = I + H (rest F = I)
-        const Eigen::Quaternionf q(block.rotation[0][l], block.rotation[1][l], block.rotation[2][l], block.rotation[3][l]);
-        const Eigen::Matrix3d r = q.cast<double>().normalized().toRotationMatrix();
-        const Eigen::Vector3d g = corner < 3 ? Eigen::Vector3d(einv.row(corner).transpose()) : Eigen::Vector3d(-einv.colwise().sum().transpose());
-        double a = block.weight[l];
-        if (guard_[static_cast<size_t>(s)] > 0.0f)
-          a *= 1.0 + inversionGuardTerm(guard_[static_cast<size_t>(s)], tau, f.determinant(), 0.0, /*push_cap=*/false).alpha;
-        gradient += a * (f - r) * g;
-        curvature += a * g.squaredNorm();
-      }
-      if (!(curvature > 0.0)) continue;
-      const Eigen::Vector3d step = gradient / curvature;
-      if (!step.allFinite()) continue;
-      for (int c = 0; c < 3; ++c) u_[static_cast<size_t>(offset + c)] -= step[c];
+  if (untangle_tangled_.empty()) return 0;
+  // F of slot s at the current displacements, with the gradient g of F by its corner at `offset`
+  // (row k of E^-1 for k = 0..2, minus their sum for corner 3).
+  const auto deformation = [this](std::int32_t s, std::int32_t offset, Eigen::Vector3d* g) {
+    const TetBlock& block = blocks_[static_cast<size_t>(s / kTetBlockWidth)];
+    const int l = s % kTetBlockWidth;
+    Eigen::Matrix3d einv, edges;
+    for (int k = 0; k < 9; ++k) einv(k / 3, k % 3) = block.edge_inverse[k][l];
+    const double* p3 = &u_[static_cast<size_t>(block.corner_offset[3][l])];
+    int corner = 3;
+    for (int k = 0; k < 3; ++k) {
+      const double* pk = &u_[static_cast<size_t>(block.corner_offset[k][l])];
+      for (int c = 0; c < 3; ++c) edges(c, k) = pk[c] - p3[c];
+      if (block.corner_offset[k][l] == offset) corner = k;
     }
+    if (g != nullptr) *g = corner < 3 ? Eigen::Vector3d(einv.row(corner).transpose()) : Eigen::Vector3d(-einv.colwise().sum().transpose());
+    return Eigen::Matrix3d(Eigen::Matrix3d::Identity() + edges * einv);  // F = I + H (rest F = I)
+  };
+  const double tau = options_.inversion_guard_threshold;
+  const auto relax = [&](int sweeps) {
+    for (int sweep = 0; sweep < sweeps; ++sweep) {
+      for (const std::int32_t v : untangle_vertex_) {
+        const auto offset = static_cast<std::int32_t>(kVectorStride) * v;
+        Eigen::Vector3d gradient = Eigen::Vector3d::Zero();
+        double curvature = 0.0;
+        for (std::int32_t i = untangle_start_[static_cast<size_t>(v)]; i < untangle_start_[static_cast<size_t>(v) + 1]; ++i) {
+          const std::int32_t s = untangle_tet_[static_cast<size_t>(i)];
+          const TetBlock& block = blocks_[static_cast<size_t>(s / kTetBlockWidth)];
+          const int l = s % kTetBlockWidth;
+          Eigen::Vector3d g;
+          const Eigen::Matrix3d f = deformation(s, offset, &g);
+          const Eigen::Quaternionf q(block.rotation[0][l], block.rotation[1][l], block.rotation[2][l], block.rotation[3][l]);
+          const Eigen::Matrix3d r = q.cast<double>().normalized().toRotationMatrix();
+          double a = block.weight[l];
+          if (guard_[static_cast<size_t>(s)] > 0.0f)
+            a *= 1.0 + inversionGuardTerm(guard_[static_cast<size_t>(s)], tau, f.determinant(), 0.0, /*push_cap=*/false).alpha;
+          gradient += a * (f - r) * g;
+          curvature += a * g.squaredNorm();
+        }
+        if (!(curvature > 0.0)) continue;
+        const Eigen::Vector3d step = gradient / curvature;
+        if (!step.allFinite()) continue;
+        for (int c = 0; c < 3; ++c) u_[static_cast<size_t>(offset + c)] -= step[c];
+      }
+    }
+  };
+  relax(kUntangleSweeps);
+  // A tet still inside out: its corners' neighbours make room too (one ring more; rare, so the
+  // ring's cost stays off the frames the corners alone untangle).
+  const bool inverted = std::any_of(untangle_tangled_.begin(), untangle_tangled_.end(),
+                                    [&](std::int32_t s) { return !(deformation(s, -1, nullptr).determinant() > 0.0); });
+  if (inverted) {
+    const size_t corners = untangle_vertex_.size();
+    for (size_t i = 0; i < corners; ++i) {
+      const auto v = static_cast<size_t>(untangle_vertex_[i]);
+      for (std::int32_t j = untangle_start_[v]; j < untangle_start_[v + 1]; ++j) addCorners(untangle_tet_[static_cast<size_t>(j)]);
+    }
+    relax(kUntangleRingSweeps);
   }
   for (const std::int32_t v : untangle_vertex_) untangle_mark_[static_cast<size_t>(v)] = 0;
-  return tangled;
+  return static_cast<std::int32_t>(untangle_tangled_.size());
 }
 
 }  // namespace tetrig

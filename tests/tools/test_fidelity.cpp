@@ -405,7 +405,7 @@ TEST_F(FidelityTool, TheRigidPelvisLeavesTheHipCreaseToTheSolve) {
 // Untangling the published pose (DeformerOptions::untangle, docs/deformation.md): after each frame's
 // last iteration the corners of body tets nearly or wholly inside out are relaxed on the same
 // energy. HDM05 frames 0-999 on the default rig with the default settings: a tet at the left armpit
-// (near LUPA) is inside out in some 60 budgeted frames without it and about a fifth as many with it;
+// (near LUPA) is inside out in some 60 budgeted frames without it and a few with it;
 // the converged reference is the same in both runs (it does not untangle; it starts from the budgeted
 // pose, so it lands within its tolerance, not to the bit).
 TEST_F(FidelityTool, UntanglingLeavesFewerInvertedTetsAndTheConvergedPoseAlone) {

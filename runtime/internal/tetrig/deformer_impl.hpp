@@ -152,8 +152,8 @@ class DeformerImpl {
   void collectGuardedTets();
   void implicitGuardSolve();
   // Untangling the published pose (untangle.cpp; with the implicit guard): the free vertex -> tet
-  // slot adjacency (CSR), the corners being relaxed and their marks.
-  std::vector<std::int32_t> untangle_start_, untangle_tet_, untangle_vertex_;
+  // slot adjacency (CSR), the tets found below the threshold, the vertices being relaxed and their marks.
+  std::vector<std::int32_t> untangle_start_, untangle_tet_, untangle_tangled_, untangle_vertex_;
   std::vector<std::uint8_t> untangle_mark_;
   void buildUntangleAdjacency();
   std::int32_t untangle();  // returns the body tets found below the untangling threshold
