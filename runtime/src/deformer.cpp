@@ -693,7 +693,7 @@ StepStats DeformerImpl::step(const HandleTargets& targets, const StepBudget& bud
   }
   if (stats.exact_rotations > 0) stats.flags |= kStepExactRotations;
   stats.guarded_tets = static_cast<std::int32_t>(guarded_count_);
-  if (!guarded_.empty() && stats.iterations > 0 && !untangle_start_.empty()) (void)untangle();
+  if (!guarded_.empty() && stats.iterations > 0 && !untangle_start_.empty()) untangle();
   writePositions();
   stats.total_ns = nanosecondsBetween(start, Clock::now());
   return stats;

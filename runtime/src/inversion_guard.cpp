@@ -35,18 +35,6 @@
 namespace tetrig {
 namespace {
 
-// H = [v_0 - v_3, v_1 - v_3, v_2 - v_3] E^-1 of the displacements v (solver order, stride 4).
-// (Forced inline, as the kernels' helpers: a call would leave the multiversioned loop's instruction set.)
-__attribute__((always_inline)) inline Eigen::Matrix3d gradientOf(const GuardedTet& t, const double* v) {
-  Eigen::Matrix3d edges;
-  const double* p3 = v + t.corner[3];
-  for (int k = 0; k < 3; ++k) {
-    const double* pk = v + t.corner[static_cast<size_t>(k)];
-    for (int c = 0; c < 3; ++c) edges(c, k) = pk[c] - p3[c];
-  }
-  return edges * t.einv;
-}
-
 // out += G^T X for a per-tet 3x3 X: corner k (0..2) takes column k of X E^-T, corner 3 minus their sum.
 __attribute__((always_inline)) inline void scatterGradient(const GuardedTet& t, const Eigen::Matrix3d& x, double* out) {
   const Eigen::Matrix3d m = x * t.einv.transpose();
@@ -65,10 +53,7 @@ __attribute__((always_inline)) inline void scatterGradient(const GuardedTet& t, 
 // out += sum_j alpha_j a_j G_j^T (R_j - I - H_j(u)) (out's handle components are cleared by the caller).
 TETRIG_MULTIVERSION void addGuardResidual(std::span<const GuardedTet> held, const TetBlock* blocks, const double* u, double* out) {
   for (const GuardedTet& t : held) {
-    const TetBlock& block = blocks[t.slot / kTetBlockWidth];
-    const int l = t.slot % kTetBlockWidth;
-    const Eigen::Quaternionf q(block.rotation[0][l], block.rotation[1][l], block.rotation[2][l], block.rotation[3][l]);
-    const Eigen::Matrix3d target = q.cast<double>().normalized().toRotationMatrix() - Eigen::Matrix3d::Identity();
+    const Eigen::Matrix3d target = storedRotation(blocks, t.slot) - Eigen::Matrix3d::Identity();
     scatterGradient(t, t.coef * (target - gradientOf(t, u)), out);
   }
 }
@@ -89,26 +74,13 @@ void DeformerImpl::collectGuardedTets() {
   // (inversionGuardTerm), without its push cap. Each held tet's corners and E^-1 are gathered here
   // once (16 lanes apart in its block), for the two or more passes over them in the solve.
   const double tau = options_.inversion_guard_threshold;
-  const auto tau_f = static_cast<float>(tau);
   std::size_t n = 0;
-  for (size_t b = 0; b < blocks_.size(); ++b) {
-    const float* det = &guard_det_[b * kTetBlockWidth];
-    // A block at a time: most hold no squashed tet, and this test of 16 lanes is one vector compare.
-    bool any = false;
-    for (size_t l = 0; l < kTetBlockWidth; ++l) any |= det[l] <= tau_f;  // <=: every float below tau
-    if (!any) continue;
-    const TetBlock& block = blocks_[b];
-    for (size_t l = 0; l < kTetBlockWidth; ++l) {
-      const size_t s = b * kTetBlockWidth + l;
-      if (!(guard_det_[s] < tau) || guard_[s] <= 0.0f) continue;  // J >= tau, unguarded, padding; NaN too
-      const double alpha = inversionGuardTerm(guard_[s], tau, guard_det_[s], 0.0, /*push_cap=*/false).alpha;
-      GuardedTet& t = guarded_[n++];
-      t.slot = static_cast<std::int32_t>(s);
-      for (size_t c = 0; c < 4; ++c) t.corner[c] = block.corner_offset[c][l];
-      for (int i = 0; i < 9; ++i) t.einv(i / 3, i % 3) = block.edge_inverse[i][l];
-      t.coef = alpha * block.weight[l];
-    }
-  }
+  forEachGuardedTetBelow(tau, [&](std::int32_t s) {
+    const double alpha = inversionGuardTerm(guard_[static_cast<size_t>(s)], tau, guard_det_[static_cast<size_t>(s)], 0.0, /*push_cap=*/false).alpha;
+    GuardedTet& t = guarded_[n++];
+    t = gatherTet(blocks_.data(), s);
+    t.coef = alpha * blocks_[static_cast<size_t>(s / kTetBlockWidth)].weight[s % kTetBlockWidth];
+  });
   guarded_count_ = n;
 }
 

@@ -63,7 +63,7 @@ void DeformerImpl::buildUntangleAdjacency() {
   untangle_mark_.assign(free, 0);
 }
 
-std::int32_t DeformerImpl::untangle() {
+void DeformerImpl::untangle() {
   // The body tets below kUntangleBelow at the last rotation pass, and their free corners.
   untangle_vertex_.clear();
   untangle_tangled_.clear();
@@ -78,35 +78,20 @@ std::int32_t DeformerImpl::untangle() {
       }
     }
   };
-  for (size_t b = 0; b < blocks_.size(); ++b) {
-    const float* det = &guard_det_[b * kTetBlockWidth];
-    bool any = false;
-    for (size_t l = 0; l < kTetBlockWidth; ++l) any |= det[l] < kUntangleBelow;
-    if (!any) continue;
-    for (size_t l = 0; l < kTetBlockWidth; ++l) {
-      const size_t s = b * kTetBlockWidth + l;
-      if (!(guard_det_[s] < kUntangleBelow) || guard_[s] <= 0.0f) continue;  // not squashed, not a body tet, padding
-      untangle_tangled_.push_back(static_cast<std::int32_t>(s));
-      addCorners(static_cast<std::int32_t>(s));
-    }
-  }
-  if (untangle_tangled_.empty()) return 0;
+  forEachGuardedTetBelow(kUntangleBelow, [&](std::int32_t s) {
+    untangle_tangled_.push_back(s);
+    addCorners(s);
+  });
+  if (untangle_tangled_.empty()) return;
   // F of slot s at the current displacements, with the gradient g of F by its corner at `offset`
   // (row k of E^-1 for k = 0..2, minus their sum for corner 3).
   const auto deformation = [this](std::int32_t s, std::int32_t offset, Eigen::Vector3d* g) {
-    const TetBlock& block = blocks_[static_cast<size_t>(s / kTetBlockWidth)];
-    const int l = s % kTetBlockWidth;
-    Eigen::Matrix3d einv, edges;
-    for (int k = 0; k < 9; ++k) einv(k / 3, k % 3) = block.edge_inverse[k][l];
-    const double* p3 = &u_[static_cast<size_t>(block.corner_offset[3][l])];
-    int corner = 3;
-    for (int k = 0; k < 3; ++k) {
-      const double* pk = &u_[static_cast<size_t>(block.corner_offset[k][l])];
-      for (int c = 0; c < 3; ++c) edges(c, k) = pk[c] - p3[c];
-      if (block.corner_offset[k][l] == offset) corner = k;
+    const GuardedTet t = gatherTet(blocks_.data(), s);
+    if (g != nullptr) {
+      const auto k = static_cast<int>(std::find(t.corner.begin(), t.corner.begin() + 3, offset) - t.corner.begin());
+      *g = k < 3 ? Eigen::Vector3d(t.einv.row(k).transpose()) : Eigen::Vector3d(-t.einv.colwise().sum().transpose());
     }
-    if (g != nullptr) *g = corner < 3 ? Eigen::Vector3d(einv.row(corner).transpose()) : Eigen::Vector3d(-einv.colwise().sum().transpose());
-    return Eigen::Matrix3d(Eigen::Matrix3d::Identity() + edges * einv);  // F = I + H (rest F = I)
+    return Eigen::Matrix3d(Eigen::Matrix3d::Identity() + gradientOf(t, u_.data()));  // F = I + H (rest F = I)
   };
   const double tau = options_.inversion_guard_threshold;
   const auto relax = [&](int sweeps) {
@@ -117,13 +102,10 @@ std::int32_t DeformerImpl::untangle() {
         double curvature = 0.0;
         for (std::int32_t i = untangle_start_[static_cast<size_t>(v)]; i < untangle_start_[static_cast<size_t>(v) + 1]; ++i) {
           const std::int32_t s = untangle_tet_[static_cast<size_t>(i)];
-          const TetBlock& block = blocks_[static_cast<size_t>(s / kTetBlockWidth)];
-          const int l = s % kTetBlockWidth;
           Eigen::Vector3d g;
           const Eigen::Matrix3d f = deformation(s, offset, &g);
-          const Eigen::Quaternionf q(block.rotation[0][l], block.rotation[1][l], block.rotation[2][l], block.rotation[3][l]);
-          const Eigen::Matrix3d r = q.cast<double>().normalized().toRotationMatrix();
-          double a = block.weight[l];
+          const Eigen::Matrix3d r = storedRotation(blocks_.data(), s);
+          double a = blocks_[static_cast<size_t>(s / kTetBlockWidth)].weight[s % kTetBlockWidth];
           if (guard_[static_cast<size_t>(s)] > 0.0f)
             a *= 1.0 + inversionGuardTerm(guard_[static_cast<size_t>(s)], tau, f.determinant(), 0.0, /*push_cap=*/false).alpha;
           gradient += a * (f - r) * g;
@@ -150,7 +132,6 @@ std::int32_t DeformerImpl::untangle() {
     relax(kUntangleRingSweeps);
   }
   for (const std::int32_t v : untangle_vertex_) untangle_mark_[static_cast<size_t>(v)] = 0;
-  return static_cast<std::int32_t>(untangle_tangled_.size());
 }
 
 }  // namespace tetrig

@@ -32,6 +32,37 @@ struct GuardedTet {
   double coef = 0.0;
 };
 
+// Slot s's corners and E^-1 from its block (coef left 0). The helpers below are forced inline, as the
+// kernels' are: a call would leave a multiversioned loop's instruction set.
+__attribute__((always_inline)) inline GuardedTet gatherTet(const TetBlock* blocks, std::int32_t s) {
+  const TetBlock& block = blocks[s / kTetBlockWidth];
+  const int l = s % kTetBlockWidth;
+  GuardedTet t;
+  t.slot = s;
+  for (size_t c = 0; c < 4; ++c) t.corner[c] = block.corner_offset[c][l];
+  for (int i = 0; i < 9; ++i) t.einv(i / 3, i % 3) = block.edge_inverse[i][l];
+  return t;
+}
+
+// H = [v_0 - v_3, v_1 - v_3, v_2 - v_3] E^-1 of the displacements v (solver order, stride 4).
+__attribute__((always_inline)) inline Eigen::Matrix3d gradientOf(const GuardedTet& t, const double* v) {
+  Eigen::Matrix3d edges;
+  const double* p3 = v + t.corner[3];
+  for (int k = 0; k < 3; ++k) {
+    const double* pk = v + t.corner[static_cast<size_t>(k)];
+    for (int c = 0; c < 3; ++c) edges(c, k) = pk[c] - p3[c];
+  }
+  return edges * t.einv;
+}
+
+// Slot s's stored rotation R as a matrix (the float quaternion normalized in double).
+__attribute__((always_inline)) inline Eigen::Matrix3d storedRotation(const TetBlock* blocks, std::int32_t s) {
+  const TetBlock& block = blocks[s / kTetBlockWidth];
+  const int l = s % kTetBlockWidth;
+  const Eigen::Quaternionf q(block.rotation[0][l], block.rotation[1][l], block.rotation[2][l], block.rotation[3][l]);
+  return q.cast<double>().normalized().toRotationMatrix();
+}
+
 class DeformerImpl {
  public:
   // The members of tetrig::Deformer of the same names, which forward here (deformer.hpp documents them).
@@ -149,6 +180,23 @@ class DeformerImpl {
   AlignedVector<float> guard_det_;  // det F per slot at the last rotation pass (written by it)
   std::size_t guarded_count_ = 0;
   AlignedVector<double> cg_r_, cg_z_, cg_p_, cg_lp_;
+  // f(slot) for every guarded tet (guard_ > 0) whose det F at the last rotation pass is below
+  // `bound`, in slot order; a block of 16 is skipped by one vector compare when none is.
+  template <class F>
+  void forEachGuardedTetBelow(double bound, F&& f) const {
+    const auto bound_f = static_cast<float>(bound);
+    for (size_t b = 0; b < blocks_.size(); ++b) {
+      const float* det = &guard_det_[b * kTetBlockWidth];
+      bool any = false;
+      for (size_t l = 0; l < kTetBlockWidth; ++l) any |= det[l] <= bound_f;  // <=: every float below bound
+      if (!any) continue;
+      for (size_t l = 0; l < kTetBlockWidth; ++l) {
+        const size_t s = b * kTetBlockWidth + l;
+        if (!(guard_det_[s] < bound) || guard_[s] <= 0.0f) continue;  // not below, unguarded, padding; NaN too
+        f(static_cast<std::int32_t>(s));
+      }
+    }
+  }
   void collectGuardedTets();
   void implicitGuardSolve();
   // Untangling the published pose (untangle.cpp; with the implicit guard): the free vertex -> tet
@@ -156,7 +204,7 @@ class DeformerImpl {
   std::vector<std::int32_t> untangle_start_, untangle_tet_, untangle_tangled_, untangle_vertex_;
   std::vector<std::uint8_t> untangle_mark_;
   void buildUntangleAdjacency();
-  std::int32_t untangle();  // returns the body tets found below the untangling threshold
+  void untangle();
 
   // Rigid groups: CSR over tet slots.
   std::vector<std::int32_t> group_start_, group_slot_;
