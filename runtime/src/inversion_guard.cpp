@@ -25,6 +25,7 @@
 #include "tetrig/rotation_kernel.hpp"
 #include "multiversion.hpp"
 #include "padded_dot.hpp"
+#include "vector_lanes.hpp"
 
 #include <Eigen/Dense>
 
@@ -35,34 +36,89 @@
 namespace tetrig {
 namespace {
 
-// out += G^T X for a per-tet 3x3 X: corner k (0..2) takes column k of X E^-T, corner 3 minus their sum.
-__attribute__((always_inline)) inline void scatterGradient(const GuardedTet& t, const Eigen::Matrix3d& x, double* out) {
-  const Eigen::Matrix3d m = x * t.einv.transpose();
-  double* o3 = out + t.corner[3];
-  for (int k = 0; k < 3; ++k) {
-    double* ok = out + t.corner[static_cast<size_t>(k)];
-    for (int c = 0; c < 3; ++c) {
-      ok[c] += m(c, k);
-      o3[c] -= m(c, k);
-    }
+// The per-tet passes over the held tets, compiled for the widest instruction set. A 3x3 matrix is
+// three columns of (x, y, z, 0) 4-lane vectors, as the displacements are stored: every product is
+// one FMA of a column with a broadcast entry, and nothing goes through memory in between.
+using lanes::Vec4;
+using lanes::load4;
+using lanes::store4;
+
+struct Columns {
+  Vec4 c[3];
+};
+
+// The columns of H = [v_0 - v_3, v_1 - v_3, v_2 - v_3] E^-1 (gradientOf's), pad lanes 0.
+TETRIG_INLINE Columns gradientColumns(const GuardedTet& t, const double* v) {
+  const Vec4 p3 = load4(v + t.corner[3]);
+  Vec4 e[3];
+  for (size_t k = 0; k < 3; ++k) {
+    e[k] = load4(v + t.corner[k]) - p3;
+    e[k][3] = 0.0;
   }
+  Columns h;
+  for (int j = 0; j < 3; ++j) h.c[j] = e[0] * t.einv(0, j) + e[1] * t.einv(1, j) + e[2] * t.einv(2, j);
+  return h;
 }
 
-// The per-tet passes over the held tets, compiled for the widest instruction set (3x3 products with
-// FMA):
+// The columns of R - I for slot s's stored rotation (the float quaternion q, normalized in double:
+// R - I = s [[-(y^2+z^2), xy-wz, xz+wy], [xy+wz, -(x^2+z^2), yz-wx], [xz-wy, yz+wx, -(x^2+y^2)]],
+// s = 2 / |q|^2).
+TETRIG_INLINE Columns rotationMinusIdentity(const TetBlock* blocks, std::int32_t slot) {
+  const TetBlock& block = blocks[slot / kTetBlockWidth];
+  const int l = slot % kTetBlockWidth;
+  const double w = block.rotation[0][l], x = block.rotation[1][l], y = block.rotation[2][l], z = block.rotation[3][l];
+  const double s = 2.0 / (w * w + x * x + y * y + z * z);
+  const double xx = x * x, yy = y * y, zz = z * z, xy = x * y, xz = x * z, yz = y * z, wx = w * x, wy = w * y, wz = w * z;
+  Columns r;
+  r.c[0] = Vec4{-(yy + zz), xy + wz, xz - wy, 0.0} * s;
+  r.c[1] = Vec4{xy - wz, -(xx + zz), yz + wx, 0.0} * s;
+  r.c[2] = Vec4{xz + wy, yz - wx, -(xx + yy), 0.0} * s;
+  return r;
+}
+
+// out += G^T X for X given by its columns: corner k (0..2) takes column k of X E^-T, corner 3 minus
+// their sum.
+TETRIG_INLINE void scatterColumns(const GuardedTet& t, const Columns& x, double* out) {
+  Vec4 sum{};
+  for (size_t k = 0; k < 3; ++k) {
+    const Vec4 m = x.c[0] * t.einv(static_cast<Eigen::Index>(k), 0) + x.c[1] * t.einv(static_cast<Eigen::Index>(k), 1) +
+                   x.c[2] * t.einv(static_cast<Eigen::Index>(k), 2);
+    double* ok = out + t.corner[k];
+    store4(ok, load4(ok) + m);
+    sum += m;
+  }
+  double* o3 = out + t.corner[3];
+  store4(o3, load4(o3) - sum);
+}
+
 // out += sum_j alpha_j a_j G_j^T (R_j - I - H_j(u)) (out's handle components are cleared by the caller).
 TETRIG_MULTIVERSION void addGuardResidual(std::span<const GuardedTet> held, const TetBlock* blocks, const double* u, double* out) {
   for (const GuardedTet& t : held) {
-    const Eigen::Matrix3d target = storedRotation(blocks, t.slot) - Eigen::Matrix3d::Identity();
-    scatterGradient(t, t.coef * (target - gradientOf(t, u)), out);
+    const Columns r = rotationMinusIdentity(blocks, t.slot), h = gradientColumns(t, u);
+    Columns x;
+    for (int j = 0; j < 3; ++j) x.c[j] = (r.c[j] - h.c[j]) * t.coef;
+    scatterColumns(t, x, out);
   }
 }
 
 // sum_j alpha_j a_j ||row c of G_j p||^2 for c = x, y, z, added into pap.
 TETRIG_MULTIVERSION void addGuardCurvature(std::span<const GuardedTet> held, const double* p, std::array<double, 3>& pap) {
+  Vec4 sum{};
   for (const GuardedTet& t : held) {
-    const Eigen::Matrix3d x = gradientOf(t, p);
-    for (int c = 0; c < 3; ++c) pap[static_cast<size_t>(c)] += t.coef * x.row(c).squaredNorm();
+    const Columns h = gradientColumns(t, p);
+    sum += (h.c[0] * h.c[0] + h.c[1] * h.c[1] + h.c[2] * h.c[2]) * t.coef;
+  }
+  for (size_t c = 0; c < 3; ++c) pap[c] += sum[c];
+}
+
+// out -= gamma (per coordinate) G^T G p summed over the held tets: the guarded part of A p.
+TETRIG_MULTIVERSION void subtractGuardProduct(std::span<const GuardedTet> held, const std::array<double, 3>& gamma, const double* p,
+                                              double* out) {
+  const Vec4 minus_gamma{-gamma[0], -gamma[1], -gamma[2], 0.0};
+  for (const GuardedTet& t : held) {
+    Columns x = gradientColumns(t, p);
+    for (int j = 0; j < 3; ++j) x.c[j] *= minus_gamma * t.coef;
+    scatterColumns(t, x, out);
   }
 }
 
@@ -123,8 +179,7 @@ void DeformerImpl::implicitGuardSolve() {
       lp = cg_lp_.data();
     }
     addScaledByLane(cg_r_.data(), {-gamma[0], -gamma[1], -gamma[2]}, lp, free4);
-    const Eigen::DiagonalMatrix<double, 3> minus_gamma(-gamma[0], -gamma[1], -gamma[2]);
-    for (const GuardedTet& t : held) scatterGradient(t, t.coef * (minus_gamma * gradientOf(t, p)), cg_r_.data());
+    subtractGuardProduct(held, gamma, p, cg_r_.data());
     std::fill(cg_r_.begin() + static_cast<std::ptrdiff_t>(free4), cg_r_.end(), 0.0);
     std::copy(cg_r_.begin(), cg_r_.end(), cg_z_.begin());
     factor_.solveInPlace(cg_z_.data());

@@ -77,19 +77,22 @@ FineVolumeConstraint::FineVolumeConstraint(const TetMesh& tet_mesh, std::int32_t
   requireClosedOriented(fine_triangles);
   boundary_ = boundaryFaces(tet_mesh, body_tets);
   gradient4_.assign(4 * static_cast<std::size_t>(tet_vertices_), 0.0);
+  points4_.assign(4 * static_cast<std::size_t>(fine_vertices_), 0.0);
   rest_volume_ = volume(rest_fine.data());
 }
 
 template <typename T>
-double enclosedVolume(std::span<const std::int32_t> triangles, const T* x) noexcept {
+double enclosedVolume(std::span<const std::int32_t> triangles, const T* x) {
   // 6 V = sum (a - o) . ((b - a) x (c - a)) about o, a vertex of the mesh (volume_gradient.hpp).
   if (triangles.size() < 3) return 0.0;
-  return volumePass(triangles, x, *std::max_element(triangles.begin(), triangles.end()) + 1) / 6.0;
+  const std::int32_t vertex_count = *std::max_element(triangles.begin(), triangles.end()) + 1;
+  std::vector<double> points4(4 * static_cast<std::size_t>(vertex_count));
+  return volumePass(triangles, x, vertex_count, points4.data()) / 6.0;
 }
 
 template <typename T>
 double FineVolumeConstraint::volume(const T* x_fine) const noexcept {
-  return volumePass(triangles_, x_fine, fine_vertices_) / 6.0;
+  return volumePass(triangles_, x_fine, fine_vertices_, points4_.data()) / 6.0;
 }
 
 template <typename T>
@@ -111,8 +114,8 @@ double FineVolumeConstraint::linearize(std::span<const double> x_tet, const T* x
   return rest_volume_ - now + dot(g.data(), x_tet.data(), x_tet.size());
 }
 
-template double enclosedVolume(std::span<const std::int32_t>, const float*) noexcept;
-template double enclosedVolume(std::span<const std::int32_t>, const double*) noexcept;
+template double enclosedVolume(std::span<const std::int32_t>, const float*);
+template double enclosedVolume(std::span<const std::int32_t>, const double*);
 template double FineVolumeConstraint::volume(const float*) const noexcept;
 template double FineVolumeConstraint::volume(const double*) const noexcept;
 template double FineVolumeConstraint::value(std::span<const double>, const float*, std::span<const double>) const noexcept;

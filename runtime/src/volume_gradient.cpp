@@ -79,22 +79,33 @@ TETRIG_INLINE double pass(std::span<const std::int32_t> triangles, const T* x, T
   return six[0] + six[1] + six[2];
 }
 
-// 6 V alone, every product in double (a float pose's points widened as loaded): the volume to
-// ~1e-15 of each term, as the constraint's value and the fidelity measures read it.
+// 6 V alone, every product in double: the volume to ~1e-15 of each term, as the constraint's value
+// and the fidelity measures read it. The points are widened to (x, y, z, 0) doubles once each into
+// points4 (a vertex is a corner of about six triangles), then each triangle reads three whole vectors.
 template <typename T>
-TETRIG_INLINE double volumeOnly(std::span<const std::int32_t> triangles, const T* x, std::int32_t vertex_count) {
+TETRIG_INLINE double volumeOnly(std::span<const std::int32_t> triangles, const T* x, std::int32_t vertex_count, double* points4) {
   if (triangles.size() < 3) return 0.0;
   const std::size_t last_vertex = static_cast<std::size_t>(vertex_count) - 1;
-  const auto point = [&](std::int32_t i) {
-    return __builtin_convertvector(loadPoint(x, static_cast<std::size_t>(i), last_vertex), lanes::Vec4);
-  };
-  const lanes::Vec4 o = point(triangles[0]);
-  lanes::Vec4 six = {0, 0, 0, 0};
-  for (std::size_t f = 0; f + 2 < triangles.size(); f += 3) {
-    const lanes::Vec4 a = point(triangles[f]);
-    six += (a - o) * cross(point(triangles[f + 1]) - a, point(triangles[f + 2]) - a);
+  for (std::size_t i = 0; i <= last_vertex; ++i) {
+    lanes::Vec4 p = __builtin_convertvector(loadPoint(x, i, last_vertex), lanes::Vec4);
+    p[3] = 0.0;
+    lanes::store4(points4 + 4 * i, p);
   }
-  return six[0] + six[1] + six[2];
+  const auto point = [points4](std::int32_t i) { return lanes::load4(points4 + 4 * static_cast<std::size_t>(i)); };
+  const lanes::Vec4 o = point(triangles[0]);
+  const auto term = [&](std::size_t f) {
+    const lanes::Vec4 a = point(triangles[f]);
+    return (a - o) * cross(point(triangles[f + 1]) - a, point(triangles[f + 2]) - a);
+  };
+  // Four sums, a triangle each in turn: one sum's chain of dependent adds would set the pace.
+  lanes::Vec4 six[4] = {};
+  const std::size_t count = triangles.size() / 3;
+  std::size_t t = 0;
+  for (; t + 4 <= count; t += 4)
+    for (std::size_t k = 0; k < 4; ++k) six[k] += term(3 * (t + k));
+  for (; t < count; ++t) six[0] += term(3 * t);
+  const lanes::Vec4 sum = (six[0] + six[1]) + (six[2] + six[3]);
+  return sum[0] + sum[1] + sum[2];
 }
 
 }  // namespace
@@ -109,12 +120,14 @@ TETRIG_MULTIVERSION double volumeGradientPass(std::span<const std::int32_t> tria
   return pass(triangles, x, gradient4, vertex_count);
 }
 
-TETRIG_MULTIVERSION double volumePass(std::span<const std::int32_t> triangles, const float* x, std::int32_t vertex_count) noexcept {
-  return volumeOnly(triangles, x, vertex_count);
+TETRIG_MULTIVERSION double volumePass(std::span<const std::int32_t> triangles, const float* x, std::int32_t vertex_count,
+                                      double* points4) noexcept {
+  return volumeOnly(triangles, x, vertex_count, points4);
 }
 
-TETRIG_MULTIVERSION double volumePass(std::span<const std::int32_t> triangles, const double* x, std::int32_t vertex_count) noexcept {
-  return volumeOnly(triangles, x, vertex_count);
+TETRIG_MULTIVERSION double volumePass(std::span<const std::int32_t> triangles, const double* x, std::int32_t vertex_count,
+                                      double* points4) noexcept {
+  return volumeOnly(triangles, x, vertex_count, points4);
 }
 
 }  // namespace tetrig

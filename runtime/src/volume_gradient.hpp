@@ -24,8 +24,9 @@ double volumeGradientPass(std::span<const std::int32_t> triangles, const float* 
                           std::int32_t vertex_count) noexcept;
 double volumeGradientPass(std::span<const std::int32_t> triangles, const double* x, double* gradient4,
                           std::int32_t vertex_count) noexcept;
-// The same 6 V without the gradient (enclosedVolume's kernel).
-double volumePass(std::span<const std::int32_t> triangles, const float* x, std::int32_t vertex_count) noexcept;
-double volumePass(std::span<const std::int32_t> triangles, const double* x, std::int32_t vertex_count) noexcept;
+// The same 6 V without the gradient (enclosedVolume's kernel), every product in double. points4:
+// vertex_count*4 scratch (overwritten with the points widened to (x, y, z, 0)).
+double volumePass(std::span<const std::int32_t> triangles, const float* x, std::int32_t vertex_count, double* points4) noexcept;
+double volumePass(std::span<const std::int32_t> triangles, const double* x, std::int32_t vertex_count, double* points4) noexcept;
 
 }  // namespace tetrig

@@ -17,8 +17,8 @@
 // volume term per tet converges too slowly to fix that in a frame's few iterations
 // (docs/fidelity.md); one constraint with a Lagrange multiplier costs one solve per frame.
 //
-// Threads: construct at load (allocates); linearize() from one thread at a time, no allocation,
-// lock or exception. `fine_triangles` must outlive this object.
+// Threads: construct at load (allocates); volume(), value() and linearize() from one thread at a
+// time (they share a scratch), no allocation, lock or exception. `fine_triangles` must outlive this object.
 #pragma once
 
 #include "tetrig/tet_mesh.hpp"
@@ -30,9 +30,10 @@
 namespace tetrig {
 
 // Volume enclosed by a closed triangle mesh (divergence theorem): triangles #F*3 vertex indices,
-// x #V*3 positions; negative when the faces point inward.
+// x #V*3 positions; negative when the faces point inward. Allocates a scratch (not for the frame path:
+// FineVolumeConstraint::volume is).
 template <typename T>
-double enclosedVolume(std::span<const std::int32_t> triangles, const T* x) noexcept;
+double enclosedVolume(std::span<const std::int32_t> triangles, const T* x);
 
 // True when every edge of the triangles is walked once each way, as often as the other: a closed
 // (watertight), consistently oriented surface, which FineVolumeConstraint needs. Load time (allocates).
@@ -77,6 +78,7 @@ class FineVolumeConstraint {
   Triangles boundary_;                       // the body tets' boundary (row-major: #*3 in a row)
   double rest_volume_ = 0.0;                 // the fine mesh's
   std::vector<double> gradient4_;            // #tetV*4 scratch: 6 dW/dx, padded (x, y, z, 0)
+  mutable std::vector<double> points4_;      // #fine*4 scratch: the fine pose widened (volume())
 };
 
 }  // namespace tetrig
