@@ -541,8 +541,8 @@ void DeformerImpl::updateConstantRhs() {
   }
 }
 
-void DeformerImpl::interpolateRotations() {
-  if (harmonic_weights_.empty()) return;
+bool DeformerImpl::interpolateRotations() {
+  if (harmonic_weights_.empty()) return false;
   bool any = false;
   for (size_t k = 0; k < oriented_regions_.size(); ++k) {
     const Eigen::Quaterniond& target = region_targets_[static_cast<size_t>(oriented_regions_[k])].rotation;
@@ -553,10 +553,10 @@ void DeformerImpl::interpolateRotations() {
     any = any || (1.0 - increment.w()) > 1e-15;
     interpolated_rotation_[k] = target;
   }
-  if (!any) return;
+  if (!any) return false;
   applyRotationIncrements(harmonic_weights_, rotation_increment_, blocks_.data(),
                           static_cast<std::int32_t>(blocks_.size()) * kTetBlockWidth);
-  rebuildDelta();
+  return true;
 }
 
 void DeformerImpl::rebuildDelta() {
@@ -631,6 +631,7 @@ StepStats DeformerImpl::step(const HandleTargets& targets, const StepBudget& bud
   updateConstantRhs();
   if (options_.update_rotations) {
     const auto t0 = Clock::now();
+    bool turned = false;
     if (!previous_rotation_.empty() && !budget.continues_frame &&
         (options_.rotation_extrapolation > 0.0 || guide_pending_)) {
       // Temporal prediction: each tet carried on by its last frame's rotation, and the frame guide
@@ -639,9 +640,10 @@ StepStats DeformerImpl::step(const HandleTargets& targets, const StepBudget& bud
                             guide_pending_ ? guide_.data() : nullptr, static_cast<float>(options_.rotation_extrapolation),
                             extrapolation_max_sin_half_);
       guide_pending_ = false;
-      rebuildDelta();
+      turned = true;
     }
-    interpolateRotations();
+    // The differential coordinates once, from the rotations both have turned.
+    if (interpolateRotations() || turned) rebuildDelta();
     stats.interpolation_ns += nanosecondsBetween(t0, Clock::now());
   }
   const auto block_count = static_cast<std::int32_t>(blocks_.size());

@@ -104,7 +104,7 @@ class DeformerImpl {
 
   bool acceptTargets(const HandleTargets& targets, std::uint32_t& flags);
   void updateConstantRhs();
-  void interpolateRotations();
+  bool interpolateRotations();  // true when it turned any tet (delta_ then needs rebuildDelta)
   void rebuildDelta();
   void rememberRotations();  // previous_rotation_ <- the current rotations (no velocity)
   void writePositions();
