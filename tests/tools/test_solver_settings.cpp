@@ -47,9 +47,9 @@ TEST(SolverSettings, TheDefaultsAreTheAccurateSettingsAndPlainIsTheFastOne) {
   const SolverSettings d;
   EXPECT_EQ(d.rotation_extrapolation, 1.0);
   EXPECT_EQ(d.rotation_relaxation, 1.8);
-  EXPECT_EQ(d.inversion_guard, 3.0);
+  EXPECT_EQ(d.inversion_guard, 4.0);
   EXPECT_EQ(d.inversion_guard_solves, 1);
-  EXPECT_EQ(d.inversion_guard_threshold, 0.7);
+  EXPECT_EQ(d.inversion_guard_threshold, 0.6);
   EXPECT_TRUE(d.volume_constraint);
   EXPECT_TRUE(d.use_coarse_level);
   EXPECT_EQ(d.after_publish_iterations, 0);

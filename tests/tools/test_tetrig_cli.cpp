@@ -299,7 +299,7 @@ TEST(TetrigCli, RunPlaysAClipAndRefusesBadInput) {
   EXPECT_CONTAINS(ok.out, "temporal prediction of each frame's start: on");
   EXPECT_CONTAINS(ok.out, "over-relaxation of the rotation update: omega 1.8");
   EXPECT_CONTAINS(ok.out,
-                  "inversion guard: body tets squashed below 0.7 of their volume up to 4 times stiffer, implicit (1 conjugate-gradient "
+                  "inversion guard: body tets squashed below 0.6 of their volume up to 5 times stiffer, implicit (1 conjugate-gradient "
                   "steps per iteration)");
   EXPECT_EQ(j["latency_us"]["prepare_next"]["count"].get<int>(),
             j["frames"].get<int>() - j["held_frames"].get<int>() - j["frames_before_start"].get<int>());
@@ -312,9 +312,9 @@ TEST(TetrigCli, RunPlaysAClipAndRefusesBadInput) {
   EXPECT_EQ(j["solver"]["after_publish_iterations"].get<int>(), 0);
   EXPECT_EQ(j["solver"]["pose_threads"].get<int>(), 1);
   EXPECT_EQ(j["solver"]["relax"].get<double>(), 1.8);
-  EXPECT_EQ(j["solver"]["inversion_guard"].get<double>(), 3.0);
+  EXPECT_EQ(j["solver"]["inversion_guard"].get<double>(), 4.0);
   EXPECT_EQ(j["solver"]["inversion_guard_solves"].get<int>(), 1);
-  EXPECT_EQ(j["solver"]["inversion_guard_threshold"].get<double>(), 0.7);
+  EXPECT_EQ(j["solver"]["inversion_guard_threshold"].get<double>(), 0.6);
   EXPECT_EQ(ok.out.find("iterations after each publish"), std::string::npos);
   // The plain settings by flags: nothing runs after publishing, nothing is announced.
   const std::string plain_stats = (dir.path() / "plain.json").string();

@@ -19,8 +19,8 @@ struct SolverSettings {
   double rotation_extrapolation_max_deg = 5.0;  // cap of a tet's predicted rotation per frame
   double rotation_relaxation = 1.8;             // omega in [1, 2): over-relaxation of each rotation update
   double volume_weight = 0.0;                   // the volume term's w (docs/deformation.md), rig and coarse level
-  double inversion_guard = 3.0;                 // k: extra stiffness of squashed body tets, rig and coarse level
-  double inversion_guard_threshold = 0.7;       // tau: the volume ratio below which the guard holds a tet
+  double inversion_guard = 4.0;                 // k: extra stiffness of squashed body tets, rig and coarse level
+  double inversion_guard_threshold = 0.6;       // tau: the volume ratio below which the guard holds a tet
   int inversion_guard_solves = 1;               // > 0: the implicit guard (conjugate-gradient steps per iteration)
   bool untangle = true;                         // with the implicit guard: relax the corners of nearly inverted
                                                 // body tets in each published pose (DeformerOptions::untangle)
