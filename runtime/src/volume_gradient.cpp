@@ -3,9 +3,10 @@
 //
 //   n_t = (b - a) x (c - a),   6 dV/dv = sum_{t of v} n_t,   6 V = sum_t (a - o) . n_t  (o: any point).
 //
-// One vertex is a 4-lane vector (x, y, z, and the next vertex's x, which the cross product drops):
-// three loads, one cross product by shuffles, three 4-lane adds into the per-vertex sums, per
-// triangle.
+// The gradient pass loads a vertex as one 4-lane vector (x, y, z, and the next vertex's x, which the
+// cross product drops): three loads, one cross product by shuffles, three 4-lane adds into the
+// per-vertex sums, per triangle. The volume-only pass widens every point to (x, y, z, 0) in double
+// once, then reads three of those per triangle.
 #include "volume_gradient.hpp"
 
 #include <algorithm>
