@@ -23,9 +23,9 @@
 // needed. Handles do not move: their components of r, z, p are kept 0.
 #include "tetrig/deformer_impl.hpp"
 #include "tetrig/rotation_kernel.hpp"
+#include "guard_columns.hpp"
 #include "multiversion.hpp"
 #include "padded_dot.hpp"
-#include "vector_lanes.hpp"
 
 #include <Eigen/Dense>
 
@@ -36,60 +36,13 @@
 namespace tetrig {
 namespace {
 
-// The per-tet passes over the held tets, compiled for the widest instruction set. A 3x3 matrix is
-// three columns of (x, y, z, 0) 4-lane vectors, as the displacements are stored: every product is
-// one FMA of a column with a broadcast entry, and nothing goes through memory in between.
+// The per-tet passes over the held tets, compiled for the widest instruction set (a 3x3 matrix as
+// three (x, y, z, 0) columns: guard_columns.hpp).
+using guard_columns::Columns;
+using guard_columns::gradientColumns;
+using guard_columns::rotationMinusIdentity;
+using guard_columns::scatterColumns;
 using lanes::Vec4;
-using lanes::load4;
-using lanes::store4;
-
-struct Columns {
-  Vec4 c[3];
-};
-
-// The columns of H = [v_0 - v_3, v_1 - v_3, v_2 - v_3] E^-1 (gradientOf's), pad lanes 0.
-TETRIG_INLINE Columns gradientColumns(const GuardedTet& t, const double* v) {
-  const Vec4 p3 = load4(v + t.corner[3]);
-  Vec4 e[3];
-  for (size_t k = 0; k < 3; ++k) {
-    e[k] = load4(v + t.corner[k]) - p3;
-    e[k][3] = 0.0;
-  }
-  Columns h;
-  for (int j = 0; j < 3; ++j) h.c[j] = e[0] * t.einv(0, j) + e[1] * t.einv(1, j) + e[2] * t.einv(2, j);
-  return h;
-}
-
-// The columns of R - I for slot s's stored rotation (the float quaternion q, normalized in double:
-// R - I = s [[-(y^2+z^2), xy-wz, xz+wy], [xy+wz, -(x^2+z^2), yz-wx], [xz-wy, yz+wx, -(x^2+y^2)]],
-// s = 2 / |q|^2).
-TETRIG_INLINE Columns rotationMinusIdentity(const TetBlock* blocks, std::int32_t slot) {
-  const TetBlock& block = blocks[slot / kTetBlockWidth];
-  const int l = slot % kTetBlockWidth;
-  const double w = block.rotation[0][l], x = block.rotation[1][l], y = block.rotation[2][l], z = block.rotation[3][l];
-  const double s = 2.0 / (w * w + x * x + y * y + z * z);
-  const double xx = x * x, yy = y * y, zz = z * z, xy = x * y, xz = x * z, yz = y * z, wx = w * x, wy = w * y, wz = w * z;
-  Columns r;
-  r.c[0] = Vec4{-(yy + zz), xy + wz, xz - wy, 0.0} * s;
-  r.c[1] = Vec4{xy - wz, -(xx + zz), yz + wx, 0.0} * s;
-  r.c[2] = Vec4{xz + wy, yz - wx, -(xx + yy), 0.0} * s;
-  return r;
-}
-
-// out += G^T X for X given by its columns: corner k (0..2) takes column k of X E^-T, corner 3 minus
-// their sum.
-TETRIG_INLINE void scatterColumns(const GuardedTet& t, const Columns& x, double* out) {
-  Vec4 sum{};
-  for (size_t k = 0; k < 3; ++k) {
-    const Vec4 m = x.c[0] * t.einv(static_cast<Eigen::Index>(k), 0) + x.c[1] * t.einv(static_cast<Eigen::Index>(k), 1) +
-                   x.c[2] * t.einv(static_cast<Eigen::Index>(k), 2);
-    double* ok = out + t.corner[k];
-    store4(ok, load4(ok) + m);
-    sum += m;
-  }
-  double* o3 = out + t.corner[3];
-  store4(o3, load4(o3) - sum);
-}
 
 // out += sum_j alpha_j a_j G_j^T (R_j - I - H_j(u)) (out's handle components are cleared by the caller).
 TETRIG_MULTIVERSION void addGuardResidual(std::span<const GuardedTet> held, const TetBlock* blocks, const double* u, double* out) {

@@ -18,12 +18,13 @@
 // guard's at the tet's current volume ratio), so it moves the pose toward the converged one, and
 // R_t, a rotation, pulls a turned-over F_t back through zero. Only the published positions change:
 // the next frame's first solve starts from the rotations, as without it.
+#include "guard_columns.hpp"
 #include "tetrig/deformer_impl.hpp"
 #include "tetrig/rotation_kernel.hpp"
 
-#include <Eigen/Dense>
-
 #include <algorithm>
+#include <array>
+#include <cmath>
 
 namespace tetrig {
 namespace {
@@ -83,37 +84,39 @@ void DeformerImpl::untangle() {
     addCorners(s);
   });
   if (untangle_tangled_.empty()) return;
-  // F of slot s at the current displacements, with the gradient g of F by its corner at `offset`
-  // (row k of E^-1 for k = 0..2, minus their sum for corner 3).
-  const auto deformation = [this](std::int32_t s, std::int32_t offset, Eigen::Vector3d* g) {
-    const GuardedTet t = gatherTet(blocks_.data(), s);
-    if (g != nullptr) {
-      const auto k = static_cast<int>(std::find(t.corner.begin(), t.corner.begin() + 3, offset) - t.corner.begin());
-      *g = k < 3 ? Eigen::Vector3d(t.einv.row(k).transpose()) : Eigen::Vector3d(-t.einv.colwise().sum().transpose());
-    }
-    return Eigen::Matrix3d(Eigen::Matrix3d::Identity() + gradientOf(t, u_.data()));  // F = I + H (rest F = I)
+  // H of slot s at the current displacements (F = I + H) and its det F, as three columns
+  // (guard_columns.hpp); dF / dx of the corner at `offset` is cornerGradient's g: (F - R) g is
+  // sum_j (h_j - (R - I)_j) g_j.
+  using guard_columns::Columns;
+  using guard_columns::Vec4;
+  const auto determinant = [this](std::int32_t s) {
+    return guard_columns::determinantOfIdentityPlus(guard_columns::gradientColumns(gatherTet(blocks_.data(), s), u_.data()));
   };
   const double tau = options_.inversion_guard_threshold;
   const auto relax = [&](int sweeps) {
     for (int sweep = 0; sweep < sweeps; ++sweep) {
       for (const std::int32_t v : untangle_vertex_) {
         const auto offset = static_cast<std::int32_t>(kVectorStride) * v;
-        Eigen::Vector3d gradient = Eigen::Vector3d::Zero();
+        Vec4 gradient{};
         double curvature = 0.0;
         for (std::int32_t i = untangle_start_[static_cast<size_t>(v)]; i < untangle_start_[static_cast<size_t>(v) + 1]; ++i) {
           const std::int32_t s = untangle_tet_[static_cast<size_t>(i)];
-          Eigen::Vector3d g;
-          const Eigen::Matrix3d f = deformation(s, offset, &g);
-          const Eigen::Matrix3d r = storedRotation(blocks_.data(), s);
+          const GuardedTet t = gatherTet(blocks_.data(), s);
+          const Columns h = guard_columns::gradientColumns(t, u_.data());
+          const Columns r = guard_columns::rotationMinusIdentity(blocks_.data(), s);
+          const auto k = static_cast<int>(std::find(t.corner.begin(), t.corner.begin() + 3, offset) - t.corner.begin());
+          const std::array<double, 3> g = guard_columns::cornerGradient(t, k);
           double a = blocks_[static_cast<size_t>(s / kTetBlockWidth)].weight[s % kTetBlockWidth];
-          if (guard_[static_cast<size_t>(s)] > 0.0f)
-            a *= 1.0 + inversionGuardTerm(guard_[static_cast<size_t>(s)], tau, f.determinant(), 0.0, /*push_cap=*/false).alpha;
-          gradient += a * (f - r) * g;
-          curvature += a * g.squaredNorm();
+          if (guard_[static_cast<size_t>(s)] > 0.0f) {
+            const double det = guard_columns::determinantOfIdentityPlus(h);
+            a *= 1.0 + inversionGuardTerm(guard_[static_cast<size_t>(s)], tau, det, 0.0, /*push_cap=*/false).alpha;
+          }
+          gradient += ((h.c[0] - r.c[0]) * g[0] + (h.c[1] - r.c[1]) * g[1] + (h.c[2] - r.c[2]) * g[2]) * a;
+          curvature += a * (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
         }
         if (!(curvature > 0.0)) continue;
-        const Eigen::Vector3d step = gradient / curvature;
-        if (!step.allFinite()) continue;
+        const Vec4 step = gradient / curvature;
+        if (!(std::isfinite(step[0]) && std::isfinite(step[1]) && std::isfinite(step[2]))) continue;
         for (int c = 0; c < 3; ++c) u_[static_cast<size_t>(offset + c)] -= step[c];
       }
     }
@@ -122,7 +125,7 @@ void DeformerImpl::untangle() {
   // A tet still inside out: its corners' neighbours make room too (one ring more; rare, so the
   // ring's cost stays off the frames the corners alone untangle).
   const bool inverted = std::any_of(untangle_tangled_.begin(), untangle_tangled_.end(),
-                                    [&](std::int32_t s) { return !(deformation(s, -1, nullptr).determinant() > 0.0); });
+                                    [&](std::int32_t s) { return !(determinant(s) > 0.0); });
   if (inverted) {
     const size_t corners = untangle_vertex_.size();
     for (size_t i = 0; i < corners; ++i) {

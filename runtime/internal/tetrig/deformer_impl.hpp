@@ -32,8 +32,9 @@ struct GuardedTet {
   double coef = 0.0;
 };
 
-// Slot s's corners and E^-1 from its block (coef left 0). The helpers below are forced inline, as the
-// kernels' are: a call would leave a multiversioned loop's instruction set.
+// Slot s's corners and E^-1 from its block (coef left 0). Forced inline, as the kernels' helpers
+// are: a call would leave a multiversioned loop's instruction set. Its matrices in the passes over
+// it: runtime/src/guard_columns.hpp.
 __attribute__((always_inline)) inline GuardedTet gatherTet(const TetBlock* blocks, std::int32_t s) {
   const TetBlock& block = blocks[s / kTetBlockWidth];
   const int l = s % kTetBlockWidth;
@@ -42,25 +43,6 @@ __attribute__((always_inline)) inline GuardedTet gatherTet(const TetBlock* block
   for (size_t c = 0; c < 4; ++c) t.corner[c] = block.corner_offset[c][l];
   for (int i = 0; i < 9; ++i) t.einv(i / 3, i % 3) = block.edge_inverse[i][l];
   return t;
-}
-
-// H = [v_0 - v_3, v_1 - v_3, v_2 - v_3] E^-1 of the displacements v (solver order, stride 4).
-__attribute__((always_inline)) inline Eigen::Matrix3d gradientOf(const GuardedTet& t, const double* v) {
-  Eigen::Matrix3d edges;
-  const double* p3 = v + t.corner[3];
-  for (int k = 0; k < 3; ++k) {
-    const double* pk = v + t.corner[static_cast<size_t>(k)];
-    for (int c = 0; c < 3; ++c) edges(c, k) = pk[c] - p3[c];
-  }
-  return edges * t.einv;
-}
-
-// Slot s's stored rotation R as a matrix (the float quaternion normalized in double).
-__attribute__((always_inline)) inline Eigen::Matrix3d storedRotation(const TetBlock* blocks, std::int32_t s) {
-  const TetBlock& block = blocks[s / kTetBlockWidth];
-  const int l = s % kTetBlockWidth;
-  const Eigen::Quaternionf q(block.rotation[0][l], block.rotation[1][l], block.rotation[2][l], block.rotation[3][l]);
-  return q.cast<double>().normalized().toRotationMatrix();
 }
 
 class DeformerImpl {
