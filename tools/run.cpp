@@ -379,6 +379,9 @@ void printSummary(const Performer& p, const SharedSource& s, double seconds, boo
               static_cast<unsigned long long>(c.budget_misses), static_cast<unsigned long long>(c.deadline_hits),
               static_cast<unsigned long long>(c.mailbox_dropped), static_cast<unsigned long long>(c.held_frames),
               static_cast<unsigned long long>(c.stale_periods), static_cast<unsigned long long>(c.frames_before_start));
+  if (c.frames > 0)
+    std::printf("  frames the solver was polling for when they came (--spin-before-frame-us): %llu of %llu\n",
+                static_cast<unsigned long long>(c.frames_spun_for), static_cast<unsigned long long>(c.frames));
   if (c.rejected_target_frames != 0 || c.rejected_poses != 0)
     std::printf("  frames with rejected marker targets %llu, rejected solved poses %llu (last pose republished; see docs/live.md)\n",
                 static_cast<unsigned long long>(c.rejected_target_frames), static_cast<unsigned long long>(c.rejected_poses));
@@ -425,6 +428,8 @@ nlohmann::json performerJson(const RunOptions& options, const Performer& p, cons
   j["rejected_marker_samples"] = c.rejected_marker_samples;
   j["stale_periods"] = c.stale_periods;
   j["frames_before_start"] = c.frames_before_start;
+  j["frames_spun_for"] = c.frames_spun_for;
+  j["spin_before_frame_us"] = options.spin_before_frame_us;
   j["deadline_hits"] = c.deadline_hits;
   j["iterations_per_frame"] = c.frames ? static_cast<double>(c.iterations) / static_cast<double>(c.frames) : 0.0;
   j["seconds"] = seconds;
@@ -596,6 +601,7 @@ void startSolver(const RunOptions& options, Performer& p, double source_rate_hz)
   loop_options.max_frames = options.frames;
   loop_options.cpu = p.cpu;
   loop_options.realtime_fifo = options.fifo;
+  loop_options.spin_before_frame_ns = static_cast<std::int64_t>(options.spin_before_frame_us * 1e3);
   loop_options.lock_memory = options.lock_memory;
   loop_options.frame_log_capacity = options.frame_log_capacity;
   loop_options.frame_log_markers = options.frame_log_markers;

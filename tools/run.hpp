@@ -60,6 +60,7 @@ struct RunOptions {
   bool force = false;                   // replace an existing stats_json or final_obj that tetrig did not write (an input never)
   int cpu = -1;
   bool fifo = false;
+  double spin_before_frame_us = 500.0;  // FrameLoopOptions::spin_before_frame_ns (0: sleep until the frame comes)
   bool lock_memory = true;
   unsigned shm_permissions = 0600;
   bool quiet = false;

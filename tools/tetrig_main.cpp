@@ -457,6 +457,10 @@ void addRunCommand(CLI::App& app, RunArgs& r) {
       ->check(CLI::Range(1, 2))
       ->group(kLatency);
   run_cmd->add_option("--cpu", run.cpu, "Pin the solver thread to this CPU")->check(CLI::Range(0, 4095))->group(kLatency);
+  run_cmd->add_option("--spin-before-frame-us", run.spin_before_frame_us,
+                      "Before each frame is due, read the frame's data into the caches and poll for it this long (default 500; 0: sleep until it comes)")
+      ->check(CLI::Range(0.0, 100000.0))
+      ->group(kLatency);
   run_cmd->add_flag("--fifo", run.fifo, "Run the solver thread under SCHED_FIFO (needs the privilege; reported when refused)")->group(kLatency);
   run_cmd->add_flag("--no-mlock", no_mlock, "Do not lock the process's memory")->group(kLatency);
   run_cmd->add_flag("--as-fast-as-possible", run.as_fast_as_possible, "Playback: as fast as the solver takes frames (each frame waits until the last was taken: none dropped; offline runs)")->group(kSources);

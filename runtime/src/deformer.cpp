@@ -758,6 +758,7 @@ bool Deformer::setLinearConstraintValue(double c) noexcept { return impl_->setLi
 void Deformer::clearLinearConstraint() noexcept { impl_->clearLinearConstraint(); }
 bool Deformer::hasLinearConstraint() const noexcept { return impl_->hasLinearConstraint(); }
 void Deformer::reset() { impl_->reset(); }
+std::size_t Deformer::frameWorkingSet(std::span<std::span<const std::byte>> out) const noexcept { return impl_->frameWorkingSet(out); }
 std::int32_t Deformer::vertexCount() const noexcept { return impl_->vertexCount(); }
 std::int32_t Deformer::tetCount() const noexcept { return impl_->tetCount(); }
 std::int32_t Deformer::freeVertexCount() const noexcept { return impl_->freeVertexCount(); }

@@ -29,6 +29,9 @@ namespace {
 
 constexpr std::int64_t kHeartbeatNs = 100'000'000;  // heartbeat while idle
 constexpr std::int64_t kMaxSleepNs = 50'000'000;    // re-check stop/stale at least this often
+constexpr std::int64_t kSpinGraceNs = 1'000'000;    // polling goes on this long past a frame's due time
+constexpr std::size_t kWarmChunkBytes = 64 * 1024;  // the working set is read in chunks, yielding and checking the mailbox between
+
 constexpr int kRecentWindow = 128;                  // frames behind the status line's p50/p99
 
 // Flush denormals to zero on this thread (near-identity covariances make them; DESIGN.md 8).
@@ -166,6 +169,30 @@ std::string FrameLoop::hygiene() const {
   return hygiene_ready_.load(std::memory_order_acquire) ? hygiene_ : std::string("(solver thread not started)");
 }
 
+bool FrameLoop::spinForFrame(std::int64_t until) noexcept {
+  // Read the working set once, a byte per cache line (the sum is kept so the reads are not dropped),
+  // then poll.
+  const std::size_t ranges = std::min(live_.frameWorkingSet(working_set_), working_set_.size());
+  std::uint64_t sum = 0;
+  for (std::size_t r = 0; r < ranges; ++r) {
+    const std::span<const std::byte> range = working_set_[r];
+    for (std::size_t chunk = 0; chunk < range.size(); chunk += kWarmChunkBytes) {
+      // A yield between chunks and in the polling below: the producer (the driver thread) may share this
+      // core, and polling with a pause instead starved it (frames came after the polling ended).
+      sched_yield();
+      if (mailbox_.hasPending() || stop_.load(std::memory_order_relaxed)) {
+        working_set_sum_ += sum;
+        return mailbox_.hasPending();
+      }
+      const std::size_t end = std::min(range.size(), chunk + kWarmChunkBytes);
+      for (std::size_t i = chunk; i < end; i += 64) sum += static_cast<std::uint64_t>(range[i]);
+    }
+  }
+  working_set_sum_ += sum;
+  while (!mailbox_.hasPending() && !stop_.load(std::memory_order_relaxed) && monotonicNowNs() < until) sched_yield();
+  return mailbox_.hasPending();
+}
+
 void FrameLoop::run() noexcept {
   try {
     applyHygiene();
@@ -180,6 +207,10 @@ void FrameLoop::run() noexcept {
   std::int64_t pose_estimate_ns = 0;  // recent pose-transfer cost, reserved out of the step's deadline
   std::int64_t last_frame_ns = monotonicNowNs();
   std::int64_t last_heartbeat_ns = last_frame_ns;
+  // When the next frame is due: the last frame's receive time plus the frames' recent period (an
+  // exponential average over about 8 intervals, each under kMaxSleepNs); 0 until two frames have come.
+  std::int64_t last_receive_ns = 0, period_ns = 0;
+  bool spun = false;  // the solver was polling when the pending frame came
 
   while (!stop_.load(std::memory_order_acquire)) {
     const MarkerFrame* frame = mailbox_.tryAcquireLatest();
@@ -197,13 +228,32 @@ void FrameLoop::run() noexcept {
       std::int64_t sleep_ns = std::min(kMaxSleepNs, kHeartbeatNs - (now - last_heartbeat_ns));
       if (!stale_.load(std::memory_order_relaxed))
         sleep_ns = std::min(sleep_ns, options_.stale_after_ns - (now - last_frame_ns) + 1);
-      mailbox_.waitForFrame(std::max<std::int64_t>(sleep_ns, 1'000'000));
+      sleep_ns = std::max<std::int64_t>(sleep_ns, 1'000'000);
+      // Not under SCHED_FIFO: a real-time thread polling would keep the driver thread off a shared core.
+      const std::int64_t spin_ns = options_.realtime_fifo ? 0 : options_.spin_before_frame_ns;
+      if (spin_ns > 0 && period_ns > 0) {
+        // A frame that is later than due by more than kSpinGraceNs is waited for asleep.
+        const std::int64_t due = last_receive_ns + period_ns;
+        if (now >= due - spin_ns && now < due + kSpinGraceNs) {
+          spun = spinForFrame(due + kSpinGraceNs);
+          continue;
+        }
+        if (now < due - spin_ns) sleep_ns = std::min(sleep_ns, due - spin_ns - now);
+      }
+      mailbox_.waitForFrame(sleep_ns);
       continue;
     }
     const std::int64_t taken_ns = monotonicNowNs();
     last_frame_ns = taken_ns;
+    if (spun) frames_spun_for_.fetch_add(1, std::memory_order_relaxed);
+    spun = false;
     if (stale_.exchange(false, std::memory_order_relaxed)) publisher_.heartbeat(ShmState::running);
     const std::int64_t receive_ns = frame->receive_timestamp_ns != 0 ? frame->receive_timestamp_ns : taken_ns;
+    if (last_receive_ns != 0 && receive_ns > last_receive_ns && receive_ns - last_receive_ns < kMaxSleepNs) {
+      const std::int64_t d = receive_ns - last_receive_ns;
+      period_ns = period_ns == 0 ? d : (7 * period_ns + d) / 8;
+    }
+    last_receive_ns = receive_ns;
 
     StepBudget budget;
     budget.max_iterations = options_.max_iterations;
@@ -338,6 +388,7 @@ FrameLoopCounters FrameLoop::counters() const noexcept {
   c.stale_periods = stale_periods_.load(std::memory_order_relaxed);
   c.iterations = iterations_.load(std::memory_order_relaxed);
   c.mailbox_dropped = mailbox_.dropped() - mailbox_dropped_at_start_;
+  c.frames_spun_for = frames_spun_for_.load(std::memory_order_relaxed);
   c.frames_before_start = frames_before_start_.load(std::memory_order_relaxed);
   return c;
 }

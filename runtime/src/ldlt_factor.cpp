@@ -1,6 +1,7 @@
 // Split application of a SimplicialLDLT factor: P, L, D^-1, L^T, P^T, three interleaved columns,
 // on a supernodal re-layout of the same factor (dense blocks, built once at load).
 #include "tetrig/ldlt_factor.hpp"
+#include "tetrig/working_set.hpp"
 
 #include "multiversion.hpp"
 #include "vector_lanes.hpp"
@@ -351,6 +352,13 @@ void SplitLdlt::solveInPlace(double* xyzw, bool skip_zero_nodes) {
       store4(x + kS * c, (s0 + s1) + (s2 + s3));
     }
   }
+}
+
+std::size_t SplitLdlt::workingSet(std::span<std::span<const std::byte>> out, std::size_t count) const noexcept {
+  count = appendWorkingSet(out, count, values_);
+  count = appendWorkingSet(out, count, rows_);
+  count = appendWorkingSet(out, count, supernodes_);
+  return appendWorkingSet(out, count, d_inv_);
 }
 
 }  // namespace tetrig

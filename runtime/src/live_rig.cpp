@@ -2,6 +2,7 @@
 // without pops, Deformer::step (Stoll et al. 2007 section 2.3) and pose transfer x_fine = B x_tet
 // (eq. 2.12) with area-weighted vertex normals. Equations in tetrig/live_rig.hpp and docs/live.md.
 #include "tetrig/live_rig_impl.hpp"
+#include "tetrig/working_set.hpp"
 
 #include "tetrig/clock.hpp"
 #include "tetrig/polar.hpp"
@@ -673,6 +674,23 @@ void LiveRigImpl::transferPose(float* positions) const noexcept {
   }
 }
 
+std::size_t LiveRigImpl::frameWorkingSet(std::span<std::span<const std::byte>> out) const noexcept {
+  std::size_t n = deformer_.frameWorkingSet(out);
+  if (coarse_) n += coarse_->deformer().frameWorkingSet(out.subspan(std::min(n, out.size())));
+  if (blocked_b_.rows > 0) {
+    n = appendWorkingSet(out, n, blocked_b_.block_offsets);
+    n = appendWorkingSet(out, n, blocked_b_.columns);
+    n = appendWorkingSet(out, n, blocked_b_.weights);
+    n = appendWorkingSet(out, n, blocked_b_.lane_rows);
+  } else {
+    n = appendWorkingSet(out, n, rig_->pose_transfer.row_offsets);
+    n = appendWorkingSet(out, n, rig_->pose_transfer.columns);
+    n = appendWorkingSet(out, n, rig_->pose_transfer.weights);
+  }
+  n = appendWorkingSet(out, n, vertex_targets_);
+  return appendWorkingSet(out, n, last_positions_);
+}
+
 bool LiveRigImpl::plausibleSample(std::size_t k, const Eigen::Vector3d& x) const noexcept {
   if (!(max_speed_ > 0.0)) return true;
   // The marker's own last accepted sample, while it is recent: no marker moves faster than v.
@@ -777,6 +795,7 @@ std::span<const float> LiveRig::restPositions() const noexcept { return impl_->r
 std::span<const float> LiveRig::restNormals() const noexcept { return impl_->restNormals(); }
 const Rig& LiveRig::rig() const noexcept { return impl_->rig(); }
 const Deformer& LiveRig::deformer() const noexcept { return impl_->deformer(); }
+std::size_t LiveRig::frameWorkingSet(std::span<std::span<const std::byte>> out) const noexcept { return impl_->frameWorkingSet(out); }
 const CoarseLevel* LiveRig::coarseLevel() const noexcept { return impl_->coarseLevel(); }
 const LiveRigOptions& LiveRig::options() const noexcept { return impl_->options(); }
 bool LiveRig::volumeNotKept() const noexcept { return impl_->volumeNotKept(); }

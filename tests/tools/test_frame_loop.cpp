@@ -528,6 +528,58 @@ TEST(FrameLoop, NoHeapAllocationPerFrameAfterWarmUp) {
   EXPECT_EQ(tetrig_shm_has_marker_positions(&h.reader), 1) << "the marker block was staged on every frame counted";
 }
 
+// Before a frame is due (the last frame's receive time + the frames' recent period), the solver
+// reads the frame's working set and polls the mailbox for spin_before_frame_ns instead of sleeping
+// (FrameLoopOptions::spin_before_frame_ns). Frames at a steady 100 Hz are then met polling: counted
+// in frames_spun_for; with the option 0 none is. The working set is the frame's data: every range
+// non-empty, together larger than the pose transfer alone, and the same ranges each call.
+TEST(FrameLoop, FramesAtASteadyPaceAreMetPollingUnlessTheSpinIsOff) {
+  const auto paced = [](std::int64_t spin_ns) {
+    FrameLoopOptions options;
+    options.lock_memory = false;
+    options.spin_before_frame_ns = spin_ns;
+    Harness h(spin_ns > 0 ? "spin" : "nospin", options);
+    h.loop->start();
+    const auto source = makeSource(demoRig(), 0.0f);
+    auto frame = std::make_unique<MarkerFrame>();
+    auto tick = std::chrono::steady_clock::now();
+    for (std::uint64_t k = 0; k < 60; ++k) {
+      tick += std::chrono::milliseconds(10);
+      std::this_thread::sleep_until(tick);
+      source->fillFrame(k, *frame);
+      EXPECT_TRUE(h.publishAndWait(*frame));
+    }
+    h.loop->requestStop();
+    h.loop->join();
+    EXPECT_EQ(h.loop->counters().frames, 60u);
+    return h.loop->counters().frames_spun_for;
+  };
+  const std::uint64_t spun = paced(500'000), slept = paced(0);
+  std::printf("frames met polling: %llu of 60 with 500 us, %llu with 0\n", static_cast<unsigned long long>(spun),
+              static_cast<unsigned long long>(slept));
+  // The first two frames set the period; a frame later than 1 ms past due on a busy machine is slept for.
+  EXPECT_GE(spun, 30u);
+  EXPECT_EQ(slept, 0u);
+
+  const Rig& rig = demoRig();
+  const LiveRig live(rig);
+  std::array<std::span<const std::byte>, 64> ranges{}, again{};
+  const std::size_t n = live.frameWorkingSet(ranges);
+  ASSERT_GT(n, 0u);
+  ASSERT_LE(n, ranges.size());
+  std::size_t bytes = 0;
+  for (std::size_t r = 0; r < n; ++r) {
+    EXPECT_FALSE(ranges[r].empty());
+    bytes += ranges[r].size();
+  }
+  EXPECT_GT(static_cast<std::int64_t>(bytes), live.poseTransferBytes());
+  EXPECT_EQ(live.frameWorkingSet(again), n);
+  for (std::size_t r = 0; r < n; ++r) EXPECT_EQ(again[r].data(), ranges[r].data());
+  // A span too short for them all still reports how many there are.
+  std::array<std::span<const std::byte>, 2> two{};
+  EXPECT_EQ(live.frameWorkingSet(two), n);
+}
+
 // Two performers on one source (tetrig run's stage): the source's frames fanned out to both
 // mailboxes (FrameMailbox::forwardTo), two solver threads, two segments. Nothing is allocated on
 // either solver thread per frame, and both publish every frame.

@@ -43,6 +43,7 @@
 #include <Eigen/Geometry>
 
 #include <chrono>
+#include <cstddef>
 #include <cstdint>
 #include <memory>
 #include <span>
@@ -220,6 +221,12 @@ class Deformer {
 
   // Back to the rest state: rotations I, positions at rest, handle targets at rest, no constraint.
   void reset();
+
+  // The memory a step reads (the tet blocks, the factor, the per-vertex vectors), as byte ranges
+  // written to `out` (at most out.size() of them); returns how many there are (more than out.size()
+  // when it did not fit). For warming the caches before a frame (tetrig/frame_loop.hpp). Any thread
+  // that may read the deformer; no allocation.
+  std::size_t frameWorkingSet(std::span<std::span<const std::byte>> out) const noexcept;
 
   std::int32_t vertexCount() const noexcept;
   std::int32_t tetCount() const noexcept;

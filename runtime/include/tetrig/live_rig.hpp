@@ -200,6 +200,12 @@ class LiveRig {
   // when nothing was pending. No allocation, lock, exception or I/O; same thread as processFrame.
   std::int64_t prepareNextFrame(std::chrono::steady_clock::time_point deadline = std::chrono::steady_clock::time_point::max()) noexcept;
 
+  // The memory a frame reads (the deformer's and the coarse level's blocks, factors and vectors,
+  // the pose transfer, the published pose), as byte ranges written to `out` (at most out.size());
+  // returns how many there are. FrameLoop reads them just before a frame is due
+  // (FrameLoopOptions::spin_before_frame_ns). Same thread as processFrame; no allocation.
+  std::size_t frameWorkingSet(std::span<std::span<const std::byte>> out) const noexcept;
+
   // The last pose again (the rest pose before the first frame): for a stale source or a held pose.
   // Same buffers as processFrame (normals written only with LiveRigOptions::normals). No allocation.
   void writeLastPose(float* positions, float* normals) const noexcept;

@@ -11,6 +11,7 @@
 #include "tetrig/ldlt_factor.hpp"
 #include "tetrig/rotation_kernel.hpp"
 #include "tetrig/tet_mesh.hpp"
+#include "tetrig/working_set.hpp"
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
@@ -60,6 +61,17 @@ class DeformerImpl {
   bool setLinearConstraint(std::span<const double> g, double c) noexcept;
   bool setLinearConstraintValue(double c) noexcept;
   void clearLinearConstraint() noexcept { constraint_active_ = false; }
+  std::size_t frameWorkingSet(std::span<std::span<const std::byte>> out) const noexcept {
+    std::size_t n = appendWorkingSet(out, 0, blocks_);
+    n = factor_.workingSet(out, n);
+    n = appendWorkingSet(out, n, u_);
+    n = appendWorkingSet(out, n, delta_);
+    n = appendWorkingSet(out, n, rest_solver_);
+    n = appendWorkingSet(out, n, rhs_constant_);
+    n = appendWorkingSet(out, n, padded_positions_);
+    n = appendWorkingSet(out, n, padded_float_positions_);
+    return appendWorkingSet(out, n, guard_det_);
+  }
   bool hasLinearConstraint() const noexcept { return constraint_active_; }
   void reset();
   std::int32_t vertexCount() const { return vertex_count_; }

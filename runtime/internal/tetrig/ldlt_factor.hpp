@@ -23,6 +23,8 @@
 #include <Eigen/SparseCore>
 
 #include <cstdint>
+#include <cstddef>
+#include <span>
 #include <vector>
 
 namespace tetrig {
@@ -45,6 +47,9 @@ class SplitLdlt {
   // Factor position of original index i (y = P b means y[position(i)] = b[i]).
   std::int32_t position(std::int32_t i) const { return position_[static_cast<size_t>(i)]; }
   const std::vector<std::int32_t>& positions() const { return position_; }
+  // The memory a solve reads (the factor's values, rows, nodes and 1 / D), appended to `out` from
+  // `count` on; returns the new count (ranges past out.size() are left out). No allocation.
+  std::size_t workingSet(std::span<std::span<const std::byte>> out, std::size_t count) const noexcept;
 
   // Solves A x = b in place for 3 interleaved right-hand sides held in factor order:
   // xyzw[kVectorStride * position(i) + c] is component c (0..2) of row i; lane 3 is carried along

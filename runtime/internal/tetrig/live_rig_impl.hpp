@@ -46,6 +46,7 @@ class LiveRigImpl {
   const Rig& rig() const noexcept { return *rig_; }
   const Deformer& deformer() const noexcept { return deformer_; }
   const CoarseLevel* coarseLevel() const noexcept { return coarse_.get(); }
+  std::size_t frameWorkingSet(std::span<std::span<const std::byte>> out) const noexcept;
   const LiveRigOptions& options() const noexcept { return options_; }
   bool volumeNotKept() const noexcept { return options_.solver.volume_constraint && volume_constraint_ == nullptr; }
   std::int64_t poseTransferBytes() const noexcept {
