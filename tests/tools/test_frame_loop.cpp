@@ -558,7 +558,9 @@ TEST(FrameLoop, FramesAtASteadyPaceAreMetPollingUnlessTheSpinIsOff) {
   std::printf("frames met polling: %llu of 60 with 500 us, %llu with 0\n", static_cast<unsigned long long>(spun),
               static_cast<unsigned long long>(slept));
   // The first two frames set the period; a frame later than 1 ms past due on a busy machine is slept for.
-  EXPECT_GE(spun, 30u);
+  // Measured: 57-58 of 60 on an idle 2-vCPU machine, 51-58 beside two busy loops, 33-42 beside four;
+  // 2-8 when the polling kept the producer thread off a shared core (a pause loop instead of yielding).
+  EXPECT_GE(spun, 20u);
   EXPECT_EQ(slept, 0u);
 
   const Rig& rig = demoRig();
