@@ -172,10 +172,11 @@ std::string FrameLoop::hygiene() const {
 bool FrameLoop::spinForFrame(std::int64_t until) noexcept {
   // Read the working set once, a byte per cache line (the sum is kept so the reads are not dropped),
   // then poll.
-  const std::size_t ranges = std::min(live_.frameWorkingSet(working_set_), working_set_.size());
+  std::array<std::span<const std::byte>, 64> working_set{};
+  const std::size_t ranges = std::min(live_.frameWorkingSet(working_set), working_set.size());
   std::uint64_t sum = 0;
   for (std::size_t r = 0; r < ranges; ++r) {
-    const std::span<const std::byte> range = working_set_[r];
+    const std::span<const std::byte> range = working_set[r];
     for (std::size_t chunk = 0; chunk < range.size(); chunk += kWarmChunkBytes) {
       // A yield between chunks and in the polling below: the producer (the driver thread) may share this
       // core, and polling with a pause instead starved it (frames came after the polling ended).

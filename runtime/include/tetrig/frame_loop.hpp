@@ -36,7 +36,6 @@
 #include "tetrig/frame_mailbox.hpp"
 #include "tetrig/latency_histogram.hpp"
 
-#include <array>
 #include <atomic>
 #include <cstddef>
 #include <cstdint>
@@ -198,8 +197,7 @@ class FrameLoop {
   std::atomic<std::uint64_t> frames_{0}, budget_misses_{0}, deadline_hits_{0}, held_frames_{0},
       rejected_target_frames_{0}, rejected_poses_{0}, occluded_marker_frames_{0}, rejected_marker_samples_{0}, unknown_marker_frames_{0},
       stale_periods_{0}, iterations_{0}, frames_spun_for_{0}, frames_before_start_{0};
-  std::array<std::span<const std::byte>, 64> working_set_{};  // spinForFrame's scratch
-  std::uint64_t working_set_sum_ = 0;                          // what reading it summed (kept, so the reads stay)
+  std::uint64_t working_set_sum_ = 0;  // what spinForFrame's reading summed (kept, so the reads stay)
   std::atomic<std::int64_t> last_latency_ns_{0}, recent_p50_ns_{0}, recent_p99_ns_{0};
   std::uint64_t mailbox_dropped_at_start_ = 0;
   std::int64_t start_ns_ = 0;  // when the solver thread was ready (written before hygiene_ready_)
