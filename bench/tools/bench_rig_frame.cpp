@@ -32,7 +32,7 @@
 //   two oriented regions add to a frame.
 //   BM_LiveRigFrame/smpl_hdm05_volume_constraint: the same live path (no split) keeping the fine
 //   mesh's volume (SolverSettings::volume_constraint: at the published pose, the fine volume, the
-//   direction from the body tets' boundary, and one solve; LiveRig::prepareNextFrame,
+//   direction from the body tets' boundary, and one frame in eight the solve for z; LiveRig::prepareNextFrame,
 //   which `tetrig run` calls after publishing and this loop leaves to the next processFrame: in the
 //   frame's time, and apart as prepare_us).
 //   BM_LiveRigFrame/smpl_hdm05_after_publish/<k>: the same live path (no split) with k iterations on

@@ -588,8 +588,12 @@ void DeformerImpl::writePositions() {
   mirror(padded_float_positions_);
 }
 
-bool DeformerImpl::setLinearConstraint(std::span<const double> g, double c) noexcept {
+bool DeformerImpl::setLinearConstraint(std::span<const double> g, double c, ConstraintDirection direction) noexcept {
+  const bool had_constraint = constraint_active_;
   constraint_active_ = false;
+  if (!had_constraint) constraint_mu_ = 0.0;  // a new constraint's multiplier starts from 0
+  const bool keep = direction == ConstraintDirection::kKeep;
+  if (keep && !had_constraint) return false;  // no z to keep
   if (constraint_g_.empty() || g.size() != 3 * static_cast<size_t>(vertex_count_) || !std::isfinite(c)) return false;
   for (std::int32_t s = 0; s < vertex_count_; ++s) {
     const double* gv = &g[3 * static_cast<size_t>(mesh_vertex_[static_cast<size_t>(s)])];
@@ -598,11 +602,14 @@ bool DeformerImpl::setLinearConstraint(std::span<const double> g, double c) noex
   }
   const double rest_dot = dot(constraint_g_.data(), rest_solver_.data(), constraint_g_.size());
   const size_t free4 = static_cast<size_t>(free_count_) * kVectorStride;
-  std::copy_n(constraint_g_.data(), free4, constraint_z_.data());
-  // g is zero but at the body boundary's vertices: the forward pass skips the supernodes it does not reach.
-  if (free_count_ > 0) factor_.solveInPlace(constraint_z_.data(), /*skip_zero_nodes=*/true);
+  if (!keep) {
+    std::copy_n(constraint_g_.data(), free4, constraint_z_.data());
+    // g is zero but at the body boundary's vertices: the forward pass skips the supernodes it does not reach.
+    if (free_count_ > 0) factor_.solveInPlace(constraint_z_.data(), /*skip_zero_nodes=*/true);
+  }
   const double gz = dot(constraint_g_.data(), constraint_z_.data(), free4);
-  // L_ff is positive definite: g_f . z > 0 unless g_f = 0 (nothing free to move), or not finite.
+  // L_ff is positive definite: g_f . z > 0 for z = L_ff^-1 g_f unless g_f = 0 (nothing free to
+  // move), or not finite. A kept z (solved for an earlier g) can fail it where g has turned too far.
   if (!(gz > 0.0) || !std::isfinite(gz) || !std::isfinite(rest_dot)) return false;
   constraint_rest_dot_ = rest_dot;
   constraint_rhs_ = c - rest_dot;
@@ -618,10 +625,13 @@ bool DeformerImpl::setLinearConstraintValue(double c) noexcept {
 }
 
 void DeformerImpl::applyLinearConstraint() {
-  // g . x = g . x_rest + g . u: the displacement part over every slot (free and handles).
+  // g . x = g . x_rest + g . u: the displacement part over every slot (free and handles). The solve
+  // already carried the multiplier so far (mu g in its right-hand side): what is left of it moves u
+  // along z, and adds to the multiplier.
   const double gu = dot(constraint_g_.data(), u_.data(), u_.size());
-  const double mu = (constraint_rhs_ - gu) / constraint_gz_;
-  addScaled(u_.data(), mu, constraint_z_.data(), static_cast<size_t>(free_count_) * kVectorStride);
+  const double mu_left = (constraint_rhs_ - gu) / constraint_gz_;
+  addScaled(u_.data(), mu_left, constraint_z_.data(), static_cast<size_t>(free_count_) * kVectorStride);
+  constraint_mu_ += mu_left;
 }
 
 StepStats DeformerImpl::step(const HandleTargets& targets, const StepBudget& budget) {
@@ -650,9 +660,15 @@ StepStats DeformerImpl::step(const HandleTargets& targets, const StepBudget& bud
   const bool has_groups = !group_slot_.empty();
   const size_t free4 = static_cast<size_t>(free_count_) * kVectorStride;
   for (int iteration = 0; iteration < budget.max_iterations; ++iteration) {
-    // 1. Linear solve: L_ff u_f = delta_f - L_fh u_h (+ point terms).
+    // 1. Linear solve: L_ff u_f = delta_f - L_fh u_h (+ point terms) (+ mu g_f, the constraint's
+    //    multiplier so far).
     const auto t0 = Clock::now();
-    for (size_t i = 0; i < free4; ++i) u_[i] = delta_[i] + rhs_constant_[i];
+    if (constraint_active_) {
+      const double mu = constraint_mu_;
+      for (size_t i = 0; i < free4; ++i) u_[i] = delta_[i] + rhs_constant_[i] + mu * constraint_g_[i];
+    } else {
+      for (size_t i = 0; i < free4; ++i) u_[i] = delta_[i] + rhs_constant_[i];
+    }
     if (free_count_ > 0) factor_.solveInPlace(u_.data());
     // The constraint's multiplier first, so that the guard's step solves (L + G) u = b + mu g: the
     // held tets' stiffness bears on the constraint's displacement too; then the little the guard's
@@ -753,7 +769,9 @@ Eigen::Vector3d Deformer::position(std::int32_t v) const { return impl_->positio
 Eigen::Quaterniond Deformer::rotation(std::int32_t t) const { return impl_->rotation(t); }
 void Deformer::setRotations(std::span<const Eigen::Quaterniond> rotations) { impl_->setRotations(rotations); }
 bool Deformer::setFrameGuide(std::span<const float> wxyz_per_tet) noexcept { return impl_->setFrameGuide(wxyz_per_tet); }
-bool Deformer::setLinearConstraint(std::span<const double> g, double c) noexcept { return impl_->setLinearConstraint(g, c); }
+bool Deformer::setLinearConstraint(std::span<const double> g, double c, ConstraintDirection direction) noexcept {
+  return impl_->setLinearConstraint(g, c, direction);
+}
 bool Deformer::setLinearConstraintValue(double c) noexcept { return impl_->setLinearConstraintValue(c); }
 void Deformer::clearLinearConstraint() noexcept { impl_->clearLinearConstraint(); }
 bool Deformer::hasLinearConstraint() const noexcept { return impl_->hasLinearConstraint(); }

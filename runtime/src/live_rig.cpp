@@ -658,7 +658,14 @@ HandleTargets LiveRigImpl::frameTargets() const noexcept {
 
 void LiveRigImpl::linearizeVolumeConstraint(const float* fine) noexcept {
   const double c = volume_constraint_->linearize(deformer_.positions(), fine, constraint_gradient_);
-  deformer_.setLinearConstraint(constraint_gradient_, c);
+  // z = L^-1 g solved again every kConstraintDirectionFrames linearizations (the step carries the
+  // multiplier in its right-hand side, so a kept z only steers what is left of it:
+  // Deformer::setLinearConstraint), or when the kept z no longer fits the new g.
+  const bool keep = ++directions_kept_ < kConstraintDirectionFrames;
+  if (!keep || !deformer_.setLinearConstraint(constraint_gradient_, c, ConstraintDirection::kKeep)) {
+    deformer_.setLinearConstraint(constraint_gradient_, c, ConstraintDirection::kSolve);
+    directions_kept_ = 0;
+  }
   frames_since_linearized_ = 0;
 }
 

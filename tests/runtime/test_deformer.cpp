@@ -237,6 +237,72 @@ TEST(Deformer, LinearConstraintKeepsASquashedBarsVolume) {
   EXPECT_FALSE(kept.hasLinearConstraint());
 }
 
+// A kept direction (ConstraintDirection::kKeep): the bar of the test above stretched to 125 %
+// instead (it gains volume as rigid as possible and thins under the constraint; squashed, it bows
+// out one way or another, no single minimum), re-linearized before every frame, once with z solved
+// for each new g and once with the z of the rest pose's g kept for all 300 frames. The solves carry the multiplier, so each kept step still lands on its plane and the
+// iteration still ends at the constrained minimum L u = b + mu g: both end at the same pose, though
+// the bar's g has turned far from the rest pose's (u += mu z_rest alone would end elsewhere:
+// L u = b + mu g_rest). kKeep without a constraint, or with a g that z does not fit, is refused.
+TEST(Deformer, AKeptConstraintDirectionEndsAtTheSameConstrainedMinimum) {
+  const auto bar = scenes::makeBarScene(4, 4, 32);
+  DeformerSetup setup = test::endVertexHandles(bar);
+  setup.options.linear_constraint = true;
+  const auto zOf = [&](std::int32_t v) { return bar.mesh.vertices(v, 2) - bar.axis_point.z(); };
+  std::vector<Eigen::Vector3d> targets;
+  for (const std::int32_t v : setup.vertex_handles) targets.emplace_back(bar.mesh.vertices.row(v).transpose() - Eigen::Vector3d(0, 0, -0.25 * zOf(v)));
+  std::vector<double> g_rest;
+  const double rest_volume = tetVolumeAndGradient(bar.mesh, bar.mesh.vertices, g_rest);
+  Deformer solved(bar.mesh, setup), kept(bar.mesh, setup);
+  EXPECT_FALSE(kept.setLinearConstraint(g_rest, rest_volume, ConstraintDirection::kKeep)) << "no z to keep yet";
+  EXPECT_FALSE(kept.hasLinearConstraint());
+  // g . x = V_rest - V(x0) + g . x0 at the deformer's pose x0.
+  const auto linearize = [&](const Deformer& d, std::vector<double>& g) {
+    const Vertices x0 = test::deformedVertices(d);
+    const double v0 = tetVolumeAndGradient(bar.mesh, x0, g);
+    double gx0 = 0.0;
+    for (std::int32_t v = 0; v < bar.mesh.vertexCount(); ++v)
+      for (int j = 0; j < 3; ++j) gx0 += g[3 * static_cast<std::size_t>(v) + static_cast<std::size_t>(j)] * x0(v, j);
+    return rest_volume - v0 + gx0;
+  };
+  std::vector<double> g;
+  double worst_plane = 0.0;
+  for (int frame = 0; frame < 300; ++frame) {
+    ASSERT_TRUE(solved.setLinearConstraint(g, linearize(solved, g)));
+    const double c = linearize(kept, g);
+    ASSERT_TRUE(kept.setLinearConstraint(g, c, frame == 0 ? ConstraintDirection::kSolve : ConstraintDirection::kKeep)) << "frame " << frame;
+    solved.step(vertexTargets(targets), StepBudget{5});
+    kept.step(vertexTargets(targets), StepBudget{5});
+    const Vertices x1 = test::deformedVertices(kept);
+    double gx1 = 0.0;
+    for (std::int32_t v = 0; v < bar.mesh.vertexCount(); ++v)
+      for (int j = 0; j < 3; ++j) gx1 += g[3 * static_cast<std::size_t>(v) + static_cast<std::size_t>(j)] * x1(v, j);
+    worst_plane = std::max(worst_plane, std::abs(gx1 - c) / rest_volume);
+  }
+  double turned = 0.0, norm = 0.0;  // how far g has moved from the rest pose's
+  for (std::size_t i = 0; i < g.size(); ++i) {
+    turned += (g[i] - g_rest[i]) * (g[i] - g_rest[i]);
+    norm += g_rest[i] * g_rest[i];
+  }
+  const Vertices a = test::deformedVertices(solved), b = test::deformedVertices(kept);
+  const double apart = (a - b).rowwise().norm().maxCoeff();
+  std::vector<double> unused;
+  const double kept_change = tetVolumeAndGradient(bar.mesh, b, unused) / rest_volume - 1.0;
+  std::printf("bar stretched to 125 %%, the rest pose's z kept for 300 frames: g moved %.0f %% of its norm; poses %.1e apart "
+              "(bar length %.0f); volume %+.1e %%; largest distance to the plane %.1e of the volume\n",
+              100 * std::sqrt(turned / norm), apart, bar.length, 100 * kept_change, worst_plane);
+  ASSERT_GT(std::sqrt(turned / norm), 0.1) << "g must turn away from the rest pose's for the test to mean anything";
+  EXPECT_LT(apart, 1e-6 * bar.length);
+  EXPECT_LT(std::abs(kept_change), 1e-6);
+  EXPECT_LT(worst_plane, 1e-9);
+  // A g the kept z does not fit (g_f . z <= 0) is refused, and leaves no constraint.
+  std::vector<double> reversed(g.size());
+  for (std::size_t i = 0; i < g.size(); ++i) reversed[i] = -g[i];
+  EXPECT_FALSE(kept.setLinearConstraint(reversed, -1.0, ConstraintDirection::kKeep));
+  EXPECT_FALSE(kept.hasLinearConstraint());
+  EXPECT_FALSE(kept.setLinearConstraint(g, 1.0, ConstraintDirection::kKeep)) << "the refusal dropped z too";
+}
+
 TEST(Deformer, VolumeWeightsActOnlyOnTheirTets) {
   const auto bar = scenes::makeBarScene(4, 4, 32);
   const std::int32_t tets = bar.mesh.tetCount();

@@ -51,6 +51,9 @@
 
 namespace tetrig {
 
+// Deformer::setLinearConstraint: solve z = L_ff^-1 g_f for the new g, or keep the last one's.
+enum class ConstraintDirection { kSolve, kKeep };
+
 class DeformerImpl;
 
 struct RegionHandle {
@@ -206,14 +209,18 @@ class Deformer {
 
   // A linear equality constraint on the positions, g . x = c (DeformerOptions::linear_constraint;
   // g: #V*3 doubles in mesh vertex order, e.g. a volume's gradient, docs/deformation.md "Volume constraint"),
-  // enforced by a Lagrange multiplier with the same factor: every solve is followed by
-  //   u_f += mu z,   z = L_ff^-1 g_f,   mu = (c - g . x) / (g_f . z),
-  // which makes each global step the minimum of its quadratic on the plane g . x = c, and a converged
-  // pose the constrained minimum. z is solved here, once (one solve); the constraint holds for every
-  // step until replaced or cleared. Handle components of g count in g . x but cannot move. Returns
-  // false (and clears the constraint) without the option, with the wrong size, with a non-finite g
-  // or c, or when g has no component on a free vertex. No allocation, lock or exception.
-  bool setLinearConstraint(std::span<const double> g, double c) noexcept;
+  // enforced by a Lagrange multiplier mu with the same factor. Each solve carries the multiplier so
+  // far in its right-hand side and moves what is left along z:
+  //   L_ff u_f = b_f + mu g_f,   u_f += m z,   m = (c - g . x) / (g_f . z),   mu += m,
+  // z = L_ff^-1 g_f. With z of this g, each global step is the minimum of its quadratic on the plane
+  // g . x = c; with the z of an earlier g kept (ConstraintDirection::kKeep: no solve), each step
+  // still lands on the plane, and a converged pose (m -> 0) is still the constrained minimum,
+  // L u = b + mu g. kSolve solves z here (one solve); the constraint holds for every step until
+  // replaced or cleared. Handle components of g count in g . x but cannot move. Returns false (and
+  // clears the constraint) without the option, with the wrong size, with a non-finite g or c, when
+  // g has no component on a free vertex, and with kKeep when there is no z to keep or g_f . z <= 0
+  // (then set it again with kSolve). No allocation, lock or exception.
+  bool setLinearConstraint(std::span<const double> g, double c, ConstraintDirection direction = ConstraintDirection::kSolve) noexcept;
   // A new value c for the constraint's g (no solve): false, and no change, without one.
   bool setLinearConstraintValue(double c) noexcept;
   void clearLinearConstraint() noexcept;

@@ -190,8 +190,8 @@ class LiveRig {
   LiveFrameStats processFrame(const MarkerFrame& frame, const StepBudget& budget, float* positions, float* normals) noexcept;
 
   // Work a frame leaves for the next one, done now: with SolverSettings::volume_constraint, the
-  // constraint's linearization at the pose just published (the fine volume's gradient, B^T of it and
-  // one solve: 0.6-0.9x a plain frame's cost); then SolverSettings::after_publish_iterations more
+  // constraint's linearization at the pose just published (the boundary's volume gradient, the fine
+  // volume, and one frame in eight the solve for its direction z: about 0.1x a plain frame's cost); then SolverSettings::after_publish_iterations more
   // iterations on that frame's targets, stopped at `deadline` (the linearization is not). Call it
   // after publishing processFrame's buffers, so that this work stays off the receive -> published
   // path (FrameLoop does, with the frame's deadline); a processFrame that finds it still pending runs

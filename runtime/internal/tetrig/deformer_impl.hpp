@@ -58,7 +58,7 @@ class DeformerImpl {
   Eigen::Quaterniond rotation(std::int32_t t) const;
   void setRotations(std::span<const Eigen::Quaterniond> rotations);
   bool setFrameGuide(std::span<const float> wxyz_per_tet) noexcept;
-  bool setLinearConstraint(std::span<const double> g, double c) noexcept;
+  bool setLinearConstraint(std::span<const double> g, double c, ConstraintDirection direction) noexcept;
   bool setLinearConstraintValue(double c) noexcept;
   void clearLinearConstraint() noexcept { constraint_active_ = false; }
   std::size_t frameWorkingSet(std::span<std::span<const std::byte>> out) const noexcept {
@@ -203,10 +203,11 @@ class DeformerImpl {
   // Rigid groups: CSR over tet slots.
   std::vector<std::int32_t> group_start_, group_slot_;
 
-  // Linear constraint (options_.linear_constraint): g and z = L_ff^-1 g_f in solver order
-  // (kVectorStride per vertex), c - g . x_rest, g_f . z.
+  // Linear constraint (options_.linear_constraint): g and z = L_ff^-1 g_f (of this g, or of an
+  // earlier one when kept) in solver order (kVectorStride per vertex), c - g . x_rest, g_f . z.
   AlignedVector<double> constraint_g_, constraint_z_;
   double constraint_rhs_ = 0.0, constraint_gz_ = 0.0, constraint_rest_dot_ = 0.0;
+  double constraint_mu_ = 0.0;  // the multiplier so far: the solves carry mu g_f in their right-hand side
   bool constraint_active_ = false;
   void applyLinearConstraint();
 };

@@ -100,6 +100,10 @@ class LiveRigImpl {
   std::vector<double> constraint_gradient_;                // its g, #tetV*3
   std::vector<float> constraint_scratch_;                  // a first iteration's fine pose (#fine*3), on a cold frame
   int frames_since_linearized_ = 0;
+  // The volume constraint's direction z = L^-1 g: solved at one linearization in this many, kept
+  // between (docs/deformation.md, "Volume constraint").
+  static constexpr int kConstraintDirectionFrames = 8;
+  int directions_kept_ = 0;
   bool next_frame_pending_ = false;  // the last accepted frame awaits prepareNextFrame()
   // Coarse level (with a coarse rig): its handle targets, and per coarse marker its vertex handle
   // and the rig marker that drives it.

@@ -15,7 +15,8 @@
 // boundary's.)
 // The rotation term ||F - R||^2 has Poisson's ratio 0: it lets flexion creases lose volume, and a
 // volume term per tet converges too slowly to fix that in a frame's few iterations
-// (docs/fidelity.md); one constraint with a Lagrange multiplier costs one solve per frame.
+// (docs/fidelity.md); one constraint with a Lagrange multiplier costs a dot product and an axpy per
+// solve, and the solve for its direction (Deformer::setLinearConstraint).
 //
 // Threads: construct at load (allocates); volume(), value() and linearize() from one thread at a
 // time (they share a scratch), no allocation, lock or exception. `fine_triangles` must outlive this object.
