@@ -55,6 +55,9 @@ if [ ! -x build/release/tetrig ] || [ ! -x build/release/tetrig-shm-cat ] || [ !
   cmake --build --preset release --target "${targets[@]}" >/dev/null
 fi
 out=build/release
+# A rig built by an older tetrig is built again: the builder's output changes with its code, and a
+# stale rig measures another rig.
+current() { [ -f "$1" ] && [ "$1" -nt build/release/tetrig ]; }
 case "$mode" in
   smpl|synthetic)
     rig="$out/latency_smpl_hdm05.rig"
@@ -64,15 +67,15 @@ case "$mode" in
       echo "{\"pose_transfer\": {\"max_nonzeros_per_row\": $cap}}" > "$out/latency_cap$cap.json"
       desc=(--rig "$out/latency_cap$cap.json")
       full="$out/latency_smpl_hdm05.rig"
-      [ -f "$full" ] || build/release/tetrig build-rig --mesh "$data/meshes/odedstein-meshes/human_man.obj" --markers "$clip" \
+      current "$full" || build/release/tetrig build-rig --mesh "$data/meshes/odedstein-meshes/human_man.obj" --markers "$clip" \
         --tet-vertices 1500 --max-marker-distance 0.15 --out "$full" --quiet
     fi
-    [ -f "$rig" ] || build/release/tetrig build-rig --mesh "$data/meshes/odedstein-meshes/human_man.obj" --markers "$clip" \
+    current "$rig" || build/release/tetrig build-rig --mesh "$data/meshes/odedstein-meshes/human_man.obj" --markers "$clip" \
       --tet-vertices 1500 --max-marker-distance 0.15 "${desc[@]}" --out "$rig" --quiet
     ;;
   armadillo)
     rig="$out/latency_armadillo_hdm05.rig"
-    [ -f "$rig" ] || build/release/tetrig build-rig --mesh "$data/meshes/libigl-tutorial-data/armadillo.obj" --markers "$clip" \
+    current "$rig" || build/release/tetrig build-rig --mesh "$data/meshes/libigl-tutorial-data/armadillo.obj" --markers "$clip" \
       --tet-vertices 1700 --max-marker-distance 1.0 --accept-implausible-alignment --out "$rig" --quiet
     ;;
 esac
