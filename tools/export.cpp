@@ -91,7 +91,7 @@ void requireDirectory(const std::filesystem::path& path) {
   const std::filesystem::path dir = directoryOf(path);
   std::error_code ec;
   if (!std::filesystem::is_directory(dir, ec))
-    throw std::invalid_argument("output directory " + dir.string() + " does not exist (create it first)");
+    throw std::invalid_argument("--out: the folder " + printableText(dir.string()) + " does not exist (create it first)");
 }
 
 [[noreturn]] void throwSystem(const std::filesystem::path& path, const std::string& what, int err) {
@@ -396,10 +396,7 @@ void checkOutputFiles(const ExportOptions& o, const ExportTarget& target, const 
                                 inputs, o.force);
       break;
   }
-  if (!o.report.empty()) {
-    rigbuild::checkOutputPath(o.report, rigbuild::OutputKind::kJson, inputs, o.force, "--report");
-    requireDirectory(o.report);
-  }
+  if (!o.report.empty()) rigbuild::checkOutputPath(o.report, rigbuild::OutputKind::kJson, inputs, o.force, "--report");
 }
 
 // glTF: the rig's up axis can be turned to +Y, and the clip has a frame rate (sample times).

@@ -109,15 +109,6 @@ int buildRigCommand(const BuildArgs& a) {
     // The rig is written only at the end: its path is checked before minutes of work.
     const std::filesystem::path inputs[] = {a.mesh, a.rig_json, a.markers, desc.markers.clip};
     checkOutputPath(a.out, OutputKind::kRig, inputs, a.force);
-    const std::filesystem::path out(a.out);
-    const std::filesystem::path dir = out.has_parent_path() ? out.parent_path() : std::filesystem::path(".");
-    std::error_code ec;
-    if (!std::filesystem::is_directory(dir, ec))
-      throw std::invalid_argument("--out " + printableText(a.out) + ": the folder " + printableText(dir.string()) +
-                                  " does not exist (create it first)");
-    if (::access(dir.c_str(), W_OK) != 0)
-      throw std::invalid_argument("--out " + printableText(a.out) + ": the folder " + printableText(dir.string()) +
-                                  " is not writable");
   }
   BuildRigInputs in;
   in.mesh = a.mesh;

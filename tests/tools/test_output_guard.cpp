@@ -99,5 +99,18 @@ TEST(OutputGuard, AnInputIsNeverAnOutput) {
   EXPECT_NE(refusal(d / "sub", OutputKind::kRig, {}, true).find("sub is a directory; give a file name"), std::string::npos);
 }
 
+// The folder an output goes in must exist now, not when the file is written after the work.
+TEST(OutputGuard, AFolderThatDoesNotExistIsRefusedBeforeAnyWork) {
+  const TempDir d;
+  const std::string missing = (d / "no" / "such").string();
+  EXPECT_NE(refusal(d / "no" / "such" / "out.json", OutputKind::kJson, {}, true)
+                .find("out.json: the folder " + missing + " does not exist (create it first)"),
+            std::string::npos);
+  EXPECT_EQ(refusal(d / "out.json", OutputKind::kJson, {}, false), "") << "an existing folder is fine";
+  // A file where the folder should be is no folder either.
+  const auto file = d.write("plain", "x");
+  EXPECT_NE(refusal(file / "out.json", OutputKind::kJson, {}, true).find("does not exist (create it first)"), std::string::npos);
+}
+
 }  // namespace
 }  // namespace tetrig::rigbuild

@@ -463,6 +463,13 @@ TEST(TetrigCli, RunStatsJsonNeverReplacesAUsersFile) {
   const CliRun again = run(base + "'" + users.string() + "'", dir);
   ASSERT_EQ(again.status, 0) << again.err;
   EXPECT_EQ(nlohmann::json::parse(test::readText(users))["generator"], "tetrig run");
+  // A folder that does not exist: refused before the clip is played (not after it, losing the run),
+  // in one line naming the folder.
+  const CliRun missing = run(base + "'" + (dir.path() / "no" / "s.json").string() + "'", dir);
+  EXPECT_NE(missing.status, 0);
+  EXPECT_EQ(missing.err, "tetrig run: error: --stats-json " + (dir.path() / "no" / "s.json").string() + ": the folder " +
+                             (dir.path() / "no").string() + " does not exist (create it first)\n");
+  EXPECT_FALSE(std::filesystem::exists(dir.path() / "no"));
 }
 
 // tetrig demo, the README's run command: the whole live path on the project's own data, with a

@@ -3,6 +3,7 @@
 #include "tetrig/rigbuild/output_guard.hpp"
 
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include <cstring>
 #include <fstream>
@@ -110,6 +111,15 @@ void checkOutputPath(const std::filesystem::path& out, OutputKind kind, std::spa
   const auto status = std::filesystem::status(out, ec);
   if (std::filesystem::is_directory(status)) {
     throw OutputRefused(what + " " + shown + " is a directory; give a file name");
+  }
+  // The folder it goes in, now: found missing only when the file is written, after the work, it
+  // would lose that work.
+  const std::filesystem::path dir = out.has_parent_path() ? out.parent_path() : std::filesystem::path(".");
+  if (!std::filesystem::is_directory(dir, ec)) {
+    throw OutputRefused(what + " " + shown + ": the folder " + printableText(dir.string()) + " does not exist (create it first)");
+  }
+  if (::access(dir.c_str(), W_OK) != 0) {
+    throw OutputRefused(what + " " + shown + ": the folder " + printableText(dir.string()) + " is not writable");
   }
   for (const std::filesystem::path& in : inputs) {
     if (!in.empty() && std::filesystem::exists(in, ec) && sameFile(out, in)) {

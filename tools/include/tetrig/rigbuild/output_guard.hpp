@@ -35,8 +35,9 @@ std::filesystem::path pc2RestObjPath(const std::filesystem::path& pc2);
 // True when `file` exists, is a regular file and carries tetrig's mark for `kind`.
 bool writtenByTetrig(const std::filesystem::path& file, OutputKind kind);
 
-// Refuses `out` (OutputRefused) when it is a directory, when it is the same file as any of
-// `inputs` (even with `force`), or when it exists and tetrig did not write it (unless `force`).
+// Refuses `out` (OutputRefused) when it is a directory, when the folder it goes in does not exist
+// or is not writable, when it is the same file as any of `inputs` (even with `force`), or when it
+// exists and tetrig did not write it (unless `force`).
 // `what` names the option in the message, e.g. "--out".
 void checkOutputPath(const std::filesystem::path& out, OutputKind kind, std::span<const std::filesystem::path> inputs,
                      bool force, const std::string& what = "--out");
