@@ -87,13 +87,6 @@ std::filesystem::path directoryOf(const std::filesystem::path& path) {
   return path.has_parent_path() ? path.parent_path() : std::filesystem::path(".");
 }
 
-void requireDirectory(const std::filesystem::path& path) {
-  const std::filesystem::path dir = directoryOf(path);
-  std::error_code ec;
-  if (!std::filesystem::is_directory(dir, ec))
-    throw std::invalid_argument("--out: the folder " + printableText(dir.string()) + " does not exist (create it first)");
-}
-
 [[noreturn]] void throwSystem(const std::filesystem::path& path, const std::string& what, int err) {
   throw std::runtime_error(path.string() + ": " + what + ": " + std::strerror(err));
 }
@@ -661,7 +654,6 @@ ExportReport exportClip(const ExportOptions& o) {
   ExportReport report;
   report.target = parseExportTarget(o.out);
   const ExportTarget& target = report.target;
-  requireDirectory(target.path);
   const bool gltf = target.format == ExportFormat::kGltf || target.format == ExportFormat::kGlb;
 
   // 1. Rig, clip, range (everything that can be refused is refused before any work).
