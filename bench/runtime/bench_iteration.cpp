@@ -1,4 +1,5 @@
-// Deformation core benchmarks: one iteration on the bars, and the factorization.
+// Deformation core benchmarks: one iteration on the bars, the factorization, and one solve
+// with the factor in double and in float.
 //
 // Bars of 4x4x33 (850 V / 2640 tets) and 8x8x85 (6966 V / 27200 tets) unit cubes, 5 tets each;
 // vertex handles: every vertex within the first and last 5 % of the length; the far handle is
@@ -63,7 +64,8 @@ void iterationBenchmark(benchmark::State& state, int nx, int ny, int nz, double 
   state.SetLabel(std::string("kernel isa: ") + rotationKernelInstructionSet());
 }
 
-void factorizeBenchmark(benchmark::State& state, int nx, int ny, int nz) {
+// The bar's Laplacian with the rows and columns of its handle vertices removed (what Deformer factors).
+Eigen::SparseMatrix<double> reducedBarLaplacian(int nx, int ny, int nz) {
   const auto bar = scenes::makeBarScene(nx, ny, nz);
   const TetRestFrames frames = computeRestFrames(bar.mesh);
   const Eigen::SparseMatrix<double> l = assembleLaplacian(bar.mesh, frames, tetWeights(frames, {}));
@@ -82,6 +84,12 @@ void factorizeBenchmark(benchmark::State& state, int nx, int ny, int nz) {
         triplets.emplace_back(index[static_cast<size_t>(it.row())], index[static_cast<size_t>(c)], it.value());
   Eigen::SparseMatrix<double> reduced(free_count, free_count);
   reduced.setFromTriplets(triplets.begin(), triplets.end());
+  return reduced;
+}
+
+void factorizeBenchmark(benchmark::State& state, int nx, int ny, int nz) {
+  const Eigen::SparseMatrix<double> reduced = reducedBarLaplacian(nx, ny, nz);
+  const auto free_count = static_cast<double>(reduced.rows());
   SplitLdlt factor;
   for (auto _ : state) {
     factor.factorize(reduced);
@@ -97,5 +105,37 @@ BENCHMARK_CAPTURE(iterationBenchmark, bar_8x8x85_volume, 8, 8, 85, 0.9)
     ->Name("BM_Iteration/bar_8x8x85_volume")
     ->Unit(benchmark::kMicrosecond);
 BENCHMARK_CAPTURE(factorizeBenchmark, bar_8x8x85, 8, 8, 85)->Name("BM_Factorize/bar_8x8x85")->Unit(benchmark::kMillisecond);
+
+// One solve with the factor (three right-hand sides, x, y, z), in double (/0, every global step's)
+// or with its float copy (/1, the implicit inversion guard's), the right-hand side refilled untimed.
+template <typename T>
+void solveLoop(benchmark::State& state, SplitLdlt& factor) {
+  const auto n = static_cast<std::size_t>(factor.size()) * kVectorStride;
+  std::vector<T> rhs(n, T(0)), x(n);
+  for (std::size_t i = 0; i < n; ++i)
+    if (i % kVectorStride != 3) rhs[i] = static_cast<T>(std::sin(0.37 * static_cast<double>(i)));
+  for (auto _ : state) {
+    state.PauseTiming();
+    std::copy(rhs.begin(), rhs.end(), x.begin());
+    state.ResumeTiming();
+    factor.solveInPlace(x.data());
+    benchmark::DoNotOptimize(x.data());
+  }
+}
+
+void solveBenchmark(benchmark::State& state, int nx, int ny, int nz) {
+  SplitLdlt factor;
+  factor.factorize(reducedBarLaplacian(nx, ny, nz));
+  if (state.range(0) != 0) {
+    factor.prepareFloatSolve();
+    solveLoop<float>(state, factor);
+  } else {
+    solveLoop<double>(state, factor);
+  }
+  state.counters["unknowns"] = factor.size();
+  state.counters["factor_nnz"] = static_cast<double>(factor.factorNonZeros());
+}
+BENCHMARK_CAPTURE(solveBenchmark, bar_4x4x33, 4, 4, 33)->Name("BM_Solve/bar_4x4x33")->DenseRange(0, 1)->Unit(benchmark::kMicrosecond);
+BENCHMARK_CAPTURE(solveBenchmark, bar_8x8x85, 8, 8, 85)->Name("BM_Solve/bar_8x8x85")->DenseRange(0, 1)->Unit(benchmark::kMicrosecond);
 
 }  // namespace

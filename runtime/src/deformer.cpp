@@ -404,9 +404,12 @@ void DeformerImpl::buildRigidGroupsAndCoefficients(const DeformerSetup& setup) {
       const auto guarded = static_cast<size_t>(std::count_if(guard_.begin(), guard_.end(), [](float k) { return k > 0.0f; }));
       guarded_.assign(guarded, GuardedTet{});
       guard_det_.assign(guard_.size(), 1.0f);
+      guard_blocks_.assign(blocks_.size(), 0);
       if (options_.untangle) buildUntangleAdjacency();
       for (AlignedVector<double>* v : {&cg_r_, &cg_z_, &cg_p_, &cg_lp_})
         v->assign(static_cast<size_t>(vertex_count_) * kVectorStride, 0.0);
+      cg_float_.assign(static_cast<size_t>(vertex_count_) * kVectorStride, 0.0f);
+      if (free_count_ > 0) factor_.prepareFloatSolve();
     }
   }
 

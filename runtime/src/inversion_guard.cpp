@@ -18,7 +18,9 @@
 // matrix of rank 3 x (guarded tets), so a few steps remove most of it. L p is kept by the
 // recurrence L p_{i+1} = r_{i+1} + beta L p_i (L z = r), so each step costs one solve with the
 // factor (three right-hand sides, one per coordinate: the system is the same for x, y and z, and
-// each coordinate takes its own step lengths) plus the guarded tets' product. No bound on k: the
+// each coordinate takes its own step lengths) plus the guarded tets' product. That solve runs on
+// the factor rounded to float (M = L to ~1e-7 of its entries): L z = r and p^T L p = r . z then
+// hold to ~1e-6, and the step u += gamma p stays a descent step of the guarded energy. No bound on k: the
 // splitting of the explicit guard is not used, so nothing limits it to k <= 1 and no push cap is
 // needed. Handles do not move: their components of r, z, p are kept 0.
 #include "tetrig/deformer_impl.hpp"
@@ -77,6 +79,19 @@ TETRIG_MULTIVERSION void subtractGuardProduct(std::span<const GuardedTet> held, 
 
 }  // namespace
 
+TETRIG_MULTIVERSION std::size_t blocksWithDetAtMost(const float* det, std::size_t block_count, float bound, std::int32_t* out) noexcept {
+  const lanes::FLanes at = lanes::FLanes{} + bound;
+  std::size_t n = 0;
+  for (std::size_t b = 0; b < block_count; ++b) {
+    const lanes::FMask below = lanes::loadF(det + b * kTetBlockWidth) <= at;  // lanes 0 or -1
+    int any = 0;
+    for (std::size_t l = 0; l < kTetBlockWidth; ++l) any |= below[l];
+    out[n] = static_cast<std::int32_t>(b);
+    n += any != 0 ? 1 : 0;
+  }
+  return n;
+}
+
 void DeformerImpl::collectGuardedTets() {
   // det F of every slot from the rotation pass (float, as the explicit guard's); most tets are
   // above tau, so this is a scan of two float arrays. alpha as the explicit guard's scalar form
@@ -93,6 +108,18 @@ void DeformerImpl::collectGuardedTets() {
   guarded_count_ = n;
 }
 
+void DeformerImpl::precondition(bool skip_zero_nodes) {
+  // z = M^-1 r with M the factor rounded to float, solved in float: the solve reads half the bytes,
+  // and a search direction needs no more digits (the step length is computed for the direction it
+  // is given).
+  const size_t free4 = static_cast<size_t>(free_count_) * kVectorStride;
+  float* zf = cg_float_.data();
+  for (size_t i = 0; i < free4; ++i) zf[i] = static_cast<float>(cg_r_[i]);
+  factor_.solveInPlace(zf, skip_zero_nodes);
+  for (size_t i = 0; i < free4; ++i) cg_z_[i] = zf[i];
+  std::fill(cg_z_.begin() + static_cast<std::ptrdiff_t>(free4), cg_z_.end(), 0.0);
+}
+
 void DeformerImpl::implicitGuardSolve() {
   const size_t free4 = static_cast<size_t>(free_count_) * kVectorStride;
   const std::span<const GuardedTet> held(guarded_.data(), guarded_count_);
@@ -107,8 +134,7 @@ void DeformerImpl::implicitGuardSolve() {
   };
   // r_0 is zero but at the guarded tets' vertices: the forward pass skips the supernodes it does not
   // reach (about a fifth of the solve on the shipped asset).
-  std::copy(cg_r_.begin(), cg_r_.end(), cg_z_.begin());
-  factor_.solveInPlace(cg_z_.data(), /*skip_zero_nodes=*/true);
+  precondition(/*skip_zero_nodes=*/true);
   std::array<double, 3> rz = dot3(cg_r_.data(), cg_z_.data());
   // p_0 = z_0 and L p_0 = L z_0 = r_0: the first step reads them where they are (and p_0^T L p_0 is
   // r_0 . z_0); they are copied out only when a further step follows (then z and r change).
@@ -134,8 +160,7 @@ void DeformerImpl::implicitGuardSolve() {
     addScaledByLane(cg_r_.data(), {-gamma[0], -gamma[1], -gamma[2]}, lp, free4);
     subtractGuardProduct(held, gamma, p, cg_r_.data());
     std::fill(cg_r_.begin() + static_cast<std::ptrdiff_t>(free4), cg_r_.end(), 0.0);
-    std::copy(cg_r_.begin(), cg_r_.end(), cg_z_.begin());
-    factor_.solveInPlace(cg_z_.data());
+    precondition(/*skip_zero_nodes=*/false);
     const std::array<double, 3> rz_next = dot3(cg_r_.data(), cg_z_.data());
     std::array<double, 3> beta{};
     for (size_t c = 0; c < 3; ++c) beta[c] = rz[c] > 0.0 ? rz_next[c] / rz[c] : 0.0;

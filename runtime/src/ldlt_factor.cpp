@@ -176,81 +176,109 @@ void SplitLdlt::buildSupernodes(const std::vector<std::int32_t>& col_start, cons
   gathered_.assign(3 * static_cast<size_t>(max_padded), 0.0);
 }
 
-using lanes::Lanes;
-using lanes::load;
-using lanes::store;
-using lanes::load4;
-using lanes::store4;
-using lanes::transposeIn;
-using lanes::transposeOut;
-using lanes::Vec4;
-
 namespace {
 
 constexpr std::int64_t kS = kVectorStride;
 
-TETRIG_INLINE Vec4 low4(Lanes v) { return __builtin_shufflevector(v, v, 0, 1, 2, 3); }
-TETRIG_INLINE Vec4 high4(Lanes v) { return __builtin_shufflevector(v, v, 4, 5, 6, 7); }
+// The solve's vector types by scalar: kLanes rows of a block (Lanes or Float8), one vertex's
+// (x, y, z, pad) (Vec4 or Vec4f). GCC takes no vector attribute on a dependent type.
+template <typename T>
+struct SolveVectors;
+template <>
+struct SolveVectors<double> {
+  using L = lanes::Lanes;
+  using V = lanes::Vec4;
+};
+template <>
+struct SolveVectors<float> {
+  using L = lanes::Float8;
+  using V = lanes::Vec4f;
+};
+
+template <typename T>
+TETRIG_INLINE typename SolveVectors<T>::L loadL(const T* p) {
+  return lanes::loadAs<typename SolveVectors<T>::L>(p);
+}
+template <typename T>
+TETRIG_INLINE void storeL(T* p, typename SolveVectors<T>::L v) {
+  lanes::storeAs(p, v);
+}
+template <typename T>
+TETRIG_INLINE typename SolveVectors<T>::V loadV(const T* p) {
+  return lanes::loadAs<typename SolveVectors<T>::V>(p);
+}
+template <typename T>
+TETRIG_INLINE void storeV(T* p, typename SolveVectors<T>::V v) {
+  lanes::storeAs(p, v);
+}
 
 // Forward block product of C consecutive 8-row chunks: xyzw[rows[l]] -= (B z_block)_l. A padding
 // row repeats the row before it with zero values; each read-modify-write completes before the
 // next, so that is harmless.
-template <int C>
-TETRIG_INLINE void subtractBlockProduct(double* xyzw, const std::int32_t* rows, const double* block, std::int32_t np,
-                                        std::int32_t k, const double* z) {
-  Lanes x[C]{}, y[C]{}, zz[C]{};
+template <int C, typename T>
+TETRIG_INLINE void subtractBlockProduct(T* xyzw, const std::int32_t* rows, const T* block, std::int32_t np, std::int32_t k,
+                                        const T* z) {
+  using L = typename SolveVectors<T>::L;
+  using V = typename SolveVectors<T>::V;
+  L x[C]{}, y[C]{}, zz[C]{};
   for (std::int32_t c = 0; c < k; ++c, block += np, z += kS) {
 #pragma GCC unroll 2
     for (int q = 0; q < C; ++q) {
-      const Lanes b = load(block + kRowPad * q);
+      const L b = loadL(block + kRowPad * q);
       x[q] += b * z[0];
       y[q] += b * z[1];
       zz[q] += b * z[2];
     }
   }
   for (int q = 0; q < C; ++q) {
-    Vec4 v[lanes::kLanes];
-    transposeOut(x[q], y[q], zz[q], v);
+    V v[lanes::kLanes];
+    lanes::transposeOut(x[q], y[q], zz[q], v);
     for (int l = 0; l < lanes::kLanes; ++l) {
-      double* target = xyzw + kS * rows[kRowPad * q + l];
-      store4(target, load4(target) - v[l]);
+      T* target = xyzw + kS * rows[kRowPad * q + l];
+      storeV(target, loadV<T>(target) - v[l]);
     }
   }
 }
 
 // (sum of x's lanes, sum of y's, sum of z's, 0).
-TETRIG_INLINE Vec4 sumLanes(Lanes x, Lanes y, Lanes z) {
-  const Vec4 zero{};
-  const Vec4 x4 = low4(x) + high4(x), y4 = low4(y) + high4(y), z4 = low4(z) + high4(z);
-  const Vec4 xy = __builtin_shufflevector(x4, y4, 0, 4, 2, 6) + __builtin_shufflevector(x4, y4, 1, 5, 3, 7);
-  const Vec4 zz = __builtin_shufflevector(z4, zero, 0, 4, 2, 6) + __builtin_shufflevector(z4, zero, 1, 5, 3, 7);
+template <class L>
+TETRIG_INLINE auto sumLanes(L x, L y, L z) {
+  const auto low4 = [](L v) { return __builtin_shufflevector(v, v, 0, 1, 2, 3); };
+  const auto high4 = [](L v) { return __builtin_shufflevector(v, v, 4, 5, 6, 7); };
+  using V = decltype(low4(x));
+  const V zero{};
+  const V x4 = low4(x) + high4(x), y4 = low4(y) + high4(y), z4 = low4(z) + high4(z);
+  const V xy = __builtin_shufflevector(x4, y4, 0, 4, 2, 6) + __builtin_shufflevector(x4, y4, 1, 5, 3, 7);
+  const V zz = __builtin_shufflevector(z4, zero, 0, 4, 2, 6) + __builtin_shufflevector(z4, zero, 1, 5, 3, 7);
   return __builtin_shufflevector(xy, zz, 0, 1, 4, 5) + __builtin_shufflevector(xy, zz, 2, 3, 6, 7);
 }
 
 // Backward block product for Q consecutive columns c: x_c = D^-1_c x_c - (B^T x_R)_c, with x_R
 // gathered into gx, gy, gz.
-template <int Q>
-TETRIG_INLINE void columnsMinusBlockProduct(double* x, const double* dk, const double* block, std::int32_t np,
-                                            const double* gx, const double* gy, const double* gz) {
-  Lanes sx[Q]{}, sy[Q]{}, sz[Q]{};
+template <int Q, typename T>
+TETRIG_INLINE void columnsMinusBlockProduct(T* x, const T* dk, const T* block, std::int32_t np, const T* gx, const T* gy,
+                                            const T* gz) {
+  using L = typename SolveVectors<T>::L;
+  L sx[Q]{}, sy[Q]{}, sz[Q]{};
   for (std::int32_t i = 0; i < np; i += kRowPad) {
-    const Lanes vx = load(gx + i), vy = load(gy + i), vz = load(gz + i);
+    const L vx = loadL(gx + i), vy = loadL(gy + i), vz = loadL(gz + i);
 #pragma GCC unroll 4
     for (int q = 0; q < Q; ++q) {
-      const Lanes b = load(block + static_cast<std::int64_t>(q) * np + i);
+      const L b = loadL(block + static_cast<std::int64_t>(q) * np + i);
       sx[q] += b * vx;
       sy[q] += b * vy;
       sz[q] += b * vz;
     }
   }
 #pragma GCC unroll 4
-  for (int q = 0; q < Q; ++q) store4(x + kS * q, load4(x + kS * q) * dk[q] - sumLanes(sx[q], sy[q], sz[q]));
+  for (int q = 0; q < Q; ++q) storeV(x + kS * q, loadV(x + kS * q) * dk[q] - sumLanes(sx[q], sy[q], sz[q]));
 }
 
-// Whether n doubles are all (plus or minus) zero.
-TETRIG_INLINE bool allZero(const double* x, std::int32_t n) {
+// Whether n values are all (plus or minus) zero.
+template <typename T>
+TETRIG_INLINE bool allZero(const T* x, std::int32_t n) {
   for (std::int32_t i = 0; i < n; ++i)
-    if (x[i] != 0.0) return false;
+    if (x[i] != T(0)) return false;
   return true;
 }
 
@@ -260,105 +288,125 @@ TETRIG_INLINE bool allZero(const double* x, std::int32_t n) {
 // z_R -= B z_block; backward x_block = D^-1 x_block - B^T x_R, then x_block = T^-T x_block.
 // For k > 1 the block products run with the vector lanes over B's rows (column-major B, 3 FMAs
 // per 8 entries, rows scattered or gathered once per node); single columns (most of them, short)
-// keep one vector (x, y, z, pad) per entry.
-TETRIG_MULTIVERSION
-void SplitLdlt::solveInPlace(double* xyzw, bool skip_zero_nodes) {
+// keep one vector (x, y, z, pad) per entry. T: double (the factor as computed) or float (its
+// rounded copy, half the bytes to read).
+template <typename T>
+TETRIG_INLINE void SplitLdlt::solveWith(const T* values, const T* d_inv, T* gathered, std::int64_t max_padded, T* xyzw,
+                                        bool skip_zero_nodes) const {
+  using L = typename SolveVectors<T>::L;
+  using V = typename SolveVectors<T>::V;
   const std::int32_t* rows = rows_.data();
-  const double* d_inv = d_inv_.data();
-  const double* values = values_.data();
   for (const Supernode& node : supernodes_) {
     const std::int32_t k = node.width;
     const std::int32_t np = node.padded_rows;
-    const double* block = values + node.block_begin;
+    const T* block = values + node.block_begin;
     const std::int32_t* r = rows + node.row_begin;
-    double* z = xyzw + kS * node.first_column;
+    T* z = xyzw + kS * node.first_column;
     if (skip_zero_nodes && allZero(z, kS * k)) continue;  // T^-1 0 = 0, and nothing to subtract
     if (k == 1) {
-      const Vec4 z0 = load4(z);
+      const V z0 = loadV(z);
       for (std::int32_t i = 0; i < np; ++i) {
-        double* target = xyzw + kS * r[i];
-        store4(target, load4(target) - block[i] * z0);
+        T* target = xyzw + kS * r[i];
+        storeV(target, loadV(target) - block[i] * z0);
       }
       continue;
     }
-    const double* triangle = values + node.value_begin;
+    const T* triangle = values + node.value_begin;
     for (std::int32_t i = 1; i < k; ++i) {  // four sums per row: chains of i / 4 FMAs
-      const double* t = triangle + static_cast<std::int64_t>(i) * k;
-      Vec4 s0 = load4(z + kS * i), s1{}, s2{}, s3{};
+      const T* t = triangle + static_cast<std::int64_t>(i) * k;
+      V s0 = loadV(z + kS * i), s1{}, s2{}, s3{};
       std::int32_t c = 0;
       for (; c + 4 <= i; c += 4) {
-        s0 -= t[c] * load4(z + kS * c);
-        s1 -= t[c + 1] * load4(z + kS * (c + 1));
-        s2 -= t[c + 2] * load4(z + kS * (c + 2));
-        s3 -= t[c + 3] * load4(z + kS * (c + 3));
+        s0 -= t[c] * loadV(z + kS * c);
+        s1 -= t[c + 1] * loadV(z + kS * (c + 1));
+        s2 -= t[c + 2] * loadV(z + kS * (c + 2));
+        s3 -= t[c + 3] * loadV(z + kS * (c + 3));
       }
-      for (; c < i; ++c) s0 -= t[c] * load4(z + kS * c);
-      store4(z + kS * i, (s0 + s1) + (s2 + s3));
+      for (; c < i; ++c) s0 -= t[c] * loadV(z + kS * c);
+      storeV(z + kS * i, (s0 + s1) + (s2 + s3));
     }
     std::int32_t i = 0;
     for (; i + 2 * kRowPad <= np; i += 2 * kRowPad) subtractBlockProduct<2>(xyzw, r + i, block + i, np, k, z);
     if (i < np) subtractBlockProduct<1>(xyzw, r + i, block + i, np, k, z);
   }
 
-  double* gx = gathered_.data();
-  const std::int64_t max_padded = static_cast<std::int64_t>(gathered_.size()) / 3;
-  double* gy = gx + max_padded;
-  double* gz = gy + max_padded;
+  T* gx = gathered;
+  T* gy = gx + max_padded;
+  T* gz = gy + max_padded;
   for (auto it = supernodes_.rbegin(); it != supernodes_.rend(); ++it) {
     const Supernode& node = *it;
     const std::int32_t k = node.width;
     const std::int32_t np = node.padded_rows;
-    const double* block = values + node.block_begin;
+    const T* block = values + node.block_begin;
     const std::int32_t* r = rows + node.row_begin;
-    double* x = xyzw + kS * node.first_column;
-    const double* dk = d_inv + node.first_column;
+    T* x = xyzw + kS * node.first_column;
+    const T* dk = d_inv + node.first_column;
     if (k == 1) {
       // Two sums, alternating rows, from the last row down: the lowest row was solved last, just
       // before this node (often its parent), so its term enters at the end of the chain.
-      Vec4 s0 = load4(x) * dk[0], s1{};
+      V s0 = loadV(x) * dk[0], s1{};
       std::int32_t i = np - 1;
       for (; i >= 1; i -= 2) {
-        s1 -= block[i] * load4(xyzw + kS * r[i]);
-        s0 -= block[i - 1] * load4(xyzw + kS * r[i - 1]);
+        s1 -= block[i] * loadV(xyzw + kS * r[i]);
+        s0 -= block[i - 1] * loadV(xyzw + kS * r[i - 1]);
       }
-      if (i == 0) s0 -= block[0] * load4(xyzw + kS * r[0]);
-      store4(x, s0 + s1);
+      if (i == 0) s0 -= block[0] * loadV(xyzw + kS * r[0]);
+      storeV(x, s0 + s1);
       continue;
     }
     for (std::int32_t i = 0; i < np; i += kRowPad) {
-      Vec4 v[lanes::kLanes];
-      for (int l = 0; l < lanes::kLanes; ++l) v[l] = load4(xyzw + kS * r[i + l]);
-      Lanes vx, vy, vz;
-      transposeIn(v, vx, vy, vz);
-      store(gx + i, vx);
-      store(gy + i, vy);
-      store(gz + i, vz);
+      V v[lanes::kLanes];
+      for (int l = 0; l < lanes::kLanes; ++l) v[l] = loadV(xyzw + kS * r[i + l]);
+      L vx, vy, vz;
+      lanes::transposeIn(v, vx, vy, vz);
+      storeL(gx + i, vx);
+      storeL(gy + i, vy);
+      storeL(gz + i, vz);
     }
     std::int32_t c = 0;
     for (; c + 4 <= k; c += 4) columnsMinusBlockProduct<4>(x + kS * c, dk + c, block + static_cast<std::int64_t>(c) * np, np, gx, gy, gz);
     for (; c < k; ++c) columnsMinusBlockProduct<1>(x + kS * c, dk + c, block + static_cast<std::int64_t>(c) * np, np, gx, gy, gz);
-    const double* triangle = values + node.value_begin;
+    const T* triangle = values + node.value_begin;
     for (c = k - 2; c >= 0; --c) {  // four sums, from the last row down (the latest solved enters last)
-      Vec4 s0 = load4(x + kS * c), s1{}, s2{}, s3{};
-      const double* t = triangle + c;
+      V s0 = loadV(x + kS * c), s1{}, s2{}, s3{};
+      const T* t = triangle + c;
       std::int32_t i = k - 1;
       for (; i - 3 > c; i -= 4) {
-        s0 -= t[static_cast<std::int64_t>(i) * k] * load4(x + kS * i);
-        s1 -= t[static_cast<std::int64_t>(i - 1) * k] * load4(x + kS * (i - 1));
-        s2 -= t[static_cast<std::int64_t>(i - 2) * k] * load4(x + kS * (i - 2));
-        s3 -= t[static_cast<std::int64_t>(i - 3) * k] * load4(x + kS * (i - 3));
+        s0 -= t[static_cast<std::int64_t>(i) * k] * loadV(x + kS * i);
+        s1 -= t[static_cast<std::int64_t>(i - 1) * k] * loadV(x + kS * (i - 1));
+        s2 -= t[static_cast<std::int64_t>(i - 2) * k] * loadV(x + kS * (i - 2));
+        s3 -= t[static_cast<std::int64_t>(i - 3) * k] * loadV(x + kS * (i - 3));
       }
-      for (; i > c; --i) s0 -= t[static_cast<std::int64_t>(i) * k] * load4(x + kS * i);
-      store4(x + kS * c, (s0 + s1) + (s2 + s3));
+      for (; i > c; --i) s0 -= t[static_cast<std::int64_t>(i) * k] * loadV(x + kS * i);
+      storeV(x + kS * c, (s0 + s1) + (s2 + s3));
     }
   }
+}
+
+TETRIG_MULTIVERSION
+void SplitLdlt::solveInPlace(double* xyzw, bool skip_zero_nodes) {
+  solveWith(values_.data(), d_inv_.data(), gathered_.data(), static_cast<std::int64_t>(gathered_.size()) / 3, xyzw, skip_zero_nodes);
+}
+
+void SplitLdlt::prepareFloatSolve() {
+  values_f_.assign(values_.begin(), values_.end());
+  d_inv_f_.assign(d_inv_.begin(), d_inv_.end());
+  gathered_f_.assign(gathered_.size(), 0.0f);
+}
+
+TETRIG_MULTIVERSION
+void SplitLdlt::solveInPlace(float* xyzw, bool skip_zero_nodes) {
+  solveWith(values_f_.data(), d_inv_f_.data(), gathered_f_.data(), static_cast<std::int64_t>(gathered_f_.size()) / 3, xyzw,
+            skip_zero_nodes);
 }
 
 std::size_t SplitLdlt::workingSet(std::span<std::span<const std::byte>> out, std::size_t count) const noexcept {
   count = appendWorkingSet(out, count, values_);
   count = appendWorkingSet(out, count, rows_);
   count = appendWorkingSet(out, count, supernodes_);
-  return appendWorkingSet(out, count, d_inv_);
+  count = appendWorkingSet(out, count, d_inv_);
+  count = appendWorkingSet(out, count, values_f_);
+  return appendWorkingSet(out, count, d_inv_f_);
 }
 
 }  // namespace tetrig

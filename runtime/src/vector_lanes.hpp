@@ -67,33 +67,39 @@ TETRIG_INLINE Lanes loadHalf(const float* p) { return __builtin_convertvector(lo
 TETRIG_INLINE void storeHalf(float* p, Lanes v) { storeAs(p, __builtin_convertvector(v, Float8)); }
 
 // The 8-lane <-> 8 x 4 transposes between per-vertex vectors (x, y, z, pad) and per-coordinate
-// lanes (shuffles instead of scalar loads and inserts).
+// lanes (shuffles instead of scalar loads and inserts), in double (Lanes, Vec4) or float (Float8,
+// Vec4f: the same shuffles on half the bytes).
 static_assert(kLanes == 8 && kVectorStride == 4, "the transposes below are written for 8 lanes of 4");
-TETRIG_INLINE Lanes concat(Vec4 a, Vec4 b) { return __builtin_shufflevector(a, b, 0, 1, 2, 3, 4, 5, 6, 7); }
+template <class L, class V>
+TETRIG_INLINE L concat(V a, V b) {
+  return __builtin_shufflevector(a, b, 0, 1, 2, 3, 4, 5, 6, 7);
+}
 
 // v[l] = (x, y, z, pad) of lane l  ->  x, y, z as lanes.
-TETRIG_INLINE void transposeIn(const Vec4 (&v)[kLanes], Lanes& x, Lanes& y, Lanes& z) {
-  const Lanes a = concat(v[0], v[1]), b = concat(v[2], v[3]), c = concat(v[4], v[5]), d = concat(v[6], v[7]);
-  const Lanes ab_xy = __builtin_shufflevector(a, b, 0, 4, 8, 12, 1, 5, 9, 13);  // x0..x3 y0..y3
-  const Lanes ab_z = __builtin_shufflevector(a, b, 2, 6, 10, 14, 3, 7, 11, 15);  // z0..z3 pad
-  const Lanes cd_xy = __builtin_shufflevector(c, d, 0, 4, 8, 12, 1, 5, 9, 13);
-  const Lanes cd_z = __builtin_shufflevector(c, d, 2, 6, 10, 14, 3, 7, 11, 15);
+template <class L, class V>
+TETRIG_INLINE void transposeIn(const V (&v)[kLanes], L& x, L& y, L& z) {
+  const L a = concat<L>(v[0], v[1]), b = concat<L>(v[2], v[3]), c = concat<L>(v[4], v[5]), d = concat<L>(v[6], v[7]);
+  const L ab_xy = __builtin_shufflevector(a, b, 0, 4, 8, 12, 1, 5, 9, 13);  // x0..x3 y0..y3
+  const L ab_z = __builtin_shufflevector(a, b, 2, 6, 10, 14, 3, 7, 11, 15);  // z0..z3 pad
+  const L cd_xy = __builtin_shufflevector(c, d, 0, 4, 8, 12, 1, 5, 9, 13);
+  const L cd_z = __builtin_shufflevector(c, d, 2, 6, 10, 14, 3, 7, 11, 15);
   x = __builtin_shufflevector(ab_xy, cd_xy, 0, 1, 2, 3, 8, 9, 10, 11);
   y = __builtin_shufflevector(ab_xy, cd_xy, 4, 5, 6, 7, 12, 13, 14, 15);
   z = __builtin_shufflevector(ab_z, cd_z, 0, 1, 2, 3, 8, 9, 10, 11);
 }
 
 // x, y, z lanes  ->  v[l] = (x_l, y_l, z_l, 0).
-TETRIG_INLINE void transposeOut(Lanes x, Lanes y, Lanes z, Vec4 (&v)[kLanes]) {
-  const Lanes zero{};
-  const Lanes xy_lo = __builtin_shufflevector(x, y, 0, 8, 1, 9, 2, 10, 3, 11);   // x0 y0 x1 y1 x2 y2 x3 y3
-  const Lanes xy_hi = __builtin_shufflevector(x, y, 4, 12, 5, 13, 6, 14, 7, 15);
-  const Lanes z0_lo = __builtin_shufflevector(z, zero, 0, 8, 1, 9, 2, 10, 3, 11);  // z0 0 z1 0 ...
-  const Lanes z0_hi = __builtin_shufflevector(z, zero, 4, 12, 5, 13, 6, 14, 7, 15);
-  const Lanes l01 = __builtin_shufflevector(xy_lo, z0_lo, 0, 1, 8, 9, 2, 3, 10, 11);  // lane 0, lane 1
-  const Lanes l23 = __builtin_shufflevector(xy_lo, z0_lo, 4, 5, 12, 13, 6, 7, 14, 15);
-  const Lanes l45 = __builtin_shufflevector(xy_hi, z0_hi, 0, 1, 8, 9, 2, 3, 10, 11);
-  const Lanes l67 = __builtin_shufflevector(xy_hi, z0_hi, 4, 5, 12, 13, 6, 7, 14, 15);
+template <class L, class V>
+TETRIG_INLINE void transposeOut(L x, L y, L z, V (&v)[kLanes]) {
+  const L zero{};
+  const L xy_lo = __builtin_shufflevector(x, y, 0, 8, 1, 9, 2, 10, 3, 11);   // x0 y0 x1 y1 x2 y2 x3 y3
+  const L xy_hi = __builtin_shufflevector(x, y, 4, 12, 5, 13, 6, 14, 7, 15);
+  const L z0_lo = __builtin_shufflevector(z, zero, 0, 8, 1, 9, 2, 10, 3, 11);  // z0 0 z1 0 ...
+  const L z0_hi = __builtin_shufflevector(z, zero, 4, 12, 5, 13, 6, 14, 7, 15);
+  const L l01 = __builtin_shufflevector(xy_lo, z0_lo, 0, 1, 8, 9, 2, 3, 10, 11);  // lane 0, lane 1
+  const L l23 = __builtin_shufflevector(xy_lo, z0_lo, 4, 5, 12, 13, 6, 7, 14, 15);
+  const L l45 = __builtin_shufflevector(xy_hi, z0_hi, 0, 1, 8, 9, 2, 3, 10, 11);
+  const L l67 = __builtin_shufflevector(xy_hi, z0_hi, 4, 5, 12, 13, 6, 7, 14, 15);
   v[0] = __builtin_shufflevector(l01, l01, 0, 1, 2, 3);
   v[1] = __builtin_shufflevector(l01, l01, 4, 5, 6, 7);
   v[2] = __builtin_shufflevector(l23, l23, 0, 1, 2, 3);

@@ -26,6 +26,11 @@ namespace tetrig {
 
 // A tet the implicit inversion guard holds, gathered once from its block (inversion_guard.cpp): its
 // slot, corner offsets (solver order, stride 4), rest edge inverse E^-1 and alpha_j a_j.
+// The indices of the blocks of kTetBlockWidth slots (det: block_count * kTetBlockWidth values) with
+// some det <= bound, ascending, into out (block_count values at most); returns how many. One vector
+// compare per block (inversion_guard.cpp).
+std::size_t blocksWithDetAtMost(const float* det, std::size_t block_count, float bound, std::int32_t* out) noexcept;
+
 struct GuardedTet {
   std::int32_t slot = 0;
   std::array<std::int32_t, 4> corner{};
@@ -172,18 +177,18 @@ class DeformerImpl {
   // below tau at the last rotation pass, and the conjugate-gradient vectors.
   std::vector<GuardedTet> guarded_;
   AlignedVector<float> guard_det_;  // det F per slot at the last rotation pass (written by it)
+  mutable std::vector<std::int32_t> guard_blocks_;  // forEachGuardedTetBelow's scratch: a block index each
   std::size_t guarded_count_ = 0;
   AlignedVector<double> cg_r_, cg_z_, cg_p_, cg_lp_;
+  AlignedVector<float> cg_float_;  // z = L^-1 r solved in float (the factor's float copy)
   // f(slot) for every guarded tet (guard_ > 0) whose det F at the last rotation pass is below
   // `bound`, in slot order; a block of 16 is skipped by one vector compare when none is.
   template <class F>
   void forEachGuardedTetBelow(double bound, F&& f) const {
-    const auto bound_f = static_cast<float>(bound);
-    for (size_t b = 0; b < blocks_.size(); ++b) {
-      const float* det = &guard_det_[b * kTetBlockWidth];
-      bool any = false;
-      for (size_t l = 0; l < kTetBlockWidth; ++l) any |= det[l] <= bound_f;  // <=: every float below bound
-      if (!any) continue;
+    // <=: every float below bound.
+    const std::size_t candidates = blocksWithDetAtMost(guard_det_.data(), blocks_.size(), static_cast<float>(bound), guard_blocks_.data());
+    for (std::size_t i = 0; i < candidates; ++i) {
+      const auto b = static_cast<size_t>(guard_blocks_[i]);
       for (size_t l = 0; l < kTetBlockWidth; ++l) {
         const size_t s = b * kTetBlockWidth + l;
         if (!(guard_det_[s] < bound) || guard_[s] <= 0.0f) continue;  // not below, unguarded, padding; NaN too
@@ -192,6 +197,7 @@ class DeformerImpl {
     }
   }
   void collectGuardedTets();
+  void precondition(bool skip_zero_nodes);  // cg_z_ = M^-1 cg_r_ (inversion_guard.cpp)
   void implicitGuardSolve();
   // Untangling the published pose (untangle.cpp; with the implicit guard): the free vertex -> tet
   // slot adjacency (CSR), the tets found below the threshold, the vertices being relaxed and their marks.

@@ -58,6 +58,11 @@ class SplitLdlt {
   // values are still all zero when reached, for right-hand sides that are zero but at a few rows
   // (only the rows' ancestors in the elimination tree fill in); the result is the same.
   void solveInPlace(double* xyzw, bool skip_zero_nodes = false);
+  // The same solve with the factor rounded to float, in float: about 1e-7 of the factor's entries
+  // off, for a search direction that need not be exact (the implicit inversion guard's). Needs
+  // prepareFloatSolve() once after factorize() (load-time: allocates the float copy).
+  void prepareFloatSolve();
+  void solveInPlace(float* xyzw, bool skip_zero_nodes = false);
 
  private:
   void buildSupernodes(const std::vector<std::int32_t>& col_start, const std::vector<std::int32_t>& row,
@@ -72,11 +77,16 @@ class SplitLdlt {
     std::int64_t value_begin;   // values_: k x k triangle (row-major, strict lower used), then the block
     std::int64_t block_begin;   // k = 1: r values; k > 1: k columns of padded_rows values (64-byte aligned)
   };
+  template <typename T>
+  void solveWith(const T* values, const T* d_inv, T* gathered, std::int64_t max_padded, T* xyzw, bool skip_zero_nodes) const;
   std::vector<Supernode> supernodes_;
   std::vector<std::int32_t> rows_;
   AlignedVector<double> values_;
   AlignedVector<double> gathered_;       // backward solve: x, y, z of one node's rows (3 x max padded_rows)
   std::vector<double> d_inv_;            // 1 / D
+  AlignedVector<float> values_f_;        // prepareFloatSolve(): values_, d_inv_ and the scratch in float
+  std::vector<float> d_inv_f_;
+  AlignedVector<float> gathered_f_;
   std::vector<std::int32_t> position_;   // original index -> factor position
   std::int64_t factor_non_zeros_ = 0;    // strictly lower non-zeros of L
 };
