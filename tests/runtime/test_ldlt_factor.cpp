@@ -57,6 +57,43 @@ TEST_P(SplitLdltBars, MatchesEigenSolveForThreeInterleavedColumns) {
   EXPECT_LT((a * x - b).norm(), 1e-9 * b.norm());
 }
 
+// The float copy of the factor (the implicit guard's solve) through the same paths: Eigen's double
+// solution to float precision (the worst component within 1e-4 of the largest; a wrong transpose or
+// sum would be off by the solution's size), the padding lane 0, and skipping zero nodes the same to
+// the bit for a right-hand side with three non-zero rows.
+TEST_P(SplitLdltBars, TheFloatCopySolvesToFloatPrecision) {
+  const auto [nx, ny, nz] = GetParam();
+  const Eigen::SparseMatrix<double> a = spdFromBar(nx, ny, nz);
+  SplitLdlt factor;
+  factor.factorize(a);
+  factor.prepareFloatSolve();
+  std::mt19937 rng(11);
+  std::normal_distribution<double> normal;
+  constexpr size_t kS = kVectorStride;
+  for (const int nonzero_rows : {static_cast<int>(a.rows()), 3}) {
+    Eigen::MatrixXd b = Eigen::MatrixXd::Zero(a.rows(), 3);
+    for (int j = 0; j < nonzero_rows; ++j) {
+      const auto row = nonzero_rows == a.rows() ? j : std::uniform_int_distribution<int>(0, static_cast<int>(a.rows()) - 1)(rng);
+      for (int c = 0; c < 3; ++c) b(row, c) = normal(rng);
+    }
+    std::vector<float> xyz(static_cast<size_t>(a.rows()) * kS, 0.0f);
+    for (std::int32_t i = 0; i < factor.size(); ++i)
+      for (int c = 0; c < 3; ++c) xyz[kS * static_cast<size_t>(factor.position(i)) + static_cast<size_t>(c)] = static_cast<float>(b(i, c));
+    std::vector<float> skipping = xyz;
+    factor.solveInPlace(xyz.data());
+    factor.solveInPlace(skipping.data(), /*skip_zero_nodes=*/true);
+    EXPECT_EQ(xyz, skipping) << nonzero_rows << " non-zero rows";
+    const Eigen::MatrixXd expected = Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>>(a).solve(b);
+    double worst = 0.0;
+    for (std::int32_t i = 0; i < factor.size(); ++i) {
+      for (int c = 0; c < 3; ++c)
+        worst = std::max(worst, std::abs(xyz[kS * static_cast<size_t>(factor.position(i)) + static_cast<size_t>(c)] - expected(i, c)));
+      EXPECT_EQ(xyz[kS * static_cast<size_t>(factor.position(i)) + 3], 0.0f);
+    }
+    EXPECT_LT(worst, 1e-4 * expected.cwiseAbs().maxCoeff()) << nonzero_rows << " non-zero rows";
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(Bars, SplitLdltBars,
                          ::testing::Values(std::array<int, 3>{3, 3, 12}, std::array<int, 3>{6, 6, 24}));
 
