@@ -83,9 +83,15 @@ TETRIG_MULTIVERSION std::size_t blocksWithDetAtMost(const float* det, std::size_
   const lanes::FLanes at = lanes::FLanes{} + bound;
   std::size_t n = 0;
   for (std::size_t b = 0; b < block_count; ++b) {
-    const lanes::FMask below = lanes::loadF(det + b * kTetBlockWidth) <= at;  // lanes 0 or -1
-    int any = 0;
-    for (std::size_t l = 0; l < kTetBlockWidth; ++l) any |= below[l];
+    // Lanes 0 or -1, folded by halves (a scalar OR of 16 extracted lanes took 8 ns a block).
+    const lanes::FMask below = lanes::loadF(det + b * kTetBlockWidth) <= at;
+    using Mask8 = int __attribute__((vector_size(8 * sizeof(int))));
+    using Mask4 = int __attribute__((vector_size(4 * sizeof(int))));
+    const Mask8 m8 = __builtin_shufflevector(below, below, 0, 1, 2, 3, 4, 5, 6, 7) |
+                     __builtin_shufflevector(below, below, 8, 9, 10, 11, 12, 13, 14, 15);
+    const Mask4 m4 = __builtin_shufflevector(m8, m8, 0, 1, 2, 3) | __builtin_shufflevector(m8, m8, 4, 5, 6, 7);
+    const Mask4 m2 = m4 | __builtin_shufflevector(m4, m4, 2, 3, 0, 1);
+    const int any = m2[0] | m2[1];
     out[n] = static_cast<std::int32_t>(b);
     n += any != 0 ? 1 : 0;
   }
