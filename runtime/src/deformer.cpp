@@ -678,9 +678,8 @@ StepStats DeformerImpl::step(const HandleTargets& targets, const StepBudget& bud
     // step moved g . u is projected out again (docs/deformation.md, "Volume constraint").
     if (constraint_active_) applyLinearConstraint();
     if (guarded_count_ > 0) {
-      implicitGuardSolve();
+      implicitGuardSolve();  // ends on the constraint's plane (its last step projects)
       ++stats.guarded_solves;
-      if (constraint_active_) applyLinearConstraint();
     }
     const auto t1 = Clock::now();
     stats.solve_ns += nanosecondsBetween(t0, t1);

@@ -120,9 +120,9 @@ void DeformerImpl::precondition(bool skip_zero_nodes) {
   // is given).
   const size_t free4 = static_cast<size_t>(free_count_) * kVectorStride;
   float* zf = cg_float_.data();
-  for (size_t i = 0; i < free4; ++i) zf[i] = static_cast<float>(cg_r_[i]);
+  toFloat(cg_r_.data(), zf, free4);
   factor_.solveInPlace(zf, skip_zero_nodes);
-  for (size_t i = 0; i < free4; ++i) cg_z_[i] = zf[i];
+  toDouble(zf, cg_z_.data(), free4);
   std::fill(cg_z_.begin() + static_cast<std::ptrdiff_t>(free4), cg_z_.end(), 0.0);
 }
 
@@ -154,9 +154,23 @@ void DeformerImpl::implicitGuardSolve() {
     std::array<double, 3> gamma{};
     for (size_t c = 0; c < 3; ++c) gamma[c] = pap[c] > 0.0 && rz[c] > 0.0 ? rz[c] / pap[c] : 0.0;
     // u += gamma p; then, unless this was the last step (the live setting S = 1 ends here), r -= gamma
-    // A p (the dense part here, the guarded part below).
+    // A p (the dense part here, the guarded part below). The last step also lands u back on the
+    // linear constraint's plane when there is one. With S = 1, g . u was its right-hand side before
+    // this step (applyLinearConstraint), so what the step moved it by is gamma_c (g . p)_c, taken
+    // out along z in the same pass, and added to the multiplier.
+    if (step + 1 == options_.inversion_guard_solves) {
+      if (constraint_active_ && step == 0) {
+        const std::array<double, 3> gp = dot3(constraint_g_.data(), p);
+        const double mu_left = -(gamma[0] * gp[0] + gamma[1] * gp[1] + gamma[2] * gp[2]) / constraint_gz_;
+        addScaledByLaneAndScaled(u_.data(), gamma, p, mu_left, constraint_z_.data(), free4);
+        constraint_mu_ += mu_left;
+      } else {
+        addScaledByLane(u_.data(), gamma, p, free4);
+        if (constraint_active_) applyLinearConstraint();
+      }
+      break;
+    }
     addScaledByLane(u_.data(), gamma, p, free4);
-    if (step + 1 == options_.inversion_guard_solves) break;
     if (step == 0) {
       std::copy(cg_z_.begin(), cg_z_.end(), cg_p_.begin());
       std::copy(cg_r_.begin(), cg_r_.end(), cg_lp_.begin());

@@ -52,4 +52,22 @@ TETRIG_MULTIVERSION void addScaledByLane(double* y, const std::array<double, 3>&
   }
 }
 
+TETRIG_MULTIVERSION void addScaledByLaneAndScaled(double* y, const std::array<double, 3>& s, const double* x, double t, const double* w,
+                                                  std::size_t n) noexcept {
+  const Vec4 scale = {s[0], s[1], s[2], 0.0};
+  for (std::size_t i = 0; i < n; i += kVectorStride) {
+    const Vec4 v = load4(y + i);
+    const Vec4 sum = v + scale * load4(x + i);
+    store4(y + i, __builtin_shufflevector(sum, v, 0, 1, 2, 7) + t * load4(w + i));  // the pad lane: y's own (+ 0)
+  }
+}
+
+TETRIG_MULTIVERSION void toFloat(const double* a, float* out, std::size_t n) noexcept {
+  for (std::size_t i = 0; i < n; ++i) out[i] = static_cast<float>(a[i]);
+}
+
+TETRIG_MULTIVERSION void toDouble(const float* a, double* out, std::size_t n) noexcept {
+  for (std::size_t i = 0; i < n; ++i) out[i] = a[i];
+}
+
 }  // namespace tetrig

@@ -26,4 +26,13 @@ void addScaled(double* y, double s, const double* x, std::size_t n) noexcept;
 // lane left as it is. n is a multiple of kVectorStride.
 void addScaledByLane(double* y, const std::array<double, 3>& s, const double* x, std::size_t n) noexcept;
 
+// The same with one more term along a second vector: y += s_c x (per lane, pad lane kept) + t w
+// (every lane; w's pad lanes are 0). One pass instead of two.
+void addScaledByLaneAndScaled(double* y, const std::array<double, 3>& s, const double* x, double t, const double* w,
+                              std::size_t n) noexcept;
+
+// out[i] = a[i] rounded to float, and back (i < n): the implicit guard's float solve.
+void toFloat(const double* a, float* out, std::size_t n) noexcept;
+void toDouble(const float* a, double* out, std::size_t n) noexcept;
+
 }  // namespace tetrig

@@ -497,9 +497,10 @@ TEST(Deformer, ImplicitInversionGuardHoldsWhereTheExplicitOneCannot) {
 
 // The implicit guard and the linear constraint together (deformer.cpp, step): the constraint's
 // multiplier goes in before the guard's conjugate-gradient step, which then solves the held tets'
-// stiffness against the constraint's displacement too, and the little that step moves g . x is
-// projected out after it. So (1) every step's result lies on the constraint's plane, held tets or
-// not, and (2) the bar pushed 3 units deep keeps every tet the right way out with its volume held.
+// stiffness against the constraint's displacement too, and the little that step moves g . x
+// (gamma_c (g . p)_c) is projected out in the same pass as the step. So (1) every step's result lies
+// on the constraint's plane, held tets or not, and (2) the bar pushed 3 units deep keeps every tet
+// the right way out with its volume held.
 TEST(Deformer, LinearConstraintHoldsWithTheImplicitGuard) {
   const auto bar = scenes::makeBarScene(4, 4, 12);
   const std::int32_t pushed = middleOfTopFace(bar);
