@@ -195,23 +195,6 @@ struct SolveVectors<float> {
   using V = lanes::Vec4f;
 };
 
-template <typename T>
-TETRIG_INLINE typename SolveVectors<T>::L loadL(const T* p) {
-  return lanes::loadAs<typename SolveVectors<T>::L>(p);
-}
-template <typename T>
-TETRIG_INLINE void storeL(T* p, typename SolveVectors<T>::L v) {
-  lanes::storeAs(p, v);
-}
-template <typename T>
-TETRIG_INLINE typename SolveVectors<T>::V loadV(const T* p) {
-  return lanes::loadAs<typename SolveVectors<T>::V>(p);
-}
-template <typename T>
-TETRIG_INLINE void storeV(T* p, typename SolveVectors<T>::V v) {
-  lanes::storeAs(p, v);
-}
-
 // Forward block product of C consecutive 8-row chunks: xyzw[rows[l]] -= (B z_block)_l. A padding
 // row repeats the row before it with zero values; each read-modify-write completes before the
 // next, so that is harmless.
@@ -224,7 +207,7 @@ TETRIG_INLINE void subtractBlockProduct(T* xyzw, const std::int32_t* rows, const
   for (std::int32_t c = 0; c < k; ++c, block += np, z += kS) {
 #pragma GCC unroll 2
     for (int q = 0; q < C; ++q) {
-      const L b = loadL(block + kRowPad * q);
+      const L b = lanes::loadAs<L>(block + kRowPad * q);
       x[q] += b * z[0];
       y[q] += b * z[1];
       zz[q] += b * z[2];
@@ -235,7 +218,7 @@ TETRIG_INLINE void subtractBlockProduct(T* xyzw, const std::int32_t* rows, const
     lanes::transposeOut(x[q], y[q], zz[q], v);
     for (int l = 0; l < lanes::kLanes; ++l) {
       T* target = xyzw + kS * rows[kRowPad * q + l];
-      storeV(target, loadV<T>(target) - v[l]);
+      lanes::storeAs(target, lanes::loadAs<V>(target) - v[l]);
     }
   }
 }
@@ -259,19 +242,20 @@ template <int Q, typename T>
 TETRIG_INLINE void columnsMinusBlockProduct(T* x, const T* dk, const T* block, std::int32_t np, const T* gx, const T* gy,
                                             const T* gz) {
   using L = typename SolveVectors<T>::L;
+  using V = typename SolveVectors<T>::V;
   L sx[Q]{}, sy[Q]{}, sz[Q]{};
   for (std::int32_t i = 0; i < np; i += kRowPad) {
-    const L vx = loadL(gx + i), vy = loadL(gy + i), vz = loadL(gz + i);
+    const L vx = lanes::loadAs<L>(gx + i), vy = lanes::loadAs<L>(gy + i), vz = lanes::loadAs<L>(gz + i);
 #pragma GCC unroll 4
     for (int q = 0; q < Q; ++q) {
-      const L b = loadL(block + static_cast<std::int64_t>(q) * np + i);
+      const L b = lanes::loadAs<L>(block + static_cast<std::int64_t>(q) * np + i);
       sx[q] += b * vx;
       sy[q] += b * vy;
       sz[q] += b * vz;
     }
   }
 #pragma GCC unroll 4
-  for (int q = 0; q < Q; ++q) storeV(x + kS * q, loadV(x + kS * q) * dk[q] - sumLanes(sx[q], sy[q], sz[q]));
+  for (int q = 0; q < Q; ++q) lanes::storeAs(x + kS * q, lanes::loadAs<V>(x + kS * q) * dk[q] - sumLanes(sx[q], sy[q], sz[q]));
 }
 
 // Whether n values are all (plus or minus) zero.
@@ -304,26 +288,26 @@ TETRIG_INLINE void SplitLdlt::solveWith(const T* values, const T* d_inv, T* gath
     T* z = xyzw + kS * node.first_column;
     if (skip_zero_nodes && allZero(z, kS * k)) continue;  // T^-1 0 = 0, and nothing to subtract
     if (k == 1) {
-      const V z0 = loadV(z);
+      const V z0 = lanes::loadAs<V>(z);
       for (std::int32_t i = 0; i < np; ++i) {
         T* target = xyzw + kS * r[i];
-        storeV(target, loadV(target) - block[i] * z0);
+        lanes::storeAs(target, lanes::loadAs<V>(target) - block[i] * z0);
       }
       continue;
     }
     const T* triangle = values + node.value_begin;
     for (std::int32_t i = 1; i < k; ++i) {  // four sums per row: chains of i / 4 FMAs
       const T* t = triangle + static_cast<std::int64_t>(i) * k;
-      V s0 = loadV(z + kS * i), s1{}, s2{}, s3{};
+      V s0 = lanes::loadAs<V>(z + kS * i), s1{}, s2{}, s3{};
       std::int32_t c = 0;
       for (; c + 4 <= i; c += 4) {
-        s0 -= t[c] * loadV(z + kS * c);
-        s1 -= t[c + 1] * loadV(z + kS * (c + 1));
-        s2 -= t[c + 2] * loadV(z + kS * (c + 2));
-        s3 -= t[c + 3] * loadV(z + kS * (c + 3));
+        s0 -= t[c] * lanes::loadAs<V>(z + kS * c);
+        s1 -= t[c + 1] * lanes::loadAs<V>(z + kS * (c + 1));
+        s2 -= t[c + 2] * lanes::loadAs<V>(z + kS * (c + 2));
+        s3 -= t[c + 3] * lanes::loadAs<V>(z + kS * (c + 3));
       }
-      for (; c < i; ++c) s0 -= t[c] * loadV(z + kS * c);
-      storeV(z + kS * i, (s0 + s1) + (s2 + s3));
+      for (; c < i; ++c) s0 -= t[c] * lanes::loadAs<V>(z + kS * c);
+      lanes::storeAs(z + kS * i, (s0 + s1) + (s2 + s3));
     }
     std::int32_t i = 0;
     for (; i + 2 * kRowPad <= np; i += 2 * kRowPad) subtractBlockProduct<2>(xyzw, r + i, block + i, np, k, z);
@@ -344,41 +328,41 @@ TETRIG_INLINE void SplitLdlt::solveWith(const T* values, const T* d_inv, T* gath
     if (k == 1) {
       // Two sums, alternating rows, from the last row down: the lowest row was solved last, just
       // before this node (often its parent), so its term enters at the end of the chain.
-      V s0 = loadV(x) * dk[0], s1{};
+      V s0 = lanes::loadAs<V>(x) * dk[0], s1{};
       std::int32_t i = np - 1;
       for (; i >= 1; i -= 2) {
-        s1 -= block[i] * loadV(xyzw + kS * r[i]);
-        s0 -= block[i - 1] * loadV(xyzw + kS * r[i - 1]);
+        s1 -= block[i] * lanes::loadAs<V>(xyzw + kS * r[i]);
+        s0 -= block[i - 1] * lanes::loadAs<V>(xyzw + kS * r[i - 1]);
       }
-      if (i == 0) s0 -= block[0] * loadV(xyzw + kS * r[0]);
-      storeV(x, s0 + s1);
+      if (i == 0) s0 -= block[0] * lanes::loadAs<V>(xyzw + kS * r[0]);
+      lanes::storeAs(x, s0 + s1);
       continue;
     }
     for (std::int32_t i = 0; i < np; i += kRowPad) {
       V v[lanes::kLanes];
-      for (int l = 0; l < lanes::kLanes; ++l) v[l] = loadV(xyzw + kS * r[i + l]);
+      for (int l = 0; l < lanes::kLanes; ++l) v[l] = lanes::loadAs<V>(xyzw + kS * r[i + l]);
       L vx, vy, vz;
       lanes::transposeIn(v, vx, vy, vz);
-      storeL(gx + i, vx);
-      storeL(gy + i, vy);
-      storeL(gz + i, vz);
+      lanes::storeAs(gx + i, vx);
+      lanes::storeAs(gy + i, vy);
+      lanes::storeAs(gz + i, vz);
     }
     std::int32_t c = 0;
     for (; c + 4 <= k; c += 4) columnsMinusBlockProduct<4>(x + kS * c, dk + c, block + static_cast<std::int64_t>(c) * np, np, gx, gy, gz);
     for (; c < k; ++c) columnsMinusBlockProduct<1>(x + kS * c, dk + c, block + static_cast<std::int64_t>(c) * np, np, gx, gy, gz);
     const T* triangle = values + node.value_begin;
     for (c = k - 2; c >= 0; --c) {  // four sums, from the last row down (the latest solved enters last)
-      V s0 = loadV(x + kS * c), s1{}, s2{}, s3{};
+      V s0 = lanes::loadAs<V>(x + kS * c), s1{}, s2{}, s3{};
       const T* t = triangle + c;
       std::int32_t i = k - 1;
       for (; i - 3 > c; i -= 4) {
-        s0 -= t[static_cast<std::int64_t>(i) * k] * loadV(x + kS * i);
-        s1 -= t[static_cast<std::int64_t>(i - 1) * k] * loadV(x + kS * (i - 1));
-        s2 -= t[static_cast<std::int64_t>(i - 2) * k] * loadV(x + kS * (i - 2));
-        s3 -= t[static_cast<std::int64_t>(i - 3) * k] * loadV(x + kS * (i - 3));
+        s0 -= t[static_cast<std::int64_t>(i) * k] * lanes::loadAs<V>(x + kS * i);
+        s1 -= t[static_cast<std::int64_t>(i - 1) * k] * lanes::loadAs<V>(x + kS * (i - 1));
+        s2 -= t[static_cast<std::int64_t>(i - 2) * k] * lanes::loadAs<V>(x + kS * (i - 2));
+        s3 -= t[static_cast<std::int64_t>(i - 3) * k] * lanes::loadAs<V>(x + kS * (i - 3));
       }
-      for (; i > c; --i) s0 -= t[static_cast<std::int64_t>(i) * k] * loadV(x + kS * i);
-      storeV(x + kS * c, (s0 + s1) + (s2 + s3));
+      for (; i > c; --i) s0 -= t[static_cast<std::int64_t>(i) * k] * lanes::loadAs<V>(x + kS * i);
+      lanes::storeAs(x + kS * c, (s0 + s1) + (s2 + s3));
     }
   }
 }

@@ -23,6 +23,26 @@ Eigen::SparseMatrix<double> spdFromBar(int nx, int ny, int nz) {
   return l;
 }
 
+// Three right-hand sides (x, y, z) that are zero but at `nonzero_rows` random rows (every row when
+// it is the matrix's size), and the same interleaved in the factor's order (lane 3 kept 0).
+Eigen::MatrixXd sparseRightHandSide(Eigen::Index rows, int nonzero_rows, std::mt19937& rng) {
+  std::normal_distribution<double> normal;
+  Eigen::MatrixXd b = Eigen::MatrixXd::Zero(rows, 3);
+  for (int j = 0; j < nonzero_rows; ++j) {
+    const auto row = nonzero_rows == rows ? j : std::uniform_int_distribution<int>(0, static_cast<int>(rows) - 1)(rng);
+    for (int c = 0; c < 3; ++c) b(row, c) = normal(rng);
+  }
+  return b;
+}
+
+template <typename T>
+std::vector<T> interleaved(const SplitLdlt& factor, const Eigen::MatrixXd& b) {
+  std::vector<T> xyz(static_cast<size_t>(b.rows()) * kVectorStride, T(0));
+  for (std::int32_t i = 0; i < factor.size(); ++i)
+    for (int c = 0; c < 3; ++c) xyz[kVectorStride * static_cast<size_t>(factor.position(i)) + static_cast<size_t>(c)] = static_cast<T>(b(i, c));
+  return xyz;
+}
+
 // Two bars, so every path of the solve runs: single columns, merged and cut supernodes, the
 // 16-row forward products and (only the larger bar has it) the 8-row remainder, the four-column
 // backward products and the column remainder, the triangles' four-sum loops and their remainders,
@@ -68,17 +88,10 @@ TEST_P(SplitLdltBars, TheFloatCopySolvesToFloatPrecision) {
   factor.factorize(a);
   factor.prepareFloatSolve();
   std::mt19937 rng(11);
-  std::normal_distribution<double> normal;
   constexpr size_t kS = kVectorStride;
   for (const int nonzero_rows : {static_cast<int>(a.rows()), 3}) {
-    Eigen::MatrixXd b = Eigen::MatrixXd::Zero(a.rows(), 3);
-    for (int j = 0; j < nonzero_rows; ++j) {
-      const auto row = nonzero_rows == a.rows() ? j : std::uniform_int_distribution<int>(0, static_cast<int>(a.rows()) - 1)(rng);
-      for (int c = 0; c < 3; ++c) b(row, c) = normal(rng);
-    }
-    std::vector<float> xyz(static_cast<size_t>(a.rows()) * kS, 0.0f);
-    for (std::int32_t i = 0; i < factor.size(); ++i)
-      for (int c = 0; c < 3; ++c) xyz[kS * static_cast<size_t>(factor.position(i)) + static_cast<size_t>(c)] = static_cast<float>(b(i, c));
+    const Eigen::MatrixXd b = sparseRightHandSide(a.rows(), nonzero_rows, rng);
+    std::vector<float> xyz = interleaved<float>(factor, b);
     std::vector<float> skipping = xyz;
     factor.solveInPlace(xyz.data());
     factor.solveInPlace(skipping.data(), /*skip_zero_nodes=*/true);
@@ -106,16 +119,9 @@ TEST(SplitLdlt, SkippingZeroNodesSolvesTheSame) {
   factor.factorize(a);
   constexpr size_t kS = kVectorStride;
   std::mt19937 rng(5);
-  std::normal_distribution<double> normal;
   for (const int nonzero_rows : {3, static_cast<int>(a.rows())}) {
-    Eigen::MatrixXd b = Eigen::MatrixXd::Zero(a.rows(), 3);
-    for (int j = 0; j < nonzero_rows; ++j) {
-      const auto row = nonzero_rows == a.rows() ? j : std::uniform_int_distribution<int>(0, static_cast<int>(a.rows()) - 1)(rng);
-      for (int c = 0; c < 3; ++c) b(row, c) = normal(rng);
-    }
-    std::vector<double> full(static_cast<size_t>(a.rows()) * kS, 0.0);
-    for (std::int32_t i = 0; i < factor.size(); ++i)
-      for (int c = 0; c < 3; ++c) full[kS * static_cast<size_t>(factor.position(i)) + static_cast<size_t>(c)] = b(i, c);
+    const Eigen::MatrixXd b = sparseRightHandSide(a.rows(), nonzero_rows, rng);
+    std::vector<double> full = interleaved<double>(factor, b);
     std::vector<double> skipping = full;
     factor.solveInPlace(full.data());
     factor.solveInPlace(skipping.data(), /*skip_zero_nodes=*/true);
