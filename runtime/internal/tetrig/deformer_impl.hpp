@@ -24,13 +24,13 @@
 
 namespace tetrig {
 
-// A tet the implicit inversion guard holds, gathered once from its block (inversion_guard.cpp): its
-// slot, corner offsets (solver order, stride 4), rest edge inverse E^-1 and alpha_j a_j.
 // The indices of the blocks of kTetBlockWidth slots (det: block_count * kTetBlockWidth values) with
 // some det <= bound, ascending, into out (block_count values at most); returns how many. One vector
 // compare per block (inversion_guard.cpp).
 std::size_t blocksWithDetAtMost(const float* det, std::size_t block_count, float bound, std::int32_t* out) noexcept;
 
+// A tet the implicit inversion guard holds, gathered once from its block (inversion_guard.cpp): its
+// slot, corner offsets (solver order, stride 4), rest edge inverse E^-1 and alpha_j a_j.
 struct GuardedTet {
   std::int32_t slot = 0;
   std::array<std::int32_t, 4> corner{};
