@@ -117,8 +117,12 @@ void applyRotationIncrements(std::span<const double> weights, std::span<const Ei
     const Lanes rest = 1.0 - total;
     iw += rest > 0.0 ? rest : Lanes{};
     const Lanes norm2 = iw * iw + ix * ix + iy * iy + iz * iz;
-    Lanes inv{};
-    for (int l = 0; l < kLanes; ++l) inv[l] = norm2[l] > 1e-24 ? 1.0 / std::sqrt(norm2[l]) : 0.0;
+    // 1 / |blend| in vectors (a lane-by-lane test, sqrt and divide took half the pass): a vanished
+    // blend's lane takes 1 under the root and 0 after.
+    const auto blended = norm2 > 1e-24;
+    Lanes root = blended ? norm2 : Lanes{} + 1.0;
+    for (int l = 0; l < kLanes; ++l) root[l] = __builtin_sqrt(root[l]);  // -fno-math-errno: one vector sqrt
+    const Lanes inv = blended ? 1.0 / root : Lanes{};
     TetBlock& block = blocks[hb / 2];
     const int lane0 = kLanes * (hb % 2);
     float* rw = block.rotation[0] + lane0;
