@@ -563,6 +563,7 @@ bool DeformerImpl::interpolateRotations() {
 }
 
 void DeformerImpl::rebuildDelta() {
+  delta_stale_ = false;
   std::fill(delta_.begin(), delta_.end(), 0.0f);
   differentialPass(blocks_.data(), static_cast<std::int32_t>(blocks_.size()), delta_.data(), u_.data(), volumeWeights(),
                    guard(), static_cast<float>(options_.inversion_guard_threshold));
@@ -656,11 +657,19 @@ StepStats DeformerImpl::step(const HandleTargets& targets, const StepBudget& bud
       turned = true;
     }
     // The differential coordinates once, from the rotations both have turned.
-    if (interpolateRotations() || turned) rebuildDelta();
+    if (interpolateRotations() || turned || delta_stale_) rebuildDelta();
     stats.interpolation_ns += nanosecondsBetween(t0, Clock::now());
   }
   const auto block_count = static_cast<std::int32_t>(blocks_.size());
   const bool has_groups = !group_slot_.empty();
+  // With the temporal prediction on, or oriented regions whose turns are interpolated over the
+  // tets, the next frame turns the tets' rotations before its first solve and builds delta again
+  // from the turned rotations: the last rotation pass of a frame then leaves delta out (it only
+  // refines the rotations). The next step builds it in any case when it did not turn (a step that
+  // continues this frame unannounced, the first frame without a previous one, regions that stood
+  // still).
+  const bool next_step_turns =
+      (options_.rotation_extrapolation > 0.0 || !harmonic_weights_.empty()) && !has_groups && !budget.continued_after;
   const size_t free4 = static_cast<size_t>(free_count_) * kVectorStride;
   for (int iteration = 0; iteration < budget.max_iterations; ++iteration) {
     // 1. Linear solve: L_ff u_f = delta_f - L_fh u_h (+ point terms) (+ mu g_f, the constraint's
@@ -686,9 +695,10 @@ StepStats DeformerImpl::step(const HandleTargets& targets, const StepBudget& bud
     ++stats.iterations;
     if (options_.update_rotations) {
       // 2.-4. Rotations, rigid groups, differential coordinates.
-      std::fill(delta_.begin(), delta_.end(), 0.0f);
+      delta_stale_ = next_step_turns && iteration + 1 == budget.max_iterations;
+      if (!delta_stale_) std::fill(delta_.begin(), delta_.end(), 0.0f);
       const RotationPassStats pass =
-          rotationPass(blocks_.data(), block_count, u_.data(), has_groups ? nullptr : delta_.data(),
+          rotationPass(blocks_.data(), block_count, u_.data(), has_groups || delta_stale_ ? nullptr : delta_.data(),
                        options_.rotation_steps, exact_lanes_.data(), static_cast<float>(options_.rotation_relaxation - 1.0),
                        volumeWeights(), guard(), static_cast<float>(options_.inversion_guard_threshold),
                        guarded_.empty() ? nullptr : guard_det_.data());

@@ -541,14 +541,19 @@ void LiveRigImpl::solve(const StepBudget& budget, std::uint32_t blending, LiveFr
   // reached (docs/fidelity.md: set only after the frame, or at rest, it is far off for a first
   // pose far from rest).
   const bool cold_constraint = volume_constraint_ && !deformer_.hasLinearConstraint() && budget.max_iterations >= 2;
+  // The iterations after publishing (prepareNextFrame) continue this frame.
+  const bool continued_after_publish = options_.solver.after_publish_iterations > 0;
   if (!refresh && !cold_constraint) {
-    stats.step = deformer_.step(targets, budget);
+    StepBudget whole = budget;
+    whole.continued_after = continued_after_publish;
+    stats.step = deformer_.step(targets, whole);
   } else {
     // One iteration with the predictions from the last pose, then the rest with predictions from
     // the pose that iteration gave (the measured markers have moved the body by then). On a cold
     // frame the volume constraint is linearized again before each further iteration.
     StepBudget first = budget;
     first.max_iterations = 1;
+    first.continued_after = budget.max_iterations > 1 || continued_after_publish;
     stats.step = deformer_.step(targets, first);
     int left = budget.max_iterations - 1;
     if (std::chrono::steady_clock::now() >= budget.deadline) stats.step.flags |= kStepDeadlineHit;
@@ -564,6 +569,7 @@ void LiveRigImpl::solve(const StepBudget& budget, std::uint32_t blending, LiveFr
       StepBudget rest = budget;
       rest.max_iterations = cold_constraint ? 1 : left;
       rest.continues_frame = true;
+      rest.continued_after = rest.max_iterations < left || continued_after_publish;
       const StepStats more = deformer_.step(targets, rest);
       addStep(stats.step, more);
       if (!cold_constraint || more.iterations <= 0) break;  // one step for the rest, as asked

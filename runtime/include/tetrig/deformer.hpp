@@ -140,6 +140,11 @@ struct StepBudget {
   // true: this call continues the previous call's frame (the live rig's re-prediction splits a
   // frame's iterations over two calls): the per-frame start (temporal extrapolation) is skipped.
   bool continues_frame = false;
+  // true: another call continues this frame right after this one (continues_frame there). The
+  // frame's last rotation pass otherwise leaves the right-hand side for the next frame to build
+  // (with the temporal prediction or oriented regions it turns the rotations first); a call that
+  // continues builds it then (a whole pass) unless this call kept it.
+  bool continued_after = false;
 };
 
 enum StepFlags : std::uint32_t {

@@ -120,6 +120,7 @@ class DeformerImpl {
   AlignedVector<double> rest_solver_;           // rest positions, solver order, kVectorStride per vertex
   AlignedVector<double> u_;                     // displacements x - x_rest, solver order (free then handles)
   AlignedVector<float> delta_;                  // sum_j a_j (R_j - I) G_j, solver order (float: rotation_kernel.hpp)
+  bool delta_stale_ = false;                    // the last rotation pass left delta_ out (step(): the next step builds it)
   AlignedVector<double> rhs_constant_;          // -L_fh u_h + point terms, free part
   std::vector<double> positions_;             // mesh order output
   AlignedVector<double> padded_positions_;      // mesh order output, kVectorStride per vertex
