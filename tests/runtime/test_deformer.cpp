@@ -724,7 +724,8 @@ TEST(Deformer, AStepContinuingTheFrameBuildsTheDeltaTheLastPassLeftOut) {
   Deformer split(bar.mesh, setup), whole(bar.mesh, setup), shorter(bar.mesh, setup);
   const int frames = 6;
   for (int f = 1; f <= frames; ++f) {
-    const auto targets = vertexTargets(test::endTargets(bar, scenes::barBendTransform(bar, 0.1 * f)));
+    const std::vector<Eigen::Vector3d> positions = test::endTargets(bar, scenes::barBendTransform(bar, 0.1 * f));
+    const HandleTargets targets = vertexTargets(positions);  // a view of positions
     if (f < frames) {
       for (Deformer* d : {&split, &whole, &shorter}) d->step(targets, StepBudget{3});
       continue;
