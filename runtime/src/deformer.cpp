@@ -667,8 +667,8 @@ StepStats DeformerImpl::step(const HandleTargets& targets, const StepBudget& bud
   // from the turned rotations: the last rotation pass of a frame then leaves delta out (it only
   // refines the rotations). The next step builds it in any case when it did not turn (a step that
   // continues this frame unannounced, the first frame without a previous one, regions that stood
-  // still).
-  const bool next_step_turns =
+  // still), unless the caller said a continuation follows (StepBudget::continued_after).
+  const bool last_pass_leaves_delta =
       (options_.rotation_extrapolation > 0.0 || !harmonic_weights_.empty()) && !has_groups && !budget.continued_after;
   const size_t free4 = static_cast<size_t>(free_count_) * kVectorStride;
   for (int iteration = 0; iteration < budget.max_iterations; ++iteration) {
@@ -695,7 +695,7 @@ StepStats DeformerImpl::step(const HandleTargets& targets, const StepBudget& bud
     ++stats.iterations;
     if (options_.update_rotations) {
       // 2.-4. Rotations, rigid groups, differential coordinates.
-      delta_stale_ = next_step_turns && iteration + 1 == budget.max_iterations;
+      delta_stale_ = last_pass_leaves_delta && iteration + 1 == budget.max_iterations;
       if (!delta_stale_) std::fill(delta_.begin(), delta_.end(), 0.0f);
       const RotationPassStats pass =
           rotationPass(blocks_.data(), block_count, u_.data(), has_groups || delta_stale_ ? nullptr : delta_.data(),

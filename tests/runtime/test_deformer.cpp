@@ -715,8 +715,8 @@ TEST(Deformer, TemporalPredictionFollowsASteadyBend) {
 // With the temporal prediction on, a frame's last rotation pass leaves delta out (the next frame
 // builds it from the turned rotations). A step that continues the frame does not turn them: it must
 // build delta itself, so 3 iterations and then 2 more on the same frame land where 5 in one step do
-// (measured: to the bit). Left with the delta of the second iteration's pass,
-// the fourth solve would take one iteration's rotations too old: then they differ by about as much as 4 iterations and 5 do.
+// (measured: to the bit). Left with the delta of the second iteration's pass, the fourth solve would
+// take rotations one iteration old, and the two would differ about as much as 4 iterations and 5 do.
 TEST(Deformer, AStepContinuingTheFrameBuildsTheDeltaTheLastPassLeftOut) {
   const auto bar = scenes::makeBarScene(4, 4, 33);
   DeformerSetup setup = test::endVertexHandles(bar);
