@@ -10,8 +10,8 @@
 //   BM_RigFrame/smpl_hdm05_predicted: the same with the temporal prediction of the warm start;
 //   _relaxed, _predicted_relaxed: with the over-relaxation of the rotation update (omega 1.8);
 //   _coarse_relaxed, _coarse_predicted_relaxed: with the coarse level too (tetrig/coarse_level.hpp:
-//   the same mesh and markers built with 150 tet vertices, 5 coarse iterations per frame, counted
-//   in the frame and in step_us; coarse_us is its share).
+//   the same mesh and markers built with 150 tet vertices, the default 2 coarse iterations per
+//   frame, counted in the frame and in step_us; coarse_us is its share).
 //   _volume: with the volume term (w 0.5) on every tet; _joint_volume: w 0.5 on the body tets of the
 //   knees and elbows only (DeformerSetup::volume_weights; the boxes of assets/human_man_fitted.json,
 //   by rest centroid; the cost does not depend on w, only on which blocks of tets have one).
@@ -20,7 +20,8 @@
 //   default settings (SolverSettings{}: the temporal prediction, omega 1.8, the implicit inversion
 //   guard, the volume kept, the 150-vertex coarse level) and with SolverSettings::plain() (the same
 //   coarse level, no prediction, guard or volume constraint); prepareNextFrame left to the next
-//   processFrame (in the frame's time, and apart as prepare_us).
+//   processFrame (in the frame's time, and apart as prepare_us); coarse_us, the coarse level's share
+//   of step_us.
 //   The variants below start from SolverSettings::plain() and add what they measure.
 //   BM_LiveRigFrame/smpl_hdm05: the same frames through the live path's own per-frame call,
 //   LiveRig::processFrame (clip frame as the C3D playback source fills it -> labels bound once ->
@@ -185,7 +186,7 @@ void rigFrame(benchmark::State& state, double extrapolation, double relaxation =
   if (with_coarse) {
     tetrig::DeformerSetup cs = coarse_rig.setup;
     cs.options.rotation_relaxation = relaxation;
-    coarse = std::make_unique<tetrig::CoarseLevel>(rig.tet_mesh, coarse_rig.tet_mesh, cs);
+    coarse = std::make_unique<tetrig::CoarseLevel>(rig.tet_mesh, deformer, coarse_rig.tet_mesh, cs);
     coarse_targets = restVertexTargets(coarse_rig.tet_mesh, cs);
     for (std::size_t m = 0; m < rig.markers.size(); ++m)
       for (const tetrig::RigMarker& c : coarse_rig.markers)
@@ -322,7 +323,7 @@ void liveRigFrame(benchmark::State& state, bool feet, bool volume_constraint = f
   }
   std::size_t f = 0;
   std::uint64_t counter = 0;
-  std::int64_t step_ns = 0, pose_ns = 0, prepare_ns = 0, iterations = 0, guarded_solves = 0, guarded_tets = 0;
+  std::int64_t step_ns = 0, pose_ns = 0, prepare_ns = 0, coarse_ns = 0, iterations = 0, guarded_solves = 0, guarded_tets = 0;
   for (auto _ : state) {
     playback.fillFrame(f, counter++, *frame);
     const tetrig::LiveFrameStats s = live.processFrame(*frame, tetrig::StepBudget{3}, fine.data(), nullptr);
@@ -331,6 +332,7 @@ void liveRigFrame(benchmark::State& state, bool feet, bool volume_constraint = f
     step_ns += s.step.total_ns;
     pose_ns += s.pose_transfer_ns;
     prepare_ns += s.prepare_ns;
+    coarse_ns += s.coarse_ns;
     iterations += s.step.iterations;
     guarded_solves += s.step.guarded_solves;
     guarded_tets += s.step.guarded_tets;
@@ -339,6 +341,7 @@ void liveRigFrame(benchmark::State& state, bool feet, bool volume_constraint = f
   const auto n = static_cast<double>(state.iterations());
   state.counters["step_us"] = static_cast<double>(step_ns) / n * 1e-3;
   state.counters["pose_transfer_us"] = static_cast<double>(pose_ns) / n * 1e-3;
+  if (coarse_ns > 0) state.counters["coarse_us"] = static_cast<double>(coarse_ns) / n * 1e-3;  // also in step_us
   if (volume_constraint || after_publish || landing || settings != Settings::kVariant) state.counters["prepare_us"] = static_cast<double>(prepare_ns) / n * 1e-3;
   state.counters["iterations"] = static_cast<double>(iterations) / n;
   if (implicit_guard || settings == Settings::kDefaults) {

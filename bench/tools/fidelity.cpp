@@ -559,7 +559,7 @@ int main(int argc, char** argv) {
   app.add_option("--coarse-rig", coarse_path,
                  "Coarse level: a rig of the same mesh and markers with fewer tet vertices, solved every frame first")
       ->check(CLI::ExistingFile);
-  app.add_option("--coarse-iterations", cfg.live.solver.coarse_iterations, "Coarse level: its iterations per frame (default 5)")
+  app.add_option("--coarse-iterations", cfg.live.solver.coarse_iterations, "Coarse level: its iterations per frame (default 2)")
       ->check(CLI::PositiveNumber)
       ->group(kExperiments);
   app.add_option("--volume-weight", cfg.live.solver.volume_weight,

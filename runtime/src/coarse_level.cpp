@@ -7,6 +7,7 @@
 
 #include <limits>
 #include <stdexcept>
+#include <string>
 
 namespace tetrig {
 
@@ -31,8 +32,8 @@ void storeQuaternion(const Eigen::Quaterniond& q, float* out) {
 
 }  // namespace
 
-CoarseLevel::CoarseLevel(const TetMesh& fine_mesh, const TetMesh& coarse_mesh, const DeformerSetup& coarse_setup,
-                         const CoarseLevelOptions& options)
+CoarseLevel::CoarseLevel(const TetMesh& fine_mesh, Deformer& fine, const TetMesh& coarse_mesh,
+                         const DeformerSetup& coarse_setup, const CoarseLevelOptions& options)
     : options_(options), coarse_(coarse_mesh, coarse_setup) {
   if (options_.iterations < 1) throw std::invalid_argument("coarse level: iterations must be at least 1");
   if (coarse_mesh.tetCount() == 0 || fine_mesh.tetCount() == 0) throw std::invalid_argument("coarse level: empty tet mesh");
@@ -51,9 +52,13 @@ CoarseLevel::CoarseLevel(const TetMesh& fine_mesh, const TetMesh& coarse_mesh, c
       }
     }
   }
+  if (!fine.setFrameGuideSources(coarse_of_fine_, coarse_mesh.tetCount())) {
+    throw std::invalid_argument("coarse level: the fine deformer takes no frame guide (DeformerOptions::frame_guide) or has " +
+                                std::to_string(fine.tetCount()) + " tets, not the fine mesh's " +
+                                std::to_string(fine_mesh.tetCount()));
+  }
   previous_.assign(4 * coarse_c.size(), 0.0f);
   change_.assign(4 * coarse_c.size(), 0.0f);
-  guide_.assign(4 * fine_c.size(), 0.0f);
   reset();
 }
 
@@ -78,11 +83,7 @@ StepStats CoarseLevel::guide(const HandleTargets& coarse_targets, Deformer& fine
     storeQuaternion(q.normalized(), &change_[4 * static_cast<std::size_t>(c)]);
     storeQuaternion(now, p);
   }
-  for (std::size_t f = 0; f < coarse_of_fine_.size(); ++f) {
-    const float* q = &change_[4 * static_cast<std::size_t>(coarse_of_fine_[f])];
-    for (std::size_t k = 0; k < 4; ++k) guide_[4 * f + k] = q[k];
-  }
-  fine.setFrameGuide(guide_);
+  fine.setFrameGuide(change_);  // each fine tet takes its coarse tet's row
   stats.total_ns = monotonicNowNs() - t0;  // the coarse step and the guide made from it
   return stats;
 }

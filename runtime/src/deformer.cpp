@@ -331,7 +331,12 @@ void DeformerImpl::buildTetBlocks(const TetMesh& mesh, const TetRestFrames& fram
       }
     }
   }
-
+  if (options_.frame_guide) {
+    // The frame guide's default sources: every tet its own row (setFrameGuideSources changes them).
+    std::vector<std::int32_t> own(static_cast<size_t>(tet_count_));
+    std::iota(own.begin(), own.end(), 0);
+    setFrameGuideSources(own, tet_count_);
+  }
 }
 
 // Rotation interpolation: harmonic weights per oriented region handle, 0 on tets touching another
@@ -741,12 +746,26 @@ Eigen::Quaterniond DeformerImpl::rotation(std::int32_t t) const {
   return {block.rotation[0][l], block.rotation[1][l], block.rotation[2][l], block.rotation[3][l]};
 }
 
-bool DeformerImpl::setFrameGuide(std::span<const float> wxyz_per_tet) noexcept {
-  if (guide_.empty() || wxyz_per_tet.size() != 4 * static_cast<size_t>(tet_count_)) return false;
-  for (std::int32_t t = 0; t < tet_count_; ++t) {
-    const std::int32_t s = slotOfTet(t);
-    const size_t base = 4 * static_cast<size_t>(s / kTetBlockWidth) * kTetBlockWidth + static_cast<size_t>(s % kTetBlockWidth);
-    for (size_t c = 0; c < 4; ++c) guide_[base + c * kTetBlockWidth] = wxyz_per_tet[4 * static_cast<size_t>(t) + c];
+bool DeformerImpl::setFrameGuideSources(std::span<const std::int32_t> source_of_tet, std::int32_t sources) {
+  if (guide_.empty() || source_of_tet.size() != static_cast<size_t>(tet_count_) || sources < 1) return false;
+  for (const std::int32_t r : source_of_tet)
+    if (r < 0 || r >= sources) return false;
+  guide_source_of_slot_.assign(guide_.size() / 4, -1);
+  for (std::int32_t t = 0; t < tet_count_; ++t)
+    guide_source_of_slot_[static_cast<size_t>(slotOfTet(t))] = source_of_tet[static_cast<size_t>(t)];
+  guide_sources_ = sources;
+  return true;
+}
+
+bool DeformerImpl::setFrameGuide(std::span<const float> wxyz_per_source) noexcept {
+  if (guide_.empty() || wxyz_per_source.size() != 4 * static_cast<size_t>(guide_sources_)) return false;
+  // In slot order: the guide's blocks are written in sequence, the rows read from a small table.
+  for (size_t s = 0; s < guide_source_of_slot_.size(); ++s) {
+    const std::int32_t r = guide_source_of_slot_[s];
+    if (r < 0) continue;  // padding lane: stays the identity
+    const float* q = &wxyz_per_source[4 * static_cast<size_t>(r)];
+    float* out = &guide_[4 * (s / kTetBlockWidth) * kTetBlockWidth + s % kTetBlockWidth];
+    for (size_t c = 0; c < 4; ++c) out[c * kTetBlockWidth] = q[c];
   }
   guide_pending_ = true;
   return true;
@@ -780,7 +799,10 @@ std::span<const float> Deformer::paddedFloatPositions() const noexcept { return 
 Eigen::Vector3d Deformer::position(std::int32_t v) const { return impl_->position(v); }
 Eigen::Quaterniond Deformer::rotation(std::int32_t t) const { return impl_->rotation(t); }
 void Deformer::setRotations(std::span<const Eigen::Quaterniond> rotations) { impl_->setRotations(rotations); }
-bool Deformer::setFrameGuide(std::span<const float> wxyz_per_tet) noexcept { return impl_->setFrameGuide(wxyz_per_tet); }
+bool Deformer::setFrameGuide(std::span<const float> wxyz_per_source) noexcept { return impl_->setFrameGuide(wxyz_per_source); }
+bool Deformer::setFrameGuideSources(std::span<const std::int32_t> source_of_tet, std::int32_t sources) {
+  return impl_->setFrameGuideSources(source_of_tet, sources);
+}
 bool Deformer::setLinearConstraint(std::span<const double> g, double c, ConstraintDirection direction) noexcept {
   return impl_->setLinearConstraint(g, c, direction);
 }

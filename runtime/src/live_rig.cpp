@@ -242,7 +242,7 @@ void LiveRigImpl::buildCoarseLevel(const Rig& coarse) {
   setup.options.frame_guide = false;
   CoarseLevelOptions co;
   co.iterations = options_.solver.coarse_iterations;
-  coarse_ = std::make_unique<CoarseLevel>(rig_->tet_mesh, coarse.tet_mesh, setup, co);
+  coarse_ = std::make_unique<CoarseLevel>(rig_->tet_mesh, deformer_, coarse.tet_mesh, setup, co);
 }
 
 std::span<const std::int32_t> LiveRigImpl::fineTriangles() const noexcept {

@@ -129,7 +129,7 @@ TEST(StepAllocations, NoneWithTheCoarseLevel) {
   setup.options.frame_guide = true;
   setup.options.rotation_extrapolation = 1.0;
   Deformer deformer(fine.mesh, setup);
-  CoarseLevel coarse(fine.mesh, coarse_bar.mesh, test::endVertexHandles(coarse_bar));
+  CoarseLevel coarse(fine.mesh, deformer, coarse_bar.mesh, test::endVertexHandles(coarse_bar));
   std::vector<std::vector<Eigen::Vector3d>> fine_targets, coarse_targets;
   for (int f = 0; f < 8; ++f) {
     const Eigen::Isometry3d far = scenes::barAxisTransform(fine, 0.3 * f, Eigen::Vector3d(0, f, 0));

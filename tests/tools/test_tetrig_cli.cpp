@@ -5,6 +5,7 @@
 #include "small_rig.hpp"
 #include "t_shape_rig.hpp"
 #include "test_data.hpp"
+#include "tetrig/solver_settings.hpp"
 #include "tetrig/version.h"
 
 #include <gtest/gtest.h>
@@ -374,7 +375,7 @@ TEST(TetrigCli, RunPlaysAClipAndRefusesBadInput) {
   EXPECT_CONTAINS(coarse.out, "coarse level: ");
   EXPECT_CONTAINS(coarse.out, "temporal prediction of each frame's start: on");
   EXPECT_EQ(ok.out.find("coarse level"), std::string::npos);
-  EXPECT_CONTAINS(coarse.out, " tets, 5 iterations per frame");
+  EXPECT_CONTAINS(coarse.out, " tets, " + std::to_string(tetrig::SolverSettings{}.coarse_iterations) + " iterations per frame");
   one_line_error(run("run --rig '" + rig + "' --coarse-rig /nonexistent/c.rig --source synthetic", dir), "/nonexistent/c.rig");
   one_line_error(run("run --rig '" + rig + "' --source 'c3d:/nonexistent/clip.c3d'", dir), "/nonexistent/clip.c3d");
   one_line_error(run("run --rig '" + rig + "' --source 'tcp:1234'", dir), "tcp");

@@ -205,12 +205,19 @@ class Deformer {
   // Not for the frame path: allocation-free but O(#T).
   void setRotations(std::span<const Eigen::Quaterniond> rotations);
 
-  // Frame guide (DeformerOptions::frame_guide): a rotation increment G per tet (4 floats w x y z per
-  // tet, mesh tet order, unit quaternions) composed onto every tet's rotation at the start of the
-  // next step() that begins a frame, before its first solve: R' = G R, with the temporal prediction
-  // taken beyond the guide (docs/fidelity.md, "Temporal prediction"). Used once, then cleared. Returns false
-  // (and keeps nothing) without the option or with the wrong size. No allocation, lock or exception.
-  bool setFrameGuide(std::span<const float> wxyz_per_tet) noexcept;
+  // Frame guide (DeformerOptions::frame_guide): a rotation increment G per tet composed onto every
+  // tet's rotation at the start of the next step() that begins a frame, before its first solve:
+  // R' = G R, with the temporal prediction taken beyond the guide (docs/fidelity.md, "Temporal
+  // prediction"). Given as a table of unit quaternions (4 floats w x y z per row); tet t takes row
+  // source(t): by default its own (one row per tet, mesh tet order), else as setFrameGuideSources
+  // says. Used once, then cleared. Returns false (and keeps nothing) without the option or with the
+  // wrong size. No allocation, lock or exception.
+  bool setFrameGuide(std::span<const float> wxyz_per_source) noexcept;
+  // Load time (allocates): tet t takes row source_of_tet[t] of setFrameGuide's table of `sources`
+  // rows, for a guide shared by groups of tets (the coarse level: one per coarse tet). Returns false
+  // (and keeps the sources it had) without DeformerOptions::frame_guide, with the wrong size or a row
+  // outside [0, sources).
+  bool setFrameGuideSources(std::span<const std::int32_t> source_of_tet, std::int32_t sources);
 
   // A linear equality constraint on the positions, g . x = c (DeformerOptions::linear_constraint;
   // g: #V*3 doubles in mesh vertex order, e.g. a volume's gradient, docs/deformation.md "Volume constraint"),

@@ -32,20 +32,21 @@
 namespace tetrig {
 
 struct CoarseLevelOptions {
-  int iterations = 5;  // coarse iterations per frame (at least 1); 5 measured as good as 10 on HDM05 (docs/fidelity.md)
+  int iterations = 2;  // coarse iterations per frame (at least 1); 2 measured as good as 5 on HDM05 and mocap36 (docs/fidelity.md)
 };
 
 class CoarseLevel {
  public:
-  // fine_mesh: the fine deformer's tet mesh (rest); coarse_mesh and coarse_setup: the coarse level's
-  // (rest in the same units and place as the fine mesh). The fine deformer it guides must have
-  // DeformerOptions::frame_guide on and fine_mesh's tet count.
-  CoarseLevel(const TetMesh& fine_mesh, const TetMesh& coarse_mesh, const DeformerSetup& coarse_setup,
+  // fine_mesh: the fine deformer's tet mesh (rest); fine: the deformer it guides (of fine_mesh, with
+  // DeformerOptions::frame_guide on: its guide's sources become the coarse tets,
+  // Deformer::setFrameGuideSources); coarse_mesh and coarse_setup: the coarse level's (rest in the
+  // same units and place as the fine mesh).
+  CoarseLevel(const TetMesh& fine_mesh, Deformer& fine, const TetMesh& coarse_mesh, const DeformerSetup& coarse_setup,
               const CoarseLevelOptions& options = {});
 
-  // One frame: the coarse step on `coarse_targets` (the coarse setup's handles), then the fine
-  // deformer's frame guide. Returns the coarse step's stats, with total_ns the whole call's time
-  // (the step and the guide). No allocation.
+  // One frame: the coarse step on `coarse_targets` (the coarse setup's handles), then the frame guide
+  // of `fine` (the deformer given at construction). Returns the coarse step's stats, with total_ns
+  // the whole call's time (the step and the guide). No allocation.
   StepStats guide(const HandleTargets& coarse_targets, Deformer& fine) noexcept;
 
   // Back to rest (rotations I, no change remembered). No allocation.
@@ -61,8 +62,7 @@ class CoarseLevel {
   Deformer coarse_;
   std::vector<std::int32_t> coarse_of_fine_;
   std::vector<float> previous_;  // R_c,n-1 per coarse tet (w x y z)
-  std::vector<float> change_;    // Q_c per coarse tet (w x y z)
-  std::vector<float> guide_;     // Q_c(f) per fine tet (w x y z)
+  std::vector<float> change_;    // Q_c per coarse tet (w x y z): the fine deformer's guide table
 };
 
 }  // namespace tetrig

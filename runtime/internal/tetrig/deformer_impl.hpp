@@ -62,7 +62,8 @@ class DeformerImpl {
   Eigen::Vector3d position(std::int32_t v) const;
   Eigen::Quaterniond rotation(std::int32_t t) const;
   void setRotations(std::span<const Eigen::Quaterniond> rotations);
-  bool setFrameGuide(std::span<const float> wxyz_per_tet) noexcept;
+  bool setFrameGuide(std::span<const float> wxyz_per_source) noexcept;
+  bool setFrameGuideSources(std::span<const std::int32_t> source_of_tet, std::int32_t sources);
   bool setLinearConstraint(std::span<const double> g, double c, ConstraintDirection direction) noexcept;
   bool setLinearConstraintValue(double c) noexcept;
   void clearLinearConstraint() noexcept { constraint_active_ = false; }
@@ -165,6 +166,9 @@ class DeformerImpl {
   // padding lanes.
   AlignedVector<float> guide_;
   bool guide_pending_ = false;
+  // The row of setFrameGuide's table each slot takes (-1 in padding lanes), and the table's rows.
+  std::vector<std::int32_t> guide_source_of_slot_;
+  std::int32_t guide_sources_ = 0;
 
   // Volume term (options_.volume_weight > 0): w per slot, the blocks' lane layout; 0 in padding
   // lanes and rigid groups. Empty otherwise.
