@@ -32,7 +32,7 @@ struct SolverSettings {
   // Iterations on each frame's own targets after its pose is published (LiveRig::prepareNextFrame,
   // within the frame's deadline). 0: none.
   int after_publish_iterations = 0;
-  int coarse_iterations = 2;     // the coarse level's iterations per frame
+  int coarse_iterations = 2;     // the coarse level's iterations per frame (2 as near as 5: docs/fidelity.md)
   bool use_coarse_level = true;  // use the rig's own coarse level (Rig::coarse) when it has one
 
   // The fast settings: no temporal prediction, no inversion guard, no volume constraint.

@@ -23,6 +23,7 @@
 #pragma once
 
 #include "tetrig/deformer.hpp"
+#include "tetrig/solver_settings.hpp"
 #include "tetrig/tet_mesh.hpp"
 
 #include <cstdint>
@@ -32,7 +33,8 @@
 namespace tetrig {
 
 struct CoarseLevelOptions {
-  int iterations = 2;  // coarse iterations per frame (at least 1); 2 measured as good as 5 on HDM05 and mocap36 (docs/fidelity.md)
+  // Coarse iterations per frame (at least 1): the live default, SolverSettings::coarse_iterations.
+  int iterations = SolverSettings{}.coarse_iterations;
 };
 
 class CoarseLevel {
