@@ -33,9 +33,25 @@ bool keepsVolume(const Rig& rig, const LiveRigOptions& options) {
          closedOrientedSurface(std::span<const std::int32_t>(rig.fine_triangles.data(), static_cast<std::size_t>(rig.fine_triangles.size())));
 }
 
-DeformerSetup liveSetup(const Rig& rig, const LiveRigOptions& options, bool frame_guide) {
+// Whether a coarse level turns the fine tets by the rig's oriented regions' turns: it interpolates
+// each of them over its own tets (region handle r of both is the same region: coarseLevelMismatch),
+// and its guide hands each fine tet its coarse tet's change, that turn included.
+bool carriesRegionTurns(const Rig& rig, const Rig& coarse) {
+  const DeformerOptions& o = coarse.setup.options;
+  const auto& fine_regions = rig.setup.region_handles;
+  const auto& coarse_regions = coarse.setup.region_handles;
+  if (!o.interpolate_rotations || !o.update_rotations || coarse_regions.size() != fine_regions.size()) return false;
+  for (std::size_t r = 0; r < fine_regions.size(); ++r)
+    if (fine_regions[r].oriented && !coarse_regions[r].oriented) return false;
+  return true;
+}
+
+DeformerSetup liveSetup(const Rig& rig, const LiveRigOptions& options, const Rig* coarse) {
   DeformerSetup setup = rig.setup;
-  setup.options.frame_guide = frame_guide;
+  setup.options.frame_guide = coarse != nullptr;
+  // Under such a coarse level the fine level takes the regions' turns from the guide alone:
+  // interpolating them again would start each frame turned twice as far near the regions.
+  if (coarse != nullptr && carriesRegionTurns(rig, *coarse)) setup.options.interpolate_rotations = false;
   // The input of the pose transfer: float positions for B's compact copy (its float kernel), else doubles.
   const bool compact = options.compact_pose_transfer && fitsCompactPoseTransfer(rig.pose_transfer.cols);
   setup.options.padded_positions = !compact;
@@ -122,7 +138,7 @@ void vertexNormals(const float* x, std::span<const std::int32_t> triangles, std:
 LiveRigImpl::LiveRigImpl(const Rig& rig, const LiveRigOptions& options, const Rig* coarse_rig)
     : rig_(&validated(rig)),
       options_(options),
-      deformer_(rig.tet_mesh, liveSetup(rig, options, coarseRigOf(rig, options, coarse_rig) != nullptr)),
+      deformer_(rig.tet_mesh, liveSetup(rig, options, coarseRigOf(rig, options, coarse_rig))),
       predictor_(rig.tet_mesh, rig.body_vertex_count, rig.body_tet_count, markerVertices(rig), MarkerPredictionOptions{}) {
   if (!(options.occlusion_blend_s >= 0.0) || !std::isfinite(options.occlusion_blend_s)) {
     throw std::invalid_argument("live rig: occlusion_blend_s must be finite and >= 0");
