@@ -3,8 +3,10 @@
 
 #include "tetrig/clock.hpp"
 
-#include <Eigen/Geometry>
+#include <Eigen/Core>
 
+#include <algorithm>
+#include <cmath>
 #include <limits>
 #include <stdexcept>
 #include <string>
@@ -21,13 +23,6 @@ std::vector<Eigen::Vector3d> restCentroids(const TetMesh& mesh) {
     c[static_cast<std::size_t>(t)] = 0.25 * s;
   }
   return c;
-}
-
-void storeQuaternion(const Eigen::Quaterniond& q, float* out) {
-  out[0] = static_cast<float>(q.w());
-  out[1] = static_cast<float>(q.x());
-  out[2] = static_cast<float>(q.y());
-  out[3] = static_cast<float>(q.z());
 }
 
 }  // namespace
@@ -58,6 +53,7 @@ CoarseLevel::CoarseLevel(const TetMesh& fine_mesh, Deformer& fine, const TetMesh
                                 std::to_string(fine_mesh.tetCount()));
   }
   previous_.assign(4 * coarse_c.size(), 0.0f);
+  now_.assign(4 * coarse_c.size(), 0.0f);
   change_.assign(4 * coarse_c.size(), 0.0f);
   reset();
 }
@@ -73,16 +69,20 @@ void CoarseLevel::reset() noexcept {
 StepStats CoarseLevel::guide(const HandleTargets& coarse_targets, Deformer& fine) noexcept {
   const std::int64_t t0 = monotonicNowNs();
   StepStats stats = coarse_.step(coarse_targets, StepBudget{options_.iterations});
-  // Q_c = R_c,n R_c,n-1^-1 per coarse tet; R_c,n-1 <- R_c,n.
-  for (std::int32_t c = 0; c < coarse_.tetCount(); ++c) {
-    float* p = &previous_[4 * static_cast<std::size_t>(c)];
-    const Eigen::Quaterniond now = coarse_.rotation(c);
-    const Eigen::Quaterniond before(p[0], p[1], p[2], p[3]);
-    Eigen::Quaterniond q = now * before.conjugate();
-    if (q.w() < 0.0) q.coeffs() = -q.coeffs();
-    storeQuaternion(q.normalized(), &change_[4 * static_cast<std::size_t>(c)]);
-    storeQuaternion(now, p);
+  // Q_c = R_c,n R_c,n-1^-1 per coarse tet (R^-1 = conj R), in the hemisphere of the identity and
+  // normalised, in float (the guide's own precision); R_c,n-1 <- R_c,n.
+  coarse_.rotations(now_);
+  for (std::size_t i = 0; i < now_.size(); i += 4) {
+    const float* n = &now_[i];
+    const float* p = &previous_[i];
+    const float q[4] = {n[0] * p[0] + n[1] * p[1] + n[2] * p[2] + n[3] * p[3],  //
+                  -n[0] * p[1] + n[1] * p[0] - n[2] * p[3] + n[3] * p[2],
+                  -n[0] * p[2] + n[1] * p[3] + n[2] * p[0] - n[3] * p[1],
+                  -n[0] * p[3] - n[1] * p[2] + n[2] * p[1] + n[3] * p[0]};
+    const float scale = (q[0] < 0.0f ? -1.0f : 1.0f) / std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+    for (std::size_t c = 0; c < 4; ++c) change_[i + c] = q[c] * scale;
   }
+  std::copy(now_.begin(), now_.end(), previous_.begin());
   fine.setFrameGuide(change_);  // each fine tet takes its coarse tet's row
   stats.total_ns = monotonicNowNs() - t0;  // the coarse step and the guide made from it
   return stats;

@@ -414,6 +414,8 @@ void DeformerImpl::buildRigidGroupsAndCoefficients(const DeformerSetup& setup) {
       for (AlignedVector<double>* v : {&cg_r_, &cg_z_, &cg_p_, &cg_lp_})
         v->assign(static_cast<size_t>(vertex_count_) * kVectorStride, 0.0);
       cg_float_.assign(static_cast<size_t>(vertex_count_) * kVectorStride, 0.0f);
+      guard_corners_.assign(4 * guarded, 0);
+      guard_corner_mark_.assign(static_cast<size_t>(vertex_count_), 0);
       if (free_count_ > 0) factor_.prepareFloatSolve();
     }
   }
@@ -429,6 +431,7 @@ void DeformerImpl::reset() {
   }
   std::fill(u_.begin(), u_.end(), 0.0);
   guarded_count_ = 0;
+  guard_corner_count_ = 0;
   for (std::int32_t h = 0; h < vertex_handle_count_; ++h) {
     const double* p = &rest_solver_[kVectorStride * static_cast<size_t>(free_count_ + h)];
     vertex_targets_[static_cast<size_t>(h)] = Eigen::Vector3d(p[0], p[1], p[2]);
@@ -771,6 +774,17 @@ bool DeformerImpl::setFrameGuide(std::span<const float> wxyz_per_source) noexcep
   return true;
 }
 
+bool DeformerImpl::rotations(std::span<float> wxyz) const noexcept {
+  if (wxyz.size() != 4 * static_cast<size_t>(tet_count_)) return false;
+  for (std::int32_t t = 0; t < tet_count_; ++t) {
+    const std::int32_t s = slotOfTet(t);
+    const TetBlock& block = blocks_[static_cast<size_t>(s / kTetBlockWidth)];
+    const int l = s % kTetBlockWidth;
+    for (size_t c = 0; c < 4; ++c) wxyz[4 * static_cast<size_t>(t) + c] = block.rotation[c][l];
+  }
+  return true;
+}
+
 void DeformerImpl::setRotations(std::span<const Eigen::Quaterniond> rotations) {
   if (rotations.size() != static_cast<size_t>(tet_count_)) return;
   for (std::int32_t t = 0; t < tet_count_; ++t) {
@@ -798,6 +812,7 @@ std::span<const double> Deformer::paddedPositions() const noexcept { return impl
 std::span<const float> Deformer::paddedFloatPositions() const noexcept { return impl_->paddedFloatPositions(); }
 Eigen::Vector3d Deformer::position(std::int32_t v) const { return impl_->position(v); }
 Eigen::Quaterniond Deformer::rotation(std::int32_t t) const { return impl_->rotation(t); }
+bool Deformer::rotations(std::span<float> wxyz) const noexcept { return impl_->rotations(wxyz); }
 void Deformer::setRotations(std::span<const Eigen::Quaterniond> rotations) { impl_->setRotations(rotations); }
 bool Deformer::setFrameGuide(std::span<const float> wxyz_per_source) noexcept { return impl_->setFrameGuide(wxyz_per_source); }
 bool Deformer::setFrameGuideSources(std::span<const std::int32_t> source_of_tet, std::int32_t sources) {

@@ -56,14 +56,32 @@ TETRIG_MULTIVERSION void addGuardResidual(std::span<const GuardedTet> held, cons
   }
 }
 
-// sum_j alpha_j a_j ||row c of G_j p||^2 for c = x, y, z, added into pap.
-TETRIG_MULTIVERSION void addGuardCurvature(std::span<const GuardedTet> held, const double* p, std::array<double, 3>& pap) {
+// sum_j alpha_j a_j ||row c of G_j p||^2 for c = x, y, z, added into pap (p in double, or the float
+// solve's own output).
+template <typename T>
+TETRIG_INLINE void guardCurvature(std::span<const GuardedTet> held, const T* p, std::array<double, 3>& pap) {
   Vec4 sum{};
   for (const GuardedTet& t : held) {
     const Columns h = gradientColumns(t, p);
     sum += (h.c[0] * h.c[0] + h.c[1] * h.c[1] + h.c[2] * h.c[2]) * t.coef;
   }
   for (size_t c = 0; c < 3; ++c) pap[c] += sum[c];
+}
+TETRIG_MULTIVERSION void addGuardCurvature(std::span<const GuardedTet> held, const double* p, std::array<double, 3>& pap) {
+  guardCurvature(held, p, pap);
+}
+TETRIG_MULTIVERSION void addGuardCurvature(std::span<const GuardedTet> held, const float* p, std::array<double, 3>& pap) {
+  guardCurvature(held, p, pap);
+}
+
+// sum over the free corners c of r_c z_c, per lane (r is 0 at every other free vertex).
+std::array<double, 3> cornerDot(std::span<const std::int32_t> corners, std::size_t free4, const double* r, const float* z) {
+  std::array<double, 3> sum{};
+  for (const std::int32_t c : corners) {
+    if (static_cast<std::size_t>(c) >= free4) continue;
+    for (size_t k = 0; k < 3; ++k) sum[k] += r[static_cast<size_t>(c) + k] * static_cast<double>(z[static_cast<size_t>(c) + k]);
+  }
+  return sum;
 }
 
 // out -= gamma (per coordinate) G^T G p summed over the held tets: the guarded part of A p.
@@ -112,6 +130,18 @@ void DeformerImpl::collectGuardedTets() {
     t.coef = alpha * blocks_[static_cast<size_t>(s / kTetBlockWidth)].weight[s % kTetBlockWidth];
   });
   guarded_count_ = n;
+  // Their corners, each once (the residual r_0 lives there).
+  std::size_t corners = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    for (const std::int32_t c : guarded_[i].corner) {
+      std::uint8_t& mark = guard_corner_mark_[static_cast<size_t>(c) / kVectorStride];
+      if (mark != 0) continue;
+      mark = 1;
+      guard_corners_[corners++] = c;
+    }
+  }
+  for (std::size_t i = 0; i < corners; ++i) guard_corner_mark_[static_cast<size_t>(guard_corners_[i]) / kVectorStride] = 0;
+  guard_corner_count_ = corners;
 }
 
 void DeformerImpl::precondition(bool skip_zero_nodes) {
@@ -129,19 +159,50 @@ void DeformerImpl::precondition(bool skip_zero_nodes) {
 void DeformerImpl::implicitGuardSolve() {
   const size_t free4 = static_cast<size_t>(free_count_) * kVectorStride;
   const std::span<const GuardedTet> held(guarded_.data(), guarded_count_);
-  // r_0 = sum_j alpha_j a_j G_j^T (R_j - I - H_j(u_0)), free components only. R_j is read here, not
-  // when the tet was gathered: the frame's prediction and guide may have turned it since.
-  std::fill(cg_r_.begin(), cg_r_.end(), 0.0);
+  const std::span<const std::int32_t> corners(guard_corners_.data(), guard_corner_count_);
+  // r_0 = sum_j alpha_j a_j G_j^T (R_j - I - H_j(u_0)), on the held tets' corners only (cg_r_ is 0
+  // everywhere else; its handle components are never read). R_j is read here, not when the tet was
+  // gathered: the frame's prediction and guide may have turned it since.
   addGuardResidual(held, blocks_.data(), u_.data(), cg_r_.data());
+  // z_0 = M^-1 r_0 in float, r_0 written at its corners only. r_0 is zero but at the guarded tets'
+  // vertices: the forward pass skips the supernodes it does not reach (about a fifth of the solve
+  // on the shipped asset).
+  float* zf = cg_float_.data();
+  std::fill_n(zf, free4, 0.0f);
+  for (const std::int32_t c : corners) {
+    if (static_cast<size_t>(c) >= free4) continue;
+    for (size_t k = 0; k < kVectorStride; ++k) zf[static_cast<size_t>(c) + k] = static_cast<float>(cg_r_[static_cast<size_t>(c) + k]);
+  }
+  if (free_count_ > 0) factor_.solveInPlace(zf, /*skip_zero_nodes=*/true);
+  std::array<double, 3> rz = cornerDot(corners, free4, cg_r_.data(), zf);
+  if (options_.inversion_guard_solves == 1) {
+    // The live setting: one step along p_0 = z_0, read from the float solve where it lies (widened
+    // exactly; the same step as from its double copy). p_0^T L p_0 = r_0 . z_0.
+    std::array<double, 3> pap = rz;
+    addGuardCurvature(held, zf, pap);
+    std::array<double, 3> gamma{};
+    for (size_t c = 0; c < 3; ++c) gamma[c] = pap[c] > 0.0 && rz[c] > 0.0 ? rz[c] / pap[c] : 0.0;
+    // u += gamma p, landing back on the linear constraint's plane when there is one: g . u was its
+    // right-hand side before this step (applyLinearConstraint), so what the step moved it by,
+    // gamma_c (g . p)_c, is taken out along z in the same pass and added to the multiplier.
+    if (constraint_active_) {
+      const std::array<double, kVectorStride> gp = paddedDotByLane(constraint_g_.data(), zf, free4);
+      const double mu_left = -(gamma[0] * gp[0] + gamma[1] * gp[1] + gamma[2] * gp[2]) / constraint_gz_;
+      addScaledByLaneAndScaled(u_.data(), gamma, zf, mu_left, constraint_z_.data(), free4);
+      constraint_mu_ += mu_left;
+    } else {
+      addScaledByLane(u_.data(), gamma, zf, free4);
+    }
+    for (const std::int32_t c : corners) std::fill_n(&cg_r_[static_cast<size_t>(c)], kVectorStride, 0.0);
+    return;
+  }
+  toDouble(zf, cg_z_.data(), free4);
+  std::fill(cg_z_.begin() + static_cast<std::ptrdiff_t>(free4), cg_z_.end(), 0.0);
   std::fill(cg_r_.begin() + static_cast<std::ptrdiff_t>(free4), cg_r_.end(), 0.0);
   const auto dot3 = [free4](const double* a, const double* b) {
     const std::array<double, kVectorStride> d = paddedDotByLane(a, b, free4);
     return std::array<double, 3>{d[0], d[1], d[2]};
   };
-  // r_0 is zero but at the guarded tets' vertices: the forward pass skips the supernodes it does not
-  // reach (about a fifth of the solve on the shipped asset).
-  precondition(/*skip_zero_nodes=*/true);
-  std::array<double, 3> rz = dot3(cg_r_.data(), cg_z_.data());
   // p_0 = z_0 and L p_0 = L z_0 = r_0: the first step reads them where they are (and p_0^T L p_0 is
   // r_0 . z_0); they are copied out only when a further step follows (then z and r change).
   const double* p = cg_z_.data();
@@ -153,21 +214,11 @@ void DeformerImpl::implicitGuardSolve() {
     addGuardCurvature(held, p, pap);
     std::array<double, 3> gamma{};
     for (size_t c = 0; c < 3; ++c) gamma[c] = pap[c] > 0.0 && rz[c] > 0.0 ? rz[c] / pap[c] : 0.0;
-    // u += gamma p; then, unless this was the last step (the live setting S = 1 ends here), r -= gamma
-    // A p (the dense part here, the guarded part below). The last step also lands u back on the
-    // linear constraint's plane when there is one. With S = 1, g . u was its right-hand side before
-    // this step (applyLinearConstraint), so what the step moved it by is gamma_c (g . p)_c, taken
-    // out along z in the same pass, and added to the multiplier.
+    // u += gamma p; then, unless this was the last step, r -= gamma A p (the dense part here, the
+    // guarded part below). The last step also lands u back on the linear constraint's plane.
     if (step + 1 == options_.inversion_guard_solves) {
-      if (constraint_active_ && step == 0) {
-        const std::array<double, 3> gp = dot3(constraint_g_.data(), p);
-        const double mu_left = -(gamma[0] * gp[0] + gamma[1] * gp[1] + gamma[2] * gp[2]) / constraint_gz_;
-        addScaledByLaneAndScaled(u_.data(), gamma, p, mu_left, constraint_z_.data(), free4);
-        constraint_mu_ += mu_left;
-      } else {
-        addScaledByLane(u_.data(), gamma, p, free4);
-        if (constraint_active_) applyLinearConstraint();
-      }
+      addScaledByLane(u_.data(), gamma, p, free4);
+      if (constraint_active_) applyLinearConstraint();
       break;
     }
     addScaledByLane(u_.data(), gamma, p, free4);
@@ -192,6 +243,7 @@ void DeformerImpl::implicitGuardSolve() {
     }
     rz = rz_next;
   }
+  std::fill(cg_r_.begin(), cg_r_.end(), 0.0);  // r has spread over every vertex: 0 again for the next solve
 }
 
 }  // namespace tetrig

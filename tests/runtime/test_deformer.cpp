@@ -808,6 +808,30 @@ TEST(Deformer, RecoversTheRestShapeFromRandomRotations) {
   EXPECT_LE(maxDistanceToRest(bar.mesh, deformer) / diagonal, 1e-6);
 }
 
+// rotations() reads every tet's stored rotation in mesh tet order, as rotation(t) gives it one at a
+// time (the deformer keeps them in slot order); a span of the wrong size is refused, untouched.
+TEST(Deformer, RotationsReadsEveryTetsStoredRotationInTetOrder) {
+  const auto bar = scenes::makeBarScene(3, 3, 12);
+  Deformer deformer(bar.mesh, test::endVertexHandles(bar));
+  deformer.step(vertexTargets(test::endTargets(bar, scenes::barBendTransform(bar, 0.7))), StepBudget{3});
+  const auto tets = static_cast<std::size_t>(bar.mesh.tetCount());
+  std::vector<float> wxyz(4 * tets, -7.0f);
+  ASSERT_TRUE(deformer.rotations(wxyz));
+  int turned = 0;
+  for (std::size_t t = 0; t < tets; ++t) {
+    const Eigen::Quaterniond q = deformer.rotation(static_cast<std::int32_t>(t));
+    EXPECT_EQ(wxyz[4 * t], static_cast<float>(q.w()));
+    EXPECT_EQ(wxyz[4 * t + 1], static_cast<float>(q.x()));
+    EXPECT_EQ(wxyz[4 * t + 2], static_cast<float>(q.y()));
+    EXPECT_EQ(wxyz[4 * t + 3], static_cast<float>(q.z()));
+    turned += q.w() < 0.999 ? 1 : 0;
+  }
+  EXPECT_GT(turned, 0);  // the bend turned tets: not the identity everywhere
+  std::vector<float> short_by_one(4 * tets - 4, -7.0f);
+  EXPECT_FALSE(deformer.rotations(short_by_one));
+  EXPECT_TRUE(std::all_of(short_by_one.begin(), short_by_one.end(), [](float v) { return v == -7.0f; }));
+}
+
 // RMS distance of `vertices` from the best rigid map of their rest positions (Kabsch), over
 // the RMS distance of the rest positions from their centroid.
 double rigidFitResidual(const TetMesh& mesh, const Vertices& x, const std::vector<std::int32_t>& vertices) {

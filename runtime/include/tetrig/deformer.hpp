@@ -200,6 +200,9 @@ class Deformer {
 
   // Current rotation of tet t.
   Eigen::Quaterniond rotation(std::int32_t t) const;
+  // Every tet's rotation as stored (4 floats w x y z per tet, mesh tet order) into `wxyz`; false
+  // (nothing written) unless it holds 4 x tetCount() floats. No allocation, lock or exception.
+  bool rotations(std::span<float> wxyz) const noexcept;
 
   // Replaces every tet rotation (e.g. randomised differential coordinates) and rebuilds delta.
   // Not for the frame path: allocation-free but O(#T).

@@ -64,6 +64,7 @@ class CoarseLevel {
   Deformer coarse_;
   std::vector<std::int32_t> coarse_of_fine_;
   std::vector<float> previous_;  // R_c,n-1 per coarse tet (w x y z)
+  std::vector<float> now_;       // R_c,n per coarse tet (w x y z), read out of the coarse deformer
   std::vector<float> change_;    // Q_c per coarse tet (w x y z): the fine deformer's guide table
 };
 

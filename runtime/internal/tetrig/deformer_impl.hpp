@@ -61,6 +61,7 @@ class DeformerImpl {
   std::span<const float> paddedFloatPositions() const { return padded_float_positions_; }
   Eigen::Vector3d position(std::int32_t v) const;
   Eigen::Quaterniond rotation(std::int32_t t) const;
+  bool rotations(std::span<float> wxyz) const noexcept;
   void setRotations(std::span<const Eigen::Quaterniond> rotations);
   bool setFrameGuide(std::span<const float> wxyz_per_source) noexcept;
   bool setFrameGuideSources(std::span<const std::int32_t> source_of_tet, std::int32_t sources);
@@ -184,8 +185,13 @@ class DeformerImpl {
   AlignedVector<float> guard_det_;  // det F per slot at the last rotation pass (written by it)
   mutable std::vector<std::int32_t> guard_blocks_;  // forEachGuardedTetBelow's scratch: a block index each
   std::size_t guarded_count_ = 0;
-  AlignedVector<double> cg_r_, cg_z_, cg_p_, cg_lp_;
+  AlignedVector<double> cg_r_, cg_z_, cg_p_, cg_lp_;  // cg_r_ is 0 between solves
   AlignedVector<float> cg_float_;  // z = L^-1 r solved in float (the factor's float copy)
+  // The held tets' corners (offsets into the per-vertex vectors, each once; handles too): r_0 lives
+  // there. guard_corner_mark_ is all 0 between collectGuardedTets calls.
+  std::vector<std::int32_t> guard_corners_;
+  std::size_t guard_corner_count_ = 0;
+  std::vector<std::uint8_t> guard_corner_mark_;
   // f(slot) for every guarded tet (guard_ > 0) whose det F at the last rotation pass is below
   // `bound`, in slot order; a block of 16 is skipped by one vector compare when none is.
   template <class F>
