@@ -495,6 +495,39 @@ TEST(Deformer, ImplicitInversionGuardHoldsWhereTheExplicitOneCannot) {
   EXPECT_NO_THROW(Deformer(bar.mesh, setup));
 }
 
+// The implicit guard keeps no trace of one solve in the next (its residual lives on the held tets'
+// corners and is cleared there after each one-step solve, and everywhere after a longer one): a
+// deformer pushed deep for 40 iterations, reset, then stepped from rest lands bit for bit where a
+// fresh deformer does, with one guard step per iteration and with two.
+TEST(Deformer, ImplicitGuardAfterResetStepsAsAFreshOne) {
+  const auto bar = scenes::makeBarScene(4, 4, 12);
+  const std::int32_t pushed = middleOfTopFace(bar);
+  for (const int solves : {1, 2}) {
+    DeformerSetup setup = test::endVertexHandles(bar);
+    setup.vertex_handles.push_back(pushed);
+    setup.options.inversion_guard = 4.0;
+    setup.options.inversion_guard_solves = solves;
+    auto targets_at = [&](double depth) {
+      auto t = test::endTargets(bar, Eigen::Isometry3d::Identity());
+      t.push_back(bar.mesh.vertices.row(pushed).transpose() - Eigen::Vector3d(0.0, depth, 0.0));
+      return vertexTargets(t);
+    };
+    Deformer used(bar.mesh, setup), fresh(bar.mesh, setup);
+    StepStats s;
+    for (int i = 0; i < 40; ++i) s = used.step(targets_at(3.0), StepBudget{1});
+    ASSERT_GT(s.guarded_tets, 0) << "the deep push must hold tets for the test to mean anything";
+    used.reset();
+    StepStats su, sf;
+    for (int i = 0; i < 10; ++i) {
+      su = used.step(targets_at(2.5), StepBudget{1});
+      sf = fresh.step(targets_at(2.5), StepBudget{1});
+    }
+    EXPECT_GT(sf.guarded_solves, 0) << solves;
+    EXPECT_EQ(su.guarded_tets, sf.guarded_tets) << solves;
+    EXPECT_EQ(test::deformedVertices(used), test::deformedVertices(fresh)) << solves << " guard steps";
+  }
+}
+
 // The implicit guard and the linear constraint together (deformer.cpp, step): the constraint's
 // multiplier goes in before the guard's conjugate-gradient step, which then solves the held tets'
 // stiffness against the constraint's displacement too, and the little that step moves g . x
