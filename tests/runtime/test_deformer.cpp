@@ -507,20 +507,22 @@ TEST(Deformer, ImplicitGuardAfterResetStepsAsAFreshOne) {
     setup.vertex_handles.push_back(pushed);
     setup.options.inversion_guard = 4.0;
     setup.options.inversion_guard_solves = solves;
+    // The targets' vectors outlive every step that reads them (HandleTargets holds spans).
     auto targets_at = [&](double depth) {
       auto t = test::endTargets(bar, Eigen::Isometry3d::Identity());
       t.push_back(bar.mesh.vertices.row(pushed).transpose() - Eigen::Vector3d(0.0, depth, 0.0));
-      return vertexTargets(t);
+      return t;
     };
+    const auto deep = targets_at(3.0), shallower = targets_at(2.5);
     Deformer used(bar.mesh, setup), fresh(bar.mesh, setup);
     StepStats s;
-    for (int i = 0; i < 40; ++i) s = used.step(targets_at(3.0), StepBudget{1});
+    for (int i = 0; i < 40; ++i) s = used.step(vertexTargets(deep), StepBudget{1});
     ASSERT_GT(s.guarded_tets, 0) << "the deep push must hold tets for the test to mean anything";
     used.reset();
     StepStats su, sf;
     for (int i = 0; i < 10; ++i) {
-      su = used.step(targets_at(2.5), StepBudget{1});
-      sf = fresh.step(targets_at(2.5), StepBudget{1});
+      su = used.step(vertexTargets(shallower), StepBudget{1});
+      sf = fresh.step(vertexTargets(shallower), StepBudget{1});
     }
     EXPECT_GT(sf.guarded_solves, 0) << solves;
     EXPECT_EQ(su.guarded_tets, sf.guarded_tets) << solves;
