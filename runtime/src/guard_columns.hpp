@@ -19,18 +19,14 @@ struct Columns {
   Vec4 c[3];
 };
 
-// Vertex lanes of v at `offset` in double (float v: widened exactly).
-TETRIG_INLINE Vec4 vertexLanes(const double* v, std::int32_t offset) { return load4(v + offset); }
-TETRIG_INLINE Vec4 vertexLanes(const float* v, std::int32_t offset) { return __builtin_convertvector(lanes::load4f(v + offset), Vec4); }
-
 // The columns of H = [v_0 - v_3, v_1 - v_3, v_2 - v_3] E^-1 of the displacements v (solver order,
 // stride 4; double, or float widened), pad lanes 0. F = I + H (the rest F is I).
 template <typename T>
 TETRIG_INLINE Columns gradientColumns(const GuardedTet& t, const T* v) {
-  const Vec4 p3 = vertexLanes(v, t.corner[3]);
+  const Vec4 p3 = lanes::load4AsDouble(v + t.corner[3]);
   Vec4 e[3];
   for (size_t k = 0; k < 3; ++k) {
-    e[k] = vertexLanes(v, t.corner[k]) - p3;
+    e[k] = lanes::load4AsDouble(v + t.corner[k]) - p3;
     e[k][3] = 0.0;
   }
   Columns h;

@@ -84,6 +84,14 @@ std::array<double, 3> cornerDot(std::span<const std::int32_t> corners, std::size
   return sum;
 }
 
+// The step length along p per coordinate, gamma_c = (r . z)_c / (p^T A p)_c (0 where either is not
+// positive).
+std::array<double, 3> stepLengths(const std::array<double, 3>& rz, const std::array<double, 3>& pap) {
+  std::array<double, 3> gamma{};
+  for (size_t c = 0; c < 3; ++c) gamma[c] = pap[c] > 0.0 && rz[c] > 0.0 ? rz[c] / pap[c] : 0.0;
+  return gamma;
+}
+
 // out -= gamma (per coordinate) G^T G p summed over the held tets: the guarded part of A p.
 TETRIG_MULTIVERSION void subtractGuardProduct(std::span<const GuardedTet> held, const std::array<double, 3>& gamma, const double* p,
                                               double* out) {
@@ -144,14 +152,14 @@ void DeformerImpl::collectGuardedTets() {
   guard_corner_count_ = corners;
 }
 
-void DeformerImpl::precondition(bool skip_zero_nodes) {
+void DeformerImpl::precondition() {
   // z = M^-1 r with M the factor rounded to float, solved in float: the solve reads half the bytes,
   // and a search direction needs no more digits (the step length is computed for the direction it
   // is given).
   const size_t free4 = static_cast<size_t>(free_count_) * kVectorStride;
   float* zf = cg_float_.data();
   toFloat(cg_r_.data(), zf, free4);
-  factor_.solveInPlace(zf, skip_zero_nodes);
+  factor_.solveInPlace(zf);
   toDouble(zf, cg_z_.data(), free4);
   std::fill(cg_z_.begin() + static_cast<std::ptrdiff_t>(free4), cg_z_.end(), 0.0);
 }
@@ -180,8 +188,7 @@ void DeformerImpl::implicitGuardSolve() {
     // exactly; the same step as from its double copy). p_0^T L p_0 = r_0 . z_0.
     std::array<double, 3> pap = rz;
     addGuardCurvature(held, zf, pap);
-    std::array<double, 3> gamma{};
-    for (size_t c = 0; c < 3; ++c) gamma[c] = pap[c] > 0.0 && rz[c] > 0.0 ? rz[c] / pap[c] : 0.0;
+    const std::array<double, 3> gamma = stepLengths(rz, pap);
     // u += gamma p, landing back on the linear constraint's plane when there is one: g . u was its
     // right-hand side before this step (applyLinearConstraint), so what the step moved it by,
     // gamma_c (g . p)_c, is taken out along z in the same pass and added to the multiplier.
@@ -212,8 +219,7 @@ void DeformerImpl::implicitGuardSolve() {
     // never stored: its dense part is L p, its guarded part is local.
     std::array<double, 3> pap = step == 0 ? rz : dot3(p, lp);
     addGuardCurvature(held, p, pap);
-    std::array<double, 3> gamma{};
-    for (size_t c = 0; c < 3; ++c) gamma[c] = pap[c] > 0.0 && rz[c] > 0.0 ? rz[c] / pap[c] : 0.0;
+    const std::array<double, 3> gamma = stepLengths(rz, pap);
     // u += gamma p; then, unless this was the last step, r -= gamma A p (the dense part here, the
     // guarded part below). The last step also lands u back on the linear constraint's plane.
     if (step + 1 == options_.inversion_guard_solves) {
@@ -231,7 +237,7 @@ void DeformerImpl::implicitGuardSolve() {
     addScaledByLane(cg_r_.data(), {-gamma[0], -gamma[1], -gamma[2]}, lp, free4);
     subtractGuardProduct(held, gamma, p, cg_r_.data());
     std::fill(cg_r_.begin() + static_cast<std::ptrdiff_t>(free4), cg_r_.end(), 0.0);
-    precondition(/*skip_zero_nodes=*/false);
+    precondition();
     const std::array<double, 3> rz_next = dot3(cg_r_.data(), cg_z_.data());
     std::array<double, 3> beta{};
     for (size_t c = 0; c < 3; ++c) beta[c] = rz[c] > 0.0 ? rz_next[c] / rz[c] : 0.0;

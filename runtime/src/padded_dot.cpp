@@ -14,20 +14,16 @@ using lanes::Vec4;
 
 namespace {
 
-// Vertex i's 4 lanes of x as doubles (float: widened exactly).
-TETRIG_INLINE Vec4 lanes4(const double* x, std::size_t i) { return load4(x + i); }
-TETRIG_INLINE Vec4 lanes4(const float* x, std::size_t i) { return __builtin_convertvector(lanes::load4f(x + i), Vec4); }
-
 template <typename T>
 TETRIG_INLINE std::array<double, kVectorStride> dotByLane(const double* a, const T* b, std::size_t n) {
   static_assert(kVectorStride == 4, "two vertices per eight sums");
   Vec4 s0 = {0, 0, 0, 0}, s1 = {0, 0, 0, 0};
   std::size_t i = 0;
   for (; i + 8 <= n; i += 8) {
-    s0 += load4(a + i) * lanes4(b, i);
-    s1 += load4(a + i + 4) * lanes4(b, i + 4);
+    s0 += load4(a + i) * lanes::load4AsDouble(b + i);
+    s1 += load4(a + i + 4) * lanes::load4AsDouble(b + i + 4);
   }
-  if (i < n) s0 += load4(a + i) * lanes4(b, i);
+  if (i < n) s0 += load4(a + i) * lanes::load4AsDouble(b + i);
   const Vec4 s = s0 + s1;
   return {s[0], s[1], s[2], s[3]};
 }
@@ -37,7 +33,7 @@ TETRIG_INLINE void scaledByLane(double* y, const std::array<double, 3>& s, const
   const Vec4 scale = {s[0], s[1], s[2], 0.0};
   for (std::size_t i = 0; i < n; i += kVectorStride) {
     const Vec4 v = load4(y + i);
-    const Vec4 sum = v + scale * lanes4(x, i);
+    const Vec4 sum = v + scale * lanes::load4AsDouble(x + i);
     store4(y + i, __builtin_shufflevector(sum, v, 0, 1, 2, 7));  // the pad lane: y's own
   }
 }
@@ -48,7 +44,7 @@ TETRIG_INLINE void scaledByLaneAndScaled(double* y, const std::array<double, 3>&
   const Vec4 scale = {s[0], s[1], s[2], 0.0};
   for (std::size_t i = 0; i < n; i += kVectorStride) {
     const Vec4 v = load4(y + i);
-    const Vec4 sum = v + scale * lanes4(x, i);
+    const Vec4 sum = v + scale * lanes::load4AsDouble(x + i);
     store4(y + i, __builtin_shufflevector(sum, v, 0, 1, 2, 7) + t * load4(w + i));  // the pad lane: y's own (+ 0)
   }
 }

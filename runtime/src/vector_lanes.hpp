@@ -50,6 +50,9 @@ TETRIG_INLINE FLanes loadF(const float* p) { return loadAs<FLanes>(p); }
 TETRIG_INLINE void storeF(float* p, FLanes v) { storeAs(p, v); }
 TETRIG_INLINE Vec4f load4f(const float* p) { return loadAs<Vec4f>(p); }
 TETRIG_INLINE void store4f(float* p, Vec4f v) { storeAs(p, v); }
+// A vertex's 4 lanes as doubles, from double or from float (widened exactly).
+TETRIG_INLINE Vec4 load4AsDouble(const double* p) { return load4(p); }
+TETRIG_INLINE Vec4 load4AsDouble(const float* p) { return __builtin_convertvector(load4f(p), Vec4); }
 
 // Two halves of a block (lanes 0-7, 8-15) in double <-> its 16 lanes in float.
 TETRIG_INLINE FLanes toFloat(Lanes low, Lanes high) {

@@ -208,7 +208,7 @@ class DeformerImpl {
     }
   }
   void collectGuardedTets();
-  void precondition(bool skip_zero_nodes);  // cg_z_ = M^-1 cg_r_ (inversion_guard.cpp)
+  void precondition();  // cg_z_ = M^-1 cg_r_ over every free vertex (inversion_guard.cpp)
   void implicitGuardSolve();
   // Untangling the published pose (untangle.cpp; with the implicit guard): the free vertex -> tet
   // slot adjacency (CSR), the tets found below the threshold, the vertices being relaxed and their marks.
