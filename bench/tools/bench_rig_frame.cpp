@@ -207,7 +207,7 @@ void rigFrame(benchmark::State& state, double extrapolation, double relaxation =
       if (coarse && coarse_handle[m] >= 0) coarse_targets[static_cast<std::size_t>(coarse_handle[m])] = target;
     }
     std::int64_t frame_coarse_ns = 0;
-    if (coarse) frame_coarse_ns = coarse->guide(coarse_handle_targets, deformer).total_ns;
+    if (coarse) frame_coarse_ns = coarse->guide(coarse_handle_targets).total_ns;
     tetrig::StepStats stats = deformer.step(handle_targets, tetrig::StepBudget{3});
     stats.total_ns += frame_coarse_ns;
     coarse_ns += frame_coarse_ns;

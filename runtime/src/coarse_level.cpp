@@ -29,7 +29,7 @@ std::vector<Eigen::Vector3d> restCentroids(const TetMesh& mesh) {
 
 CoarseLevel::CoarseLevel(const TetMesh& fine_mesh, Deformer& fine, const TetMesh& coarse_mesh,
                          const DeformerSetup& coarse_setup, const CoarseLevelOptions& options)
-    : options_(options), coarse_(coarse_mesh, coarse_setup) {
+    : options_(options), fine_(fine), coarse_(coarse_mesh, coarse_setup) {
   if (options_.iterations < 1) throw std::invalid_argument("coarse level: iterations must be at least 1");
   if (coarse_mesh.tetCount() == 0 || fine_mesh.tetCount() == 0) throw std::invalid_argument("coarse level: empty tet mesh");
   // Nearest rest centroid, brute force: load time, O(#fine tets x #coarse tets) (the SMPL rig and a
@@ -66,7 +66,7 @@ void CoarseLevel::reset() noexcept {
   }
 }
 
-StepStats CoarseLevel::guide(const HandleTargets& coarse_targets, Deformer& fine) noexcept {
+StepStats CoarseLevel::guide(const HandleTargets& coarse_targets) noexcept {
   const std::int64_t t0 = monotonicNowNs();
   StepStats stats = coarse_.step(coarse_targets, StepBudget{options_.iterations});
   // Q_c = R_c,n R_c,n-1^-1 per coarse tet (R^-1 = conj R), in the hemisphere of the identity and
@@ -83,7 +83,7 @@ StepStats CoarseLevel::guide(const HandleTargets& coarse_targets, Deformer& fine
     for (std::size_t c = 0; c < 4; ++c) change_[i + c] = q[c] * scale;
   }
   std::copy(now_.begin(), now_.end(), previous_.begin());
-  fine.setFrameGuide(change_);  // each fine tet takes its coarse tet's row
+  fine_.setFrameGuide(change_);  // each fine tet takes its coarse tet's row
   stats.total_ns = monotonicNowNs() - t0;  // the coarse step and the guide made from it
   return stats;
 }

@@ -549,7 +549,7 @@ void LiveRigImpl::solve(const StepBudget& budget, std::uint32_t blending, LiveFr
     coarse_targets.vertex_positions = coarse_vertex_targets_;
     coarse_targets.region_transforms = coarse_region_targets_;
     coarse_targets.point_positions = coarse_point_targets_;
-    const StepStats cs = coarse_->guide(coarse_targets, deformer_);
+    const StepStats cs = coarse_->guide(coarse_targets);
     stats.coarse_ns = cs.total_ns;
   }
   // A frame without the volume constraint yet (the first, or the first after a reset) runs its

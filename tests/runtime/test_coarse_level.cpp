@@ -165,7 +165,7 @@ SwingResult swing(const BarPair& bars, double angle, int coarse_iterations) {
   options.iterations = coarse_iterations;
   CoarseLevel coarse(bars.fine.mesh, guided, bars.coarse.mesh, test::endVertexHandles(bars.coarse), options);
   plain.step(vertexTargetsOf(fine_targets), StepBudget{3});
-  coarse.guide(vertexTargetsOf(coarse_targets), guided);
+  coarse.guide(vertexTargetsOf(coarse_targets));
   guided.step(vertexTargetsOf(fine_targets), StepBudget{3});
   return {distanceToConverged(bars.fine, plain, fine_targets), distanceToConverged(bars.fine, guided, fine_targets)};
 }
@@ -199,7 +199,7 @@ TEST(CoarseLevel, FollowsASteadyBendCloser) {
     fine_targets = bendTargets(bars, bars.fine, angle);
     const auto coarse_targets = bendTargets(bars, bars.coarse, angle);
     plain.step(vertexTargetsOf(fine_targets), StepBudget{3});
-    coarse.guide(vertexTargetsOf(coarse_targets), guided);
+    coarse.guide(vertexTargetsOf(coarse_targets));
     guided.step(vertexTargetsOf(fine_targets), StepBudget{3});
   }
   const double lag_plain = distanceToConverged(bars.fine, plain, fine_targets);
@@ -236,7 +236,7 @@ TEST(CoarseLevel, AfterAnInvertingJumpEndsNoHigherThanThePlainStart) {
       Deformer plain(bars.fine.mesh, setup), guided(bars.fine.mesh, setup);
       CoarseLevel coarse(bars.fine.mesh, guided, bars.coarse.mesh, test::endVertexHandles(bars.coarse), options);
       plain.step(vertexTargetsOf(fine_targets), StepBudget{k});
-      coarse.guide(vertexTargetsOf(coarse_targets), guided);
+      coarse.guide(vertexTargetsOf(coarse_targets));
       const StepStats s = guided.step(vertexTargetsOf(fine_targets), StepBudget{k});
       const double ep = test::exactEnergy(bars.fine.mesh, plain), eg = test::exactEnergy(bars.fine.mesh, guided);
       std::printf("inverting jump, %d coarse, %2d fine iterations: exact energy plain %.6g, with the coarse level %.6g%s\n",
@@ -287,7 +287,7 @@ TEST(CoarseLevel, ItsGuideCarriesTheRegionsTurnOnce) {
       transforms[1].translation = far.translation();
       // The coarse bar's axis is the fine bar's: the same transform moves its far end.
       coarse_targets.region_transforms = transforms;
-      coarse.guide(coarse_targets, fine);
+      coarse.guide(coarse_targets);
       fine.step(fine_targets, StepBudget{1});
       if (f % 4 != 0) continue;
       Deformer converged(bars.fine.mesh, regions(bars.fine));

@@ -143,7 +143,7 @@ TEST(StepAllocations, NoneWithTheCoarseLevel) {
     HandleTargets ft, ct;
     ft.vertex_positions = fine_targets[f];
     ct.vertex_positions = coarse_targets[f];
-    coarse.guide(ct, deformer);
+    coarse.guide(ct);
     return deformer.step(ft, StepBudget{3});
   };
   run(0);  // warm-up

@@ -42,14 +42,17 @@ class CoarseLevel {
   // fine_mesh: the fine deformer's tet mesh (rest); fine: the deformer it guides (of fine_mesh, with
   // DeformerOptions::frame_guide on: its guide's sources become the coarse tets,
   // Deformer::setFrameGuideSources); coarse_mesh and coarse_setup: the coarse level's (rest in the
-  // same units and place as the fine mesh).
+  // same units and place as the fine mesh). The coarse level keeps `fine` (it must outlive the coarse
+  // level), so a coarse level is neither copied nor moved.
   CoarseLevel(const TetMesh& fine_mesh, Deformer& fine, const TetMesh& coarse_mesh, const DeformerSetup& coarse_setup,
               const CoarseLevelOptions& options = {});
+  CoarseLevel(const CoarseLevel&) = delete;
+  CoarseLevel& operator=(const CoarseLevel&) = delete;
 
   // One frame: the coarse step on `coarse_targets` (the coarse setup's handles), then the frame guide
-  // of `fine` (the deformer given at construction). Returns the coarse step's stats, with total_ns
-  // the whole call's time (the step and the guide). No allocation.
-  StepStats guide(const HandleTargets& coarse_targets, Deformer& fine) noexcept;
+  // of the fine deformer given at construction. Returns the coarse step's stats, with total_ns the
+  // whole call's time (the step and the guide). No allocation.
+  StepStats guide(const HandleTargets& coarse_targets) noexcept;
 
   // Back to rest (rotations I, no change remembered). No allocation.
   void reset() noexcept;
@@ -61,6 +64,7 @@ class CoarseLevel {
 
  private:
   CoarseLevelOptions options_;
+  Deformer& fine_;
   Deformer coarse_;
   std::vector<std::int32_t> coarse_of_fine_;
   std::vector<float> previous_;  // R_c,n-1 per coarse tet (w x y z)
